@@ -1,0 +1,1 @@
+"""Ready-made chain files, installed as ``videotrack.chains`` (see docs/chains.md)."""

@@ -1,0 +1,5 @@
+import sys
+
+from videotrack.cli import main
+
+sys.exit(main())

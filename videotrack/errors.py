@@ -1,0 +1,7 @@
+"""Errors of the video side (video files, views, filters, detections, config)."""
+
+from kinematics.errors import LocatedError
+
+
+class VideoTrackError(LocatedError):
+    """A problem with a video, view, filter, detections file or project config."""
