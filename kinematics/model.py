@@ -132,11 +132,13 @@ class AxisRef:
 
 @dataclass(frozen=True)
 class Body:
-    """A body made of kinematic chains; ``units`` are the length units of the file."""
+    """A body made of kinematic chains; ``units`` are the length units of the file and
+    ``description`` free text (provenance, licence notes) kept through load and save."""
 
     name: str
     chains: tuple[Chain, ...]
     units: str = "px"
+    description: str = ""
 
     # -- traversal --------------------------------------------------------------------
     def joints(self) -> Iterator[tuple[Chain, Joint, Joint | None, Segment | None]]:

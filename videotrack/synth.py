@@ -1,0 +1,313 @@
+"""Artificial marker videos with known ground truth (paper Sect. 3.2).
+
+A chain is moved through an angle trajectory, its markers are projected through one or more
+cameras and drawn as anti-aliased discs (:func:`videotrack.render.render_markers`), optionally
+with noise, static and flickering ghost markers, occlusions and interlaced fields. Every
+image drawn is recorded in a ground-truth table, so detection and fitting can be scored.
+
+The functions here are pure (arrays in, arrays out) except :func:`write_video`, which writes
+lossless video atomically; the ``videotrack synth`` command ties them together.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import tempfile
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from kinematics.fk import forward_kinematics
+from kinematics.model import Body
+from kinematics.packing import pack_body
+from videotrack.errors import VideoTrackError
+from videotrack.render import render_markers
+
+LAYOUTS = ("side-by-side", "stacked", "separate")
+CODECS = {"ffv1": ("FFV1", ".avi"), "mjpg": ("MJPG", ".avi"), "png": (None, "")}
+
+
+@dataclass(frozen=True)
+class SynthOptions:
+    """How the artificial video looks. Defaults follow the paper's test video.
+
+    marker_diameter : disc diameter in pixels (the paper: 4 px).
+    intensity, background : grey levels of markers and background.
+    noise_sigma : standard deviation of Gaussian pixel noise (grey levels).
+    static_ghosts, flicker_ghosts : ghost markers (reflections) per view; static ones are
+        always visible, flickering ones appear in each image with ``flicker_probability``.
+    occlusion_fraction : share of (marker, view, image) hidden, in runs of
+        ``occlusion_length`` images (a marker hidden in one view for a few frames).
+    interlaced : every video frame holds two fields (even / odd lines) taken at consecutive
+        postures, as PAL video; ``top_field_first`` says which field comes first in time.
+    layout : views side by side or stacked in one video, or one video per camera.
+    seed : seeds noise, ghosts and occlusions (the trajectory has its own seed).
+    """
+
+    marker_diameter: float = 4.0
+    intensity: float = 230.0
+    background: float = 20.0
+    noise_sigma: float = 0.0
+    static_ghosts: int = 0
+    flicker_ghosts: int = 0
+    flicker_probability: float = 0.5
+    occlusion_fraction: float = 0.0
+    occlusion_length: int = 3
+    interlaced: bool = False
+    top_field_first: bool = True
+    layout: str = "side-by-side"
+    seed: int = 0
+
+    def validate(self) -> None:
+        checks = [
+            ("marker_diameter", 0.5 <= self.marker_diameter <= 100, "between 0.5 and 100 px"),
+            ("intensity", 0 < self.intensity <= 255, "in (0, 255]"),
+            ("background", 0 <= self.background < 255, "in [0, 255)"),
+            ("noise_sigma", 0 <= self.noise_sigma <= 100, "between 0 and 100"),
+            ("static_ghosts", 0 <= self.static_ghosts <= 1000, "between 0 and 1000"),
+            ("flicker_ghosts", 0 <= self.flicker_ghosts <= 1000, "between 0 and 1000"),
+            ("flicker_probability", 0 <= self.flicker_probability <= 1, "in [0, 1]"),
+            ("occlusion_fraction", 0 <= self.occlusion_fraction < 1, "in [0, 1)"),
+            ("occlusion_length", self.occlusion_length >= 1, "at least 1"),
+            ("layout", self.layout in LAYOUTS, f"one of {', '.join(LAYOUTS)}"),
+        ]
+        for name, ok, what in checks:
+            if not ok:
+                raise VideoTrackError(f"must be {what}, got {getattr(self, name)!r}",
+                                      field=name)
+
+
+@dataclass(frozen=True)
+class SynthScene:
+    """Everything drawn, per image (a field when interlaced).
+
+    angles_deg : (n_images, n_axes) postures.
+    root_positions : (n_images, n_chains, 3).
+    markers, joints : (n_images, n_markers | n_joints, 3) 3D positions.
+    projections : (n_images, n_views, n_markers, 2) marker images in each camera's pixels.
+    visible : (n_images, n_views, n_markers) bool, False where occluded.
+    ghosts : (n_images, n_views, n_ghosts, 2), NaN where a flickering ghost is off.
+    view_names : camera (view) names, in order.
+    """
+
+    angles_deg: np.ndarray
+    root_positions: np.ndarray
+    markers: np.ndarray
+    joints: np.ndarray
+    projections: np.ndarray
+    visible: np.ndarray
+    ghosts: np.ndarray
+    view_names: tuple[str, ...]
+
+
+def camera_sizes(cameras: Mapping) -> list[tuple[int, int]]:
+    """(width, height) of every camera; synthetic videos need them."""
+    sizes = []
+    for name, cam in cameras.items():
+        size = getattr(cam, "image_size", None)
+        if size is None:
+            raise VideoTrackError("camera needs an image size to render a video",
+                                  field=f"cameras.{name}.size")
+        sizes.append((int(size[0]), int(size[1])))
+    return sizes
+
+
+def simulate(
+    body: Body,
+    cameras: Mapping,
+    angles_deg: np.ndarray,
+    options: SynthOptions,
+    root_positions: np.ndarray | None = None,
+) -> SynthScene:
+    """Pose the chain, project it, and decide occlusions and ghosts for every image."""
+    options.validate()
+    angles = np.asarray(angles_deg, dtype=float)
+    if angles.ndim != 2 or angles.shape[1] != body.n_axes:
+        raise VideoTrackError(f"trajectory needs shape (frames, {body.n_axes}), got "
+                              f"{angles.shape}", field="angles")
+    if options.interlaced and angles.shape[0] % 2:
+        raise VideoTrackError("an interlaced video needs an even number of postures (two "
+                              "fields per frame)", field="angles")
+    n = angles.shape[0]
+    roots = body.root_positions() if root_positions is None else np.asarray(root_positions)
+    roots = np.ascontiguousarray(np.broadcast_to(roots, (n, len(body.chains), 3)), dtype=float)
+    pose = forward_kinematics(pack_body(body), angles, roots)
+    names = tuple(cameras)
+    proj = np.stack([cam.project(pose.markers) for cam in cameras.values()], axis=1)
+    rng = np.random.default_rng(options.seed)
+    visible = _occlusions(rng, proj.shape[:3], options)
+    ghosts = _ghosts(rng, n, camera_sizes(cameras), options)
+    return SynthScene(angles, roots, pose.markers, pose.joints, proj, visible, ghosts, names)
+
+
+def _occlusions(rng, shape, options: SynthOptions) -> np.ndarray:
+    """Runs of ``occlusion_length`` hidden images, starting at a rate giving the fraction."""
+    visible = np.ones(shape, dtype=bool)
+    if options.occlusion_fraction <= 0:
+        return visible
+    start_p = options.occlusion_fraction / options.occlusion_length
+    starts = rng.random(shape) < start_p
+    for t in np.flatnonzero(starts.any(axis=(1, 2))):
+        v, m = np.nonzero(starts[t])
+        visible[t:t + options.occlusion_length, v, m] = False
+    return visible
+
+
+def _ghosts(rng, n, sizes, options: SynthOptions) -> np.ndarray:
+    """Ghost positions per image and view; flickering ghosts are NaN while off."""
+    k = options.static_ghosts + options.flicker_ghosts
+    out = np.full((n, len(sizes), k, 2), np.nan)
+    pad = 2.0 * options.marker_diameter
+    for v, (w, h) in enumerate(sizes):
+        pos = rng.uniform([pad, pad], [max(w - pad, pad + 1), max(h - pad, pad + 1)], (k, 2))
+        out[:, v] = pos
+        on = rng.random((n, options.flicker_ghosts)) < options.flicker_probability
+        out[:, v, options.static_ghosts:][~on] = np.nan
+    return out
+
+
+def view_rois(sizes: Sequence[tuple[int, int]], layout: str) -> list[tuple[int, int, int, int]]:
+    """(x, y, w, h) of each view in the composite frame (each at the origin if separate)."""
+    rois, x, y = [], 0, 0
+    for w, h in sizes:
+        if layout == "separate":
+            rois.append((0, 0, w, h))
+        elif layout == "side-by-side":
+            rois.append((x, 0, w, h))
+            x += w
+        else:
+            rois.append((0, y, w, h))
+            y += h
+    return rois
+
+
+def render_view_images(scene: SynthScene, sizes, options: SynthOptions, image: int,
+                       rng: np.random.Generator) -> list[np.ndarray]:
+    """The grey image of each view for one posture (markers, ghosts, noise)."""
+    out = []
+    for v, (w, h) in enumerate(sizes):
+        pts = scene.projections[image, v][scene.visible[image, v]]
+        ghosts = scene.ghosts[image, v]
+        pts = np.concatenate([pts, ghosts[np.isfinite(ghosts[:, 0])]])
+        out.append(render_markers((h, w), pts, options.marker_diameter, options.intensity,
+                                  options.background, options.noise_sigma, rng))
+    return out
+
+
+def iter_frames(scene: SynthScene, sizes, options: SynthOptions) -> Iterable[list[np.ndarray]]:
+    """Video frames: one list per frame with one image per output video."""
+    rng = np.random.default_rng([options.seed, 1])
+    rois = view_rois(sizes, options.layout)
+    step = 2 if options.interlaced else 1
+    for t in range(0, scene.angles_deg.shape[0], step):
+        views = render_view_images(scene, sizes, options, t, rng)
+        if options.interlaced:
+            second = render_view_images(scene, sizes, options, t + 1, rng)
+            first_rows = 0 if options.top_field_first else 1
+            for a, b in zip(views, second, strict=True):
+                a[1 - first_rows::2] = b[1 - first_rows::2]
+        if options.layout == "separate":
+            yield views
+            continue
+        width = max(x + w for x, _, w, _ in rois)
+        height = max(y + h for _, y, _, h in rois)
+        frame = np.full((height, width), round(options.background), np.uint8)
+        for (x, y, w, h), img in zip(rois, views, strict=True):
+            frame[y:y + h, x:x + w] = img
+        yield [frame]
+
+
+class VideoSink:
+    """Writes frames losslessly (FFV1 AVI or a PNG folder) and publishes atomically.
+
+    Frames go to a temporary file (or folder) next to the target; :meth:`commit` moves it
+    into place, and leaving the ``with`` block without commit removes it.
+    """
+
+    def __init__(self, path: str | os.PathLike, fps: float, codec: str = "ffv1") -> None:
+        if codec not in CODECS:
+            raise VideoTrackError(f"codec must be one of {', '.join(CODECS)}", field="codec")
+        self.path, self.fps, self.codec = Path(path), float(fps), codec
+        self._writer = None
+        self._count = 0
+        parent = self.path.parent
+        parent.mkdir(parents=True, exist_ok=True)
+        if codec == "png":
+            self._tmp = Path(tempfile.mkdtemp(dir=parent, prefix=f".{self.path.name}."))
+        else:
+            fd, tmp = tempfile.mkstemp(dir=parent, prefix=f".{self.path.stem}.",
+                                       suffix=self.path.suffix or ".avi")
+            os.close(fd)
+            self._tmp = Path(tmp)
+
+    def write(self, frame: np.ndarray) -> None:
+        if self.codec == "png":
+            if not cv2.imwrite(str(self._tmp / f"frame_{self._count:06d}.png"), frame):
+                raise VideoTrackError("cannot write PNG frame", file=self.path)
+        else:
+            if self._writer is None:
+                fourcc = cv2.VideoWriter_fourcc(*CODECS[self.codec][0])
+                h, w = frame.shape[:2]
+                self._writer = cv2.VideoWriter(str(self._tmp), fourcc, self.fps, (w, h),
+                                               isColor=frame.ndim == 3)
+                if not self._writer.isOpened():
+                    raise VideoTrackError(f"OpenCV cannot write {self.codec} video",
+                                          file=self.path)
+            self._writer.write(frame)
+        self._count += 1
+
+    def commit(self) -> Path:
+        if self._writer is not None:
+            self._writer.release()
+            self._writer = None
+        if self.codec == "png" and self.path.exists():
+            shutil.rmtree(self.path)
+        os.replace(self._tmp, self.path)
+        return self.path
+
+    def __enter__(self) -> VideoSink:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self._writer is not None:
+            self._writer.release()
+        if self._tmp.exists():
+            with contextlib.suppress(OSError):
+                if self._tmp.is_dir():
+                    shutil.rmtree(self._tmp)
+                else:
+                    self._tmp.unlink()
+
+
+def truth_columns(body: Body, view_names: Sequence[str]) -> list[str]:
+    """Column names of the ground-truth table (see :func:`truth_table`)."""
+    cols = ["frame", *body.axis_labels]
+    cols += [f"{c.name}.root.{a}" for c in body.chains for a in "xyz"]
+    cols += [f"{p}.{a}" for p in (*body.marker_names, *body.joint_names) for a in "xyz"]
+    for v in view_names:
+        for m in body.marker_names:
+            cols += [f"{v}.{m}.u", f"{v}.{m}.v", f"{v}.{m}.visible"]
+    return cols
+
+
+def truth_table(scene: SynthScene) -> np.ndarray:
+    """Ground truth as a (n_images, n_columns) array, columns from :func:`truth_columns`.
+
+    Row ``i`` is image ``i`` as detection numbers them: a video frame, or a field (half-frame)
+    in time order when interlaced. Projections are in the view's full-frame pixels.
+    """
+    n = scene.angles_deg.shape[0]
+    proj = np.concatenate([scene.projections, scene.visible[..., None]], axis=-1)
+    return np.concatenate([
+        np.arange(n)[:, None],
+        scene.angles_deg,
+        scene.root_positions.reshape(n, -1),
+        scene.markers.reshape(n, -1),
+        scene.joints.reshape(n, -1),
+        proj.reshape(n, -1),
+    ], axis=1)
