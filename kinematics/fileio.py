@@ -28,20 +28,24 @@ def atomic_write(path: str | os.PathLike, mode: str = "w", **open_kwargs) -> Ite
     path = Path(path)
     if mode == "w":
         open_kwargs.setdefault("encoding", "utf-8")
+        open_kwargs.setdefault("newline", "\n")
     try:
+        perms = path.stat().st_mode & 0o777 if path.exists() else 0o644
         fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     except OSError as err:
-        raise LocatedError(f"cannot write here: {err.strerror}", file=path) from None
+        raise LocatedError(f"cannot write file: {err.strerror}", file=path) from None
     try:
         with os.fdopen(fd, mode, **open_kwargs) as fh:
             yield fh
             fh.flush()
             os.fsync(fh.fileno())
-        os.chmod(tmp, 0o644)  # mkstemp creates 0600 files
+        os.chmod(tmp, perms)  # mkstemp creates 0600 files; keep the target's permissions
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as err:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
+        if isinstance(err, OSError):
+            raise LocatedError(f"cannot write file: {err.strerror or err}", file=path) from None
         raise
 
 
