@@ -246,7 +246,8 @@ def validate_body(body: Body) -> None:
     """Raise :class:`KinematicsError` naming the element for the first rule broken.
 
     Rules: units known; names non-empty and unique per kind (joint names are unique in the
-    body because posture columns are ``joint.axis``); each joint has one axis per rotation
+    body because posture columns are ``joint.axis``); no marker named like a joint (3D
+    point columns are ``name.x``); each joint has one axis per rotation
     y, x, z with unique names; numbers finite; min <= max; locked values inside the range;
     segment lengths >= 0; a ``marker`` root names a marker of its chain.
     """
@@ -289,6 +290,11 @@ def validate_body(body: Body) -> None:
             for m in seg.markers:
                 unique("marker", m.name)
                 _check_vec(m.offset, f"marker '{m.name}' offset")
+    clash = seen["marker"] & seen["joint"]
+    if clash:
+        name = sorted(clash)[0]
+        raise KinematicsError(f"marker '{name}' has the name of a joint; results name points "
+                              "by these names, so they must differ", field=f"marker '{name}'")
     for chain in body.chains:
         root = chain.root
         where = f"chain '{chain.name}' root"

@@ -29,19 +29,21 @@ def draw(path: Path, out_dir: Path) -> Path:
     joint_index = {name: k for k, name in enumerate(body.joint_names)}
     segments = [(joint_index[j.name], k) for k, (j, _) in enumerate(body.segments())]
     fig, axes = plt.subplots(1, 2, figsize=(10, 4.6))
-    views = (("top view (x, z)", 0, 2, -1), ("side view (x, y)", 0, 1, 1))
-    for ax, (title, u, v, sign) in zip(axes, views, strict=True):
+    views = (("top view (x, z)", 0, 2), ("side view (x, y)", 0, 1))
+    for ax, (title, u, v) in zip(axes, views, strict=True):
         for j, s in segments:
             a, b = pose.joints[j], pose.segment_ends[s]
-            ax.plot([a[u], b[u]], [sign * a[v], sign * b[v]], "-", color="0.35", lw=2.5)
-        ax.plot(pose.joints[:, u], sign * pose.joints[:, v], "o", color="tab:blue", ms=7,
+            ax.plot([a[u], b[u]], [a[v], b[v]], "-", color="0.35", lw=2.5)
+        ax.plot(pose.joints[:, u], pose.joints[:, v], "o", color="tab:blue", ms=7,
                 label="joint centres")
-        ax.plot(pose.markers[:, u], sign * pose.markers[:, v], "s", mfc="none",
+        ax.plot(pose.markers[:, u], pose.markers[:, v], "s", mfc="none",
                 color="tab:red", ms=9, mew=1.5, label="markers")
         if len(body.marker_names) <= 12:
             for name, p in zip(body.marker_names, pose.markers, strict=True):
-                ax.annotate(name, (p[u], sign * p[v]), xytext=(5, 5),
+                ax.annotate(name, (p[u], p[v]), xytext=(5, 5),
                             textcoords="offset points", color="tab:red", fontsize=9)
+        if v == 2:
+            ax.invert_yaxis()  # looking down on the animal: its right side below
         ax.set_title(title)
         ax.set_aspect("equal")
         ax.set_xlabel(f"x (anterior, {body.units})")

@@ -10,7 +10,8 @@ z right). Each leg is a chain whose fixed root is the thorax-coxa joint:
 * CTr (coxa-trochanter/femur): ``roll`` (x, along the leg) and ``pitch`` (z); y locked.
 * FTi (femur-tibia) and TiTa (tibia-tarsus): hinges about z.
 
-Markers sit at every joint centre and the tarsus tip, like DeepFly3D's 5 keypoints per leg.
+Markers (``<leg>_<keypoint>_mk``) sit at every joint centre and the tarsus tip, like
+DeepFly3D's 5 keypoints per leg.
 Usage: python tools/make_fly_chain.py
 """
 
@@ -22,10 +23,17 @@ from kinematics.chain_xml import save_body
 from kinematics.model import Axis, Body, Chain, Joint, Marker, Root, Segment
 
 REPO = Path(__file__).resolve().parents[1]
+DESCRIPTION = (
+    "Six-legged fruit fly made by tools/make_fly_chain.py. Coxa positions and segment lengths "
+    "are rounded from the NeuroMechFly model (flygym, NeLy-EPFL, Apache-2.0)."
+)
 
 # Thorax-coxa positions in NeuroMechFly's thorax frame (x fwd, y left, z up), right legs.
 COXA_MJCF = {"F": (-0.161, -0.172, -0.230), "M": (-0.557, -0.125, -0.482),
              "H": (-0.784, -0.087, -0.497)}
+# ThC roll range of the right legs (left legs mirrored): it turns the plane in which the
+# leg swings out, so front legs reach forward, middle legs sideways, hind legs backward.
+ROLL_RIGHT = {"F": (-60, 0), "M": (-120, -60), "H": (-170, -130)}
 # Coxa, femur, tibia, tarsus (sum of tarsus 1-5) lengths.
 LENGTHS = {"F": (0.365, 0.705, 0.518, 0.565), "M": (0.181, 0.784, 0.667, 0.607),
            "H": (0.199, 0.836, 0.684, 0.698)}
@@ -43,18 +51,18 @@ def leg(side: str, pos: str) -> Chain:
     if side == "L":
         y_left = -y_left
     root = Root("fixed", (x, z_up, -y_left))
-    tarsus_seg = Segment(f"{p}_tarsus", tarsus, markers=(Marker(f"{p}_Tip"),))
-    tita = hinge(f"{p}_TiTa", -120, 30, tarsus_seg)
-    tibia_seg = Segment(f"{p}_tibia", tibia, markers=(Marker(f"{p}_TiTa"),), joints=(tita,))
-    fti = hinge(f"{p}_FTi", 0, 170, tibia_seg)
-    femur_seg = Segment(f"{p}_femur", femur, markers=(Marker(f"{p}_FTi"),), joints=(fti,))
+    tarsus_seg = Segment(f"{p}_tarsus", tarsus, markers=(Marker(f"{p}_Tip_mk"),))
+    tita = hinge(f"{p}_TiTa", -30, 120, tarsus_seg)
+    tibia_seg = Segment(f"{p}_tibia", tibia, markers=(Marker(f"{p}_TiTa_mk"),), joints=(tita,))
+    fti = hinge(f"{p}_FTi", -170, 0, tibia_seg)
+    femur_seg = Segment(f"{p}_femur", femur, markers=(Marker(f"{p}_FTi_mk"),), joints=(fti,))
     ctr = Joint(f"{p}_CTr", (Axis.fixed("y", "y"), Axis.free("roll", "x", -90, 90),
-                             Axis.free("pitch", "z", -170, 0)), segments=(femur_seg,))
+                             Axis.free("pitch", "z", 20, 160)), segments=(femur_seg,))
     coxa_seg = Segment(f"{p}_coxa", coxa,
-                       markers=(Marker(f"{p}_ThC", (-coxa, 0.0, 0.0)), Marker(f"{p}_CTr")),
+                       markers=(Marker(f"{p}_ThC_mk", (-coxa, 0.0, 0.0)), Marker(f"{p}_CTr_mk")),
                        joints=(ctr,))
-    sign = 1.0 if side == "R" else -1.0
-    thc = Joint(f"{p}_ThC", (Axis.free("roll", "y", *sorted((sign * -30, sign * 120))),
+    lo, hi = ROLL_RIGHT[pos] if side == "R" else (-ROLL_RIGHT[pos][1], -ROLL_RIGHT[pos][0])
+    thc = Joint(f"{p}_ThC", (Axis.free("roll", "y", lo, hi),
                              Axis.free("yaw", "x", -60, 60),
                              Axis.free("pitch", "z", -40, 60)),
                 orientation_deg=(0.0, 0.0, -90.0), segments=(coxa_seg,))
@@ -63,7 +71,7 @@ def leg(side: str, pos: str) -> Chain:
 
 def main() -> None:
     chains = tuple(leg(s, p) for s in "LR" for p in "FMH")
-    body = Body("fly-six-legs", chains, units="mm")
+    body = Body("fly-six-legs", chains, units="mm", description=DESCRIPTION)
     body.validate()
     out = REPO / "chains" / "fly_six_legs.xml"
     save_body(out, body)

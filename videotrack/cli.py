@@ -16,6 +16,8 @@ from kinematics.errors import LocatedError
 #: Sub-command modules, in the order ``--help`` lists them.
 COMMAND_MODULES = (
     "videotrack.commands.chain",
+    "videotrack.commands.synth",
+    "videotrack.commands.detect",
 )
 
 

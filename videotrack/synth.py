@@ -311,3 +311,98 @@ def truth_table(scene: SynthScene) -> np.ndarray:
         scene.joints.reshape(n, -1),
         proj.reshape(n, -1),
     ], axis=1)
+
+
+@dataclass(frozen=True)
+class SynthProject:
+    """Paths written by :func:`write_synthetic_project`."""
+
+    videos: tuple[Path, ...]
+    truth: Path
+    cameras: Path
+    chain: Path
+    config: Path
+    n_images: int
+
+
+def project_config_text(video_names: Sequence[str], cameras: Mapping, options: SynthOptions,
+                        chain_name: str, cameras_name: str, detections_name: str) -> str:
+    """A detect-ready project config for the synthetic video (TOML text)."""
+    sizes = camera_sizes(cameras)
+    rois = view_rois(sizes, options.layout)
+    paths = ", ".join(f'"{v}"' for v in video_names)
+    lines = [
+        "# Project written by 'videotrack synth': the synthetic video, its views and a",
+        "# filter chain that finds the rendered markers.",
+        "",
+        "[video]",
+        f"path = [{paths}]" if len(video_names) > 1 else f"path = {paths}",
+        f'deinterlace = "{"fields" if options.interlaced else "none"}"',
+        f'field_order = "{"top" if options.top_field_first else "bottom"}"',
+        "",
+    ]
+    for k, (name, (x, y, w, h)) in enumerate(zip(cameras, rois, strict=True)):
+        lines += ["[[views]]", f'name = "{name}"', f"roi = [{x}, {y}, {w}, {h}]",
+                  f'camera = "{name}"']
+        if len(video_names) > 1:
+            lines.append(f"video = {k}")
+        lines.append("")
+    threshold = int(options.background + options.intensity / 3)
+    min_area = max(1, int(0.25 * np.pi * (options.marker_diameter / 2) ** 2))
+    lines += [
+        "[[filters.steps]]", 'type = "threshold"', f"value = {threshold}", "",
+        "[markers]", f"min_area = {min_area}", "",
+        "[output]", f'detections = "{detections_name}"', "",
+        f"# chain: {chain_name}; cameras: {cameras_name}; ground truth: truth.csv",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def write_synthetic_project(
+    out_dir: str | os.PathLike,
+    body: Body,
+    chain_text: str,
+    cameras: Mapping,
+    angles_deg: np.ndarray,
+    options: SynthOptions,
+    fps: float = 50.0,
+    codec: str = "ffv1",
+    progress=None,
+) -> SynthProject:
+    """Render the video(s) and write ground truth, cameras, chain and a project config.
+
+    ``progress`` is called with the number of frames written so far (for a progress bar).
+    Every file is written atomically; an interrupted call leaves no partial output.
+    """
+    from kinematics.camera_io import save_cameras
+    from kinematics.fileio import atomic_write_text
+    from videotrack.tables import write_table
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    scene = simulate(body, cameras, angles_deg, options)
+    sizes = camera_sizes(cameras)
+    ext = CODECS[codec][1]
+    if options.layout == "separate":
+        names = [f"video_{name}{ext}" for name in cameras]
+    else:
+        names = [f"video{ext}"]
+    if codec == "png":
+        names = [n if n.endswith("_png") else f"{n}_png" for n in names]
+    with contextlib.ExitStack() as stack:
+        sinks = [stack.enter_context(VideoSink(out / n, fps, codec)) for n in names]
+        for k, frames in enumerate(iter_frames(scene, sizes, options), start=1):
+            for sink, frame in zip(sinks, frames, strict=True):
+                sink.write(frame)
+            if progress is not None:
+                progress(k)
+        videos = tuple(sink.commit() for sink in sinks)
+    write_table(out / "truth.csv", truth_columns(body, scene.view_names), truth_table(scene))
+    save_cameras(out / "cameras.toml", cameras, units=body.units)
+    atomic_write_text(out / "chain.xml", chain_text)
+    config = out / "project.toml"
+    atomic_write_text(config, project_config_text(
+        names, cameras, options, "chain.xml", "cameras.toml", "detections.npz"))
+    return SynthProject(videos, out / "truth.csv", out / "cameras.toml", out / "chain.xml",
+                        config, scene.angles_deg.shape[0])

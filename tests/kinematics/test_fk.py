@@ -1,11 +1,15 @@
 """Forward kinematics: hand-computed postures of the paper's chains, numba == NumPy twin."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 from kinematics.fk import forward_kinematics, forward_kinematics_reference
 from kinematics.packing import pack_body
 from kinematics.rotations import euler_yxz, rot_x, rot_y, rot_z
+
+CHAINS = Path(__file__).resolve().parents[2] / "chains"
 
 
 def test_euler_order_is_ry_rx_rz():
@@ -152,3 +156,40 @@ def test_branched_multichain_body_numba_matches_reference():
         ref = forward_kinematics_reference(body, angles[k])
         np.testing.assert_allclose(batch.markers[k], ref.markers, atol=1e-9, rtol=0)
         np.testing.assert_allclose(batch.joints[k], ref.joints, atol=1e-9, rtol=0)
+
+
+def test_bundled_chains_load_and_fly_body_scales():
+    from kinematics.chain_xml import load_body
+
+    fly = load_body(CHAINS / "fly_six_legs.xml")
+    assert len(fly.chains) == 6 and len(fly.marker_names) == 30 and fly.n_axes == 72
+    assert "NeuroMechFly" in fly.description
+    rng = np.random.default_rng(11)
+    angles = random_postures(fly, 20, rng)
+    batch = forward_kinematics(fly, angles)
+    for k in range(20):
+        ref = forward_kinematics_reference(fly, angles[k])
+        np.testing.assert_allclose(batch.markers[k], ref.markers, atol=1e-9, rtol=0)
+    # legs hang from their fixed roots: the thorax-coxa markers never move
+    np.testing.assert_allclose(batch.markers[:, ::5], np.broadcast_to(
+        batch.markers[:1, ::5], batch.markers[:, ::5].shape), atol=1e-12)
+
+
+def test_stick_insect_file_matches_the_python_built_chain(stick_insect):
+    from kinematics.chain_xml import load_body
+
+    assert load_body(CHAINS / "stick_insect_frontleg.xml") == stick_insect
+
+
+def test_marker_may_not_share_a_joint_name(locust):
+    import dataclasses
+
+    from kinematics.errors import KinematicsError
+    from kinematics.model import Marker
+
+    j0 = locust.chains[0].root_joint
+    coxa = dataclasses.replace(j0.segments[0], markers=(Marker("J1"),))
+    chain = dataclasses.replace(locust.chains[0], root_joint=dataclasses.replace(
+        j0, segments=(coxa,)))
+    with pytest.raises(KinematicsError, match="name of a joint"):
+        dataclasses.replace(locust, chains=(chain,)).validate()
