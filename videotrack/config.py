@@ -1,0 +1,543 @@
+"""Project configuration: a TOML file checked against small declarative schemas.
+
+Every section of the project file is declared once, here or by the module that owns it, as a
+:class:`Section` of :class:`Key` entries (name, type, default, bounds, doc). The declarations are
+the single source of truth: :func:`load_config` validates against them, the records built from
+a config (e.g. :class:`~videotrack.markers.MarkerSettings`) validate through them, and
+:func:`describe_section` turns them into a Markdown reference.
+
+A later module adds its section with ``register_section(Section("anneal", [...]))`` at import
+and reads ``config["anneal"]``; the module must be imported before :func:`load_config` (the
+commands that read a section import its module).
+
+Type strings
+    ``str``, ``int``, ``float`` (an integer is accepted), ``bool``, ``path`` (a string, resolved
+    against the config file's folder), ``table`` (a TOML table), ``list[T]`` for any type T, and
+    unions ``A | B``.
+
+Errors name the file and the dotted key: ``run.toml: filters.steps[2].value: must be at most
+255, got 300``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import tomllib
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from videotrack.errors import VideoTrackError
+
+#: Marks a key without a default: it must be given.
+REQUIRED = object()
+
+
+@dataclass(frozen=True)
+class Key:
+    """One key of a section.
+
+    ``min``/``max`` bound every number inside the value (also inside lists); ``length`` fixes the
+    length of a list; ``check`` is an extra rule returning an error message or None; ``items`` is
+    the schema (a :class:`Section` or :class:`Variants`) of a ``table`` or ``list[table]``.
+    """
+
+    name: str
+    type: str
+    default: Any = REQUIRED
+    doc: str = ""
+    choices: tuple | None = None
+    min: float | None = None
+    max: float | None = None
+    length: int | None = None
+    check: Callable[[Any], str | None] | None = None
+    items: Section | Variants | None = None
+
+    @property
+    def required(self) -> bool:
+        return self.default is REQUIRED
+
+
+@dataclass(frozen=True)
+class Section:
+    """A table of keys; ``array`` True for an array of tables (``[[views]]``)."""
+
+    name: str
+    keys: tuple[Key, ...]
+    doc: str = ""
+    array: bool = False
+    _by_name: dict = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "keys", tuple(self.keys))
+        object.__setattr__(self, "_by_name", {k.name: k for k in self.keys})
+
+    def key(self, name: str) -> Key:
+        return self._by_name[name]
+
+    def validate(
+        self,
+        table: Mapping,
+        *,
+        where: str | None = None,
+        file: str | os.PathLike | None = None,
+        base: str | os.PathLike | None = None,
+    ) -> dict:
+        """Check ``table`` and return a new dict with defaults filled in and paths resolved.
+
+        ``where`` is the dotted prefix used in error fields (default: the section name),
+        ``base`` the folder relative paths resolve against (default: the working directory).
+        """
+        where = self.name if where is None else where
+        if not isinstance(table, Mapping):
+            raise VideoTrackError(f"must be a table, got {_kind(table)}", file=file, field=where)
+        unknown = [k for k in table if k not in self._by_name]
+        if unknown:
+            known = ", ".join(self._by_name) or "none"
+            raise VideoTrackError(
+                f"unknown key {unknown[0]!r} (known keys: {known})",
+                file=file,
+                field=f"{where}.{unknown[0]}",
+            )
+        out = {}
+        for key in self.keys:
+            name = f"{where}.{key.name}"
+            if key.name not in table:
+                if key.required:
+                    raise VideoTrackError(f"missing (required): {key.doc}", file=file, field=name)
+                out[key.name] = key.default
+                continue
+            out[key.name] = _check_key(key, table[key.name], name, file, base)
+        return out
+
+
+@dataclass(frozen=True)
+class Variants:
+    """Tables whose ``tag`` key selects their schema, e.g. filter steps selected by ``type``."""
+
+    name: str
+    tag: str
+    sections: Mapping[str, Section]
+    doc: str = ""
+
+    def validate(self, table, *, where=None, file=None, base=None) -> dict:
+        where = self.name if where is None else where
+        if not isinstance(table, Mapping):
+            raise VideoTrackError(f"must be a table, got {_kind(table)}", file=file, field=where)
+        if self.tag not in table:
+            raise VideoTrackError(
+                f"missing {self.tag!r}; one of: {', '.join(self.sections)}", file=file, field=where
+            )
+        kind = table[self.tag]
+        if kind not in self.sections:
+            raise VideoTrackError(
+                f"unknown {self.tag} {kind!r}; one of: {', '.join(self.sections)}",
+                file=file,
+                field=f"{where}.{self.tag}",
+            )
+        rest = {k: v for k, v in table.items() if k != self.tag}
+        return {self.tag: kind, **self.sections[kind].validate(rest, where=where, file=file,
+                                                                base=base)}
+
+
+#: Registered top-level sections, in documentation order.
+SECTIONS: dict[str, Section] = {}
+
+
+def register_section(section: Section) -> Section:
+    """Add a top-level section (once per name) and return it."""
+    if section.name in SECTIONS and SECTIONS[section.name] != section:
+        raise ValueError(f"config section {section.name!r} is registered twice")
+    SECTIONS[section.name] = section
+    return section
+
+
+@dataclass(frozen=True)
+class Config:
+    """A validated project file: ``config["video"]`` is the checked dict of that section.
+
+    An absent section holds its defaults (an absent array of tables is an empty list);
+    ``given`` lists the sections the file itself has.
+    """
+
+    path: Path
+    sections: Mapping[str, Any]
+    given: tuple[str, ...] = ()
+
+    @property
+    def folder(self) -> Path:
+        return self.path.parent
+
+    def __getitem__(self, name: str):
+        return self.sections[name]
+
+    def __contains__(self, name: str) -> bool:
+        return name in self.sections
+
+
+def load_config(path: str | os.PathLike) -> Config:
+    """Read and validate a project TOML file.
+
+    Raises
+    ------
+    VideoTrackError
+        Missing or unreadable file, TOML syntax (with the line), unknown section or key, wrong
+        type or value.
+    """
+    path = Path(path).absolute()
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise VideoTrackError("no such config file", file=path) from None
+    except (OSError, UnicodeDecodeError) as err:
+        raise VideoTrackError(f"cannot read config file: {err}", file=path) from None
+    return parse_config(text, path)
+
+
+def parse_config(text: str, path: str | os.PathLike) -> Config:
+    """Validate TOML ``text`` as if read from ``path`` (relative paths resolve beside it)."""
+    path = Path(path).absolute()
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as err:
+        msg = str(err)
+        match = re.search(r"\(at line (\d+), column \d+\)", msg)
+        line = int(match.group(1)) if match else None
+        msg = re.sub(r"\s*\(at line \d+, column \d+\)", "", msg)
+        raise VideoTrackError(f"TOML syntax: {msg}", file=path, line=line) from None
+    unknown = [k for k in raw if k not in SECTIONS]
+    if unknown:
+        raise VideoTrackError(
+            f"unknown section (known: {', '.join(SECTIONS)})", file=path, field=unknown[0]
+        )
+    sections: dict[str, Any] = {}
+    for name, section in SECTIONS.items():
+        value = raw.get(name)
+        if section.array:
+            if value is None:
+                value = []
+            if not isinstance(value, list):
+                raise VideoTrackError(
+                    f"must be an array of tables ([[{name}]]), got {_kind(value)}",
+                    file=path,
+                    field=name,
+                )
+            sections[name] = [
+                section.validate(item, where=f"{name}[{i}]", file=path, base=path.parent)
+                for i, item in enumerate(value)
+            ]
+        else:
+            sections[name] = section.validate(
+                {} if value is None else value, file=path, base=path.parent
+            )
+    return Config(path=path, sections=sections, given=tuple(raw))
+
+
+def describe_section(section: Section | Variants, level: int = 3) -> str:
+    """Markdown reference of a section: one table row per key (generated docs)."""
+    if isinstance(section, Variants):
+        parts = [f"{section.doc}\n"] if section.doc else []
+        for kind, sub in section.sections.items():
+            parts.append(f"{'#' * level} `{section.tag} = \"{kind}\"`\n\n{sub.doc}\n")
+            if sub.keys:
+                parts.append(_key_table(sub))
+        return "\n".join(parts)
+    head = f"[[{section.name}]]" if section.array else f"[{section.name}]"
+    return f"{'#' * level} `{head}`\n\n{section.doc}\n\n{_key_table(section)}"
+
+
+def _key_table(section: Section) -> str:
+    rows = ["| key | type | default | meaning |", "| --- | --- | --- | --- |"]
+    for key in section.keys:
+        default = "required" if key.required else f"`{_toml(key.default)}`"
+        extra = f" One of: {', '.join(_toml(c) for c in key.choices)}." if key.choices else ""
+        cells = (f"`{key.name}`", key.type, default, key.doc + extra)
+        rows.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
+    return "\n".join(rows) + "\n"
+
+
+def _toml(value) -> str:
+    """A default or choice as it is written in TOML."""
+    return json.dumps(value) if isinstance(value, bool | str | list) else repr(value)
+
+
+# -- value checking -----------------------------------------------------------------------------
+
+
+def _kind(value) -> str:
+    if isinstance(value, bool):
+        return "a boolean"
+    if isinstance(value, int):
+        return "an integer"
+    if isinstance(value, float):
+        return "a number"
+    if isinstance(value, str):
+        return "a string"
+    if isinstance(value, list):
+        return "a list"
+    if isinstance(value, Mapping):
+        return "a table"
+    return type(value).__name__
+
+
+def _split_union(type_: str) -> list[str]:
+    parts, depth, cur = [], 0, ""
+    for ch in type_:
+        if ch == "[":
+            depth += 1
+        elif ch == "]":
+            depth -= 1
+        if ch == "|" and depth == 0:
+            parts.append(cur.strip())
+            cur = ""
+        else:
+            cur += ch
+    parts.append(cur.strip())
+    return parts
+
+
+def _convert(type_: str, value, key: Key, name: str, file, base):
+    """Value converted to ``type_`` or raise VideoTrackError; unions try each alternative."""
+    alternatives = _split_union(type_)
+    if len(alternatives) > 1:
+        errors = []
+        for alt in alternatives:
+            try:
+                return _convert(alt, value, key, name, file, base)
+            except VideoTrackError as err:
+                errors.append(err)
+        # Prefer the message of the alternative whose outer type matched.
+        for err in errors:
+            if not err.message.startswith("must be "):
+                raise err
+        raise VideoTrackError(
+            f"must be {' or '.join(_article(a) for a in alternatives)}, got {_kind(value)}",
+            file=file,
+            field=name,
+        )
+    if type_.startswith("list[") and type_.endswith("]"):
+        if not isinstance(value, list):
+            raise VideoTrackError(f"must be {_article(type_)}, got {_kind(value)}",
+                                  file=file, field=name)
+        inner = type_[5:-1]
+        return [_convert(inner, v, key, f"{name}[{i}]", file, base) for i, v in enumerate(value)]
+    ok = {
+        "str": isinstance(value, str),
+        "path": isinstance(value, str | os.PathLike),
+        "bool": isinstance(value, bool),
+        "int": isinstance(value, int) and not isinstance(value, bool),
+        "float": isinstance(value, int | float) and not isinstance(value, bool),
+        "table": isinstance(value, Mapping),
+    }
+    if type_ not in ok:
+        raise ValueError(f"unknown schema type {type_!r} of {name}")
+    if not ok[type_]:
+        raise VideoTrackError(f"must be {_article(type_)}, got {_kind(value)}", file=file,
+                              field=name)
+    if type_ == "float":
+        value = float(value)
+        if value != value or value in (float("inf"), float("-inf")):
+            raise VideoTrackError("must be a finite number", file=file, field=name)
+    if type_ in ("int", "float"):
+        if key.min is not None and value < key.min:
+            raise VideoTrackError(f"must be at least {key.min:g}, got {value:g}", file=file,
+                                  field=name)
+        if key.max is not None and value > key.max:
+            raise VideoTrackError(f"must be at most {key.max:g}, got {value:g}", file=file,
+                                  field=name)
+    if type_ == "path":
+        if not value:
+            return ""  # an empty path means "not given"
+        p = Path(value).expanduser()  # also accepts an already resolved path
+        return (Path(base) / p if base is not None and not p.is_absolute() else p).absolute()
+    if type_ == "table" and key.items is not None:
+        return key.items.validate(value, where=name, file=file, base=base)
+    return value
+
+
+_NAMES = {
+    "str": ("a string", "strings"),
+    "path": ("a path (string)", "paths"),
+    "bool": ("true or false", "booleans"),
+    "int": ("an integer", "integers"),
+    "float": ("a number", "numbers"),
+    "table": ("a table", "tables"),
+}
+
+
+def _article(type_: str, plural: bool = False) -> str:
+    if type_.startswith("list["):
+        return ("lists" if plural else "a list") + f" of {_article(type_[5:-1], plural=True)}"
+    return _NAMES[type_][plural] if type_ in _NAMES else type_
+
+
+def _check_key(key: Key, value, name: str, file, base):
+    out = _convert(key.type, value, key, name, file, base)
+    if key.choices is not None and out not in key.choices:
+        raise VideoTrackError(
+            f"must be one of {', '.join(map(repr, key.choices))}, got {out!r}",
+            file=file,
+            field=name,
+        )
+    if key.length is not None and isinstance(out, list) and len(out) != key.length:
+        raise VideoTrackError(f"must have {key.length} entries, got {len(out)}", file=file,
+                              field=name)
+    if key.check is not None:
+        problem = key.check(out)
+        if problem:
+            raise VideoTrackError(problem, file=file, field=name)
+    return out
+
+
+# -- the sections of marker detection -----------------------------------------------------------
+
+
+def _frames_rule(text: str) -> str | None:
+    from videotrack.video import parse_frame_range
+
+    try:
+        parse_frame_range(text)
+    except ValueError as err:
+        return str(err)
+    return None
+
+
+def _odd(value: int) -> str | None:
+    return None if value % 2 == 1 else f"must be odd (a kernel has a centre pixel), got {value}"
+
+
+def _roi_rule(roi: list) -> str | None:
+    if roi and len(roi) != 4:
+        return f"must be [x, y, width, height], got {len(roi)} entries"
+    if roi and (roi[2] < 1 or roi[3] < 1):
+        return f"width and height must be at least 1, got {roi[2]} x {roi[3]}"
+    return None
+
+
+def _hsv_rule(hsv: list) -> str | None:
+    if hsv[0] > 179:
+        return f"OpenCV hue runs 0..179, got {hsv[0]}"
+    return None
+
+
+def _rects_rule(rects: list) -> str | None:
+    for i, r in enumerate(rects):
+        if len(r) != 4 or r[2] < 1 or r[3] < 1:
+            return f"entry {i} must be [x, y, width, height] with a positive size, got {r}"
+    return None
+
+
+def _polygons_rule(polygons: list) -> str | None:
+    for i, poly in enumerate(polygons):
+        if len(poly) < 3 or any(len(p) != 2 for p in poly):
+            return f"polygon {i} must have at least 3 [x, y] points"
+    return None
+
+
+VIDEO = register_section(Section("video", (
+    Key("path", "path | list[path]", doc="Video file or image-sequence folder; a list of them "
+        "for synchronised cameras (one file per camera)."),
+    Key("fps", "float", 0.0, "Frame rate; 0 takes it from the video (image sequences: 25).",
+        min=0.0, max=1e6),
+    Key("deinterlace", "str", "none", "Split each frame into its two fields (half-frames).",
+        choices=("none", "fields")),
+    Key("field_order", "str", "top", "Which field was exposed first: 'top' (even rows) or "
+        "'bottom' (odd rows; PAL DV).", choices=("top", "bottom")),
+    Key("line_doubling", "str", "none", "Stretch half-frames back to full height: 'repeat' "
+        "rows or 'linear' interpolation.", choices=("none", "repeat", "linear")),
+    Key("frames", "str", "", "Frame range 'A:B' (start included, stop excluded, 0-based); "
+        "empty for all.", check=_frames_rule),
+), doc="The video(s) to read and how to split frames in time."))
+
+VIEWS = register_section(Section("views", (
+    Key("name", "str", doc="Name of the view, unique."),
+    Key("roi", "list[int]", [], "Rectangle [x, y, width, height] of the frame holding the view; "
+        "empty for the whole frame.", min=0, check=_roi_rule),
+    Key("flip_x", "bool", False, "Mirror the view left-right (a mirror set-up)."),
+    Key("flip_y", "bool", False, "Mirror the view top-bottom."),
+    Key("camera", "str", "", "Camera of this view in the camera file; empty: the view's name."),
+    Key("video", "int", 0, "Index of the view's video in video.path (synchronised cameras).",
+        min=0),
+), doc="One entry per view: a rectangle of a video frame seen by one camera.", array=True))
+
+_MORPH_KEYS = (
+    Key("size", "int", 3, "Kernel size in pixels (odd).", min=1, max=99, check=_odd),
+    Key("iterations", "int", 1, "How often the operation is repeated.", min=1, max=100),
+    Key("shape", "str", "ellipse", "Kernel shape.", choices=("ellipse", "rect", "cross")),
+)
+
+FILTER_STEPS = Variants("filters.steps", "type", {
+    "channel": Section("channel", (
+        Key("channel", "str", doc="Colour channel to keep as the grey image.",
+            choices=("blue", "green", "red")),
+    ), doc="Colour → grey: keep one colour channel."),
+    "grey": Section("grey", (), doc="Colour → grey: luminance (OpenCV's BGR2GRAY)."),
+    "hsv_range": Section("hsv_range", (
+        Key("lower", "list[int]", doc="Lowest [hue, saturation, value]; hue 0..179.",
+            length=3, min=0, max=255, check=_hsv_rule),
+        Key("upper", "list[int]", doc="Highest [hue, saturation, value]. A lower hue above the "
+            "upper hue wraps around red.", length=3, min=0, max=255, check=_hsv_rule),
+    ), doc="Colour → mask: pixels whose HSV colour lies in the range."),
+    "background": Section("background", (
+        Key("frames", "int", 25, "Frames sampled evenly over the whole video for the median.",
+            min=3, max=500),
+        Key("polarity", "str", "brighter", "Keep what is brighter than the background, darker, "
+            "or both (absolute difference).", choices=("brighter", "darker", "both")),
+    ), doc="Grey → grey: subtract the per-pixel median of sampled frames (computed once)."),
+    "invert": Section("invert", (), doc="Grey or mask: 255 - value (dark markers become bright)."),
+    "threshold": Section("threshold", (
+        Key("value", "int", doc="Pixels brighter than this grey level become marker pixels.",
+            min=0, max=254),
+    ), doc="Grey → mask: global threshold."),
+    "otsu": Section("otsu", (), doc="Grey → mask: threshold chosen per image by Otsu's method."),
+    "adaptive": Section("adaptive", (
+        Key("block_size", "int", 15, "Side of the neighbourhood in pixels (odd).", min=3,
+            max=255, check=_odd),
+        Key("offset", "float", 10.0, "A pixel is a marker pixel when it exceeds its "
+            "neighbourhood's mean by more than this.", min=-255.0, max=255.0),
+        Key("method", "str", "mean", "Neighbourhood mean: plain or Gaussian-weighted.",
+            choices=("mean", "gaussian")),
+    ), doc="Grey → mask: threshold relative to the local mean."),
+    "erode": Section("erode", _MORPH_KEYS, doc="Shrink bright regions (grey or mask)."),
+    "dilate": Section("dilate", _MORPH_KEYS, doc="Grow bright regions (grey or mask)."),
+    "open": Section("open", _MORPH_KEYS, doc="Erode then dilate: removes specks."),
+    "close": Section("close", _MORPH_KEYS, doc="Dilate then erode: fills small holes."),
+    "mask": Section("mask", (
+        Key("rects", "list[list[int]]", [], "Rectangles [x, y, width, height] in view "
+            "coordinates.", min=0, check=_rects_rule),
+        Key("polygons", "list[list[list[float]]]", [], "Polygons [[x, y], ...] in view "
+            "coordinates.", check=_polygons_rule),
+        Key("image", "path", "", "Image of the view's size; non-zero pixels are masked."),
+        Key("keep", "bool", False, "true: keep only the masked area, discard the rest."),
+        Key("view", "str", "", "Apply to this view only; empty: every view."),
+    ), doc="Any → same: zero the masked area (static reflections, the frame of a mirror)."),
+}, doc="Filter steps run in order on each view image; the chain must end with a mask.")
+
+FILTERS = register_section(Section("filters", (
+    Key("steps", "list[table]", doc="Ordered filter steps ([[filters.steps]] tables).",
+        items=FILTER_STEPS),
+), doc="The filter chain that turns a view image into a mask of marker pixels."))
+
+MARKERS = register_section(Section("markers", (
+    Key("min_area", "int", 1, "Smallest marker region in pixels.", min=1, max=10**7),
+    Key("max_area", "int", 10000, "Largest marker region in pixels.", min=1, max=10**8),
+    Key("max_aspect", "float", 0.0, "Largest ratio of a region's long to short axis (second "
+        "moments); 0 turns the gate off.", min=0.0, max=1000.0,
+        check=lambda v: None if v == 0 or v >= 1 else f"must be 0 (off) or at least 1, got {v}"),
+    Key("min_circularity", "float", 0.0, "Smallest circularity area/(2π·(λ1+λ2)) (1 for a "
+        "disc, lower for elongated or ragged regions); 0 turns the gate off.", min=0.0,
+        max=1.0),
+    Key("weighting", "str", "intensity", "Centroid of the pixel intensities (sub-pixel) or of "
+        "the region's pixels ('binary').", choices=("intensity", "binary")),
+    Key("window_pad", "int", 1, "Pixels added around a region for the intensity-weighted "
+        "centroid and its local background.", min=0, max=20),
+    Key("connectivity", "int", 8, "Pixel neighbourhood of a region.", choices=(4, 8)),
+), doc="Which regions of the mask are markers, and how their centroids are measured."))
+
+OUTPUT = register_section(Section("output", (
+    Key("detections", "path", "", "Detections file; empty: '<first video>.detections.npz' "
+        "beside the config file."),
+), doc="Where results go."))

@@ -1,0 +1,273 @@
+"""Marker detection over a video: frames → views × fields → filters → regions → centroids.
+
+:func:`iter_detect` is a generator yielding the detections of one record (a frame, or a
+half-frame when de-interlacing) at a time; it never prints or writes, and closing it cancels
+the run. :func:`detect_video` collects a whole run into a
+:class:`~videotrack.detections.Detections`. :func:`settings_from_config` builds the settings
+from a project file.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from videotrack.deinterlace import Deinterlace
+from videotrack.detections import FORMAT, VERSION, Detections, DetectSettings, build_detections
+from videotrack.errors import VideoTrackError
+from videotrack.filters import FilterChain
+from videotrack.markers import MarkerSettings, RegionFinder
+from videotrack.video import VideoSet, VideoTrackWarning, as_video_set, resolve_frames
+from videotrack.views import Plane, View, check_views
+
+
+@dataclass(frozen=True, eq=False)
+class FrameDetections:
+    """Detections of one record.
+
+    Attributes
+    ----------
+    record : int
+        Index of the record in the run (0-based; two per frame when de-interlacing).
+    video_frame : int
+        Frame index in the video.
+    parity : int or None
+        Field parity (0 even rows, 1 odd rows), None for the whole frame.
+    points : tuple of ndarray, shape (n_v, 2)
+        Centroids per view, in view image coordinates.
+    areas : tuple of ndarray of int64, shape (n_v,)
+        Region areas per view.
+    """
+
+    record: int
+    video_frame: int
+    parity: int | None
+    points: tuple[np.ndarray, ...]
+    areas: tuple[np.ndarray, ...]
+
+
+def settings_from_config(config) -> DetectSettings:
+    """Detection settings of a loaded project file (views, filters, markers, fields)."""
+    video = config["video"]
+    deinterlace = Deinterlace(video["deinterlace"], video["field_order"], video["line_doubling"])
+    views = [
+        View(v["name"], tuple(v["roi"]) or None, v["flip_x"], v["flip_y"], v["camera"] or None,
+             v["video"])
+        for v in config["views"]
+    ]
+    if not views:  # one whole-frame view per video
+        n = len(video_paths(config))
+        views = [View("view" if n == 1 else f"view{i}", video=i) for i in range(n)]
+    return DetectSettings(tuple(views), FilterChain.from_config(config),
+                          MarkerSettings.from_config(config), deinterlace)
+
+
+def video_paths(config) -> list[Path]:
+    """The video file(s) or folder(s) of a project file, resolved."""
+    paths = config["video"]["path"]
+    return [Path(p) for p in (paths if isinstance(paths, list) else [paths])]
+
+
+def default_output(config) -> Path:
+    """Detections path of a project file: ``[output] detections`` or
+    ``<first video>.detections.npz`` beside the config file."""
+    given = config["output"]["detections"]
+    if given:
+        return Path(given)
+    return config.folder / f"{video_paths(config)[0].stem}.detections.npz"
+
+
+def iter_detect(source, settings: DetectSettings, frames=None) -> Iterator[FrameDetections]:
+    """Detect markers record by record.
+
+    Parameters
+    ----------
+    source : VideoSource or VideoSet
+        The video(s); colour frames are needed when the filter chain picks colours.
+    settings : DetectSettings
+    frames : range, (start, stop), "A:B" or None
+        Video frames to process (None: all).
+
+    Yields
+    ------
+    FrameDetections
+        One per frame, or per half-frame in time order when de-interlacing.
+
+    Raises
+    ------
+    VideoTrackError
+        ROI outside the frame, unknown view in a mask step, grey video for a colour filter,
+        a frame range outside the video, or the first frame of the range cannot be decoded.
+    """
+    videos = as_video_set(source)
+    detect = FrameDetector(videos, settings)
+    frame_range = resolve_frames(frames, videos.n_frames)
+    record = 0
+    for index, frame_set in videos.frames(frame_range.start, frame_range.stop, reuse=True):
+        for parity, points, areas in detect(frame_set):
+            yield FrameDetections(record, index, parity, points, areas)
+            record += 1
+
+
+class FrameDetector:
+    """Detection of one frame at a time, with the filters prepared once for every plane.
+
+    What :func:`iter_detect` runs per frame; also for detecting single frames (e.g. the
+    frame a GUI shows). Construction checks the views against the video(s) and computes
+    background medians.
+
+    Parameters
+    ----------
+    videos : VideoSet or VideoSource
+    settings : DetectSettings
+    """
+
+    def __init__(self, videos, settings: DetectSettings) -> None:
+        videos = as_video_set(videos)
+        if settings.filters.needs_colour and not all(s.colour for s in videos.sources):
+            raise VideoTrackError("the filter chain picks colours, but the video was opened "
+                                  "in grey (open it with colour=True)", field="filters.steps")
+        self.views = check_views(settings.views, [(s.width, s.height) for s in videos.sources])
+        settings.filters.check_views([v.name for v in self.views])
+        deint = settings.deinterlace
+        self.planes = [[Plane(v, p, deint) for v in self.views] for p in deint.parities]
+        sampler = _Sampler(videos)
+        self.filters = [[settings.filters.compile(pl, sampler.for_video(pl.view.video))
+                         for pl in row] for row in self.planes]
+        self.find = RegionFinder(settings.markers)
+
+    def __call__(self, frame_set) -> list[tuple[int | None, tuple, tuple]]:
+        """Detect in one frame per video (a tuple, as :meth:`VideoSet.read` gives).
+
+        Returns
+        -------
+        list of (parity, points, areas)
+            One entry per field in time order (one entry without de-interlacing); points
+            and areas are tuples with one array per view, points in view coordinates.
+        """
+        out = []
+        for row, filters in zip(self.planes, self.filters, strict=True):
+            points, areas = [], []
+            for plane, chain in zip(row, filters, strict=True):
+                mask, weights = chain.run(plane.extract(frame_set[plane.view.video]))
+                regions = self.find(mask, weights)
+                points.append(plane.to_view(regions.xy))
+                areas.append(regions.area)
+            out.append((row[0].parity, tuple(points), tuple(areas)))
+        return out
+
+
+class _Sampler:
+    """Frames sampled evenly over a whole video (for background medians), read once."""
+
+    def __init__(self, videos: VideoSet) -> None:
+        self.videos = videos
+        self.cache: dict[tuple[int, int], list[np.ndarray]] = {}
+
+    def for_video(self, video: int) -> Callable[[int], list[np.ndarray]]:
+        return lambda n: self.sample(video, n)
+
+    def sample(self, video: int, n: int) -> list[np.ndarray]:
+        if (video, n) not in self.cache:
+            source = self.videos.sources[video]
+            while True:
+                count = self.videos.n_frames
+                indices = np.unique(np.rint(np.linspace(0, count - 1, n)).astype(int))
+                try:
+                    self.cache[video, n] = [source.read(int(i)) for i in indices]
+                    break
+                except VideoTrackError:
+                    if self.videos.n_frames == count:  # not a newly found break: give up
+                        raise
+        return self.cache[video, n]
+
+
+def detect_video(source, settings: DetectSettings, frames=None,
+                 progress: Callable[[int], object] | None = None) -> Detections:
+    """Detect markers in every record of a frame range and collect them.
+
+    Parameters
+    ----------
+    source : VideoSource or VideoSet
+    settings : DetectSettings
+    frames : range, (start, stop), "A:B" or None
+    progress : callable, optional
+        Called with 1 after each video frame (e.g. ``tqdm.update``).
+
+    Returns
+    -------
+    Detections
+        Not yet saved (``save_detections``). A view without any marker in the whole run is
+        reported by a :class:`~videotrack.video.VideoTrackWarning`; its records are empty.
+    """
+    videos = as_video_set(source)
+    frame_range = resolve_frames(frames, videos.n_frames)
+    per_record, video_frames, parities = [], [], []
+    last = None
+    for det in iter_detect(videos, settings, frame_range):
+        per_record.append(list(zip(det.points, det.areas, strict=True)))
+        video_frames.append(det.video_frame)
+        parities.append(-1 if det.parity is None else det.parity)
+        if progress is not None and det.video_frame != last:
+            progress(1)
+        last = det.video_frame
+    broken = [s.broken_at for s in videos.sources if s.broken_at is not None]
+    metadata = {
+        "format": FORMAT,
+        "version": VERSION,
+        "settings": settings.to_dict(),
+        "settings_hash": settings.hash(),
+        "videos": videos.identity(),
+        "view_names": [v.name for v in settings.views],
+        "frame_rate": settings.deinterlace.frame_rate(videos.fps),
+        "frames": [frame_range.start, frame_range.start if last is None else last + 1],
+        "broken_at": min(broken) if broken else None,
+    }
+    detections = build_detections(per_record, video_frames, parities, metadata)
+    counts = detections.counts()
+    for v, name in enumerate(detections.view_names):
+        if len(counts) and not counts[:, v].any():
+            warnings.warn(
+                f"view {name!r}: no markers in any of the {len(counts)} records; check its ROI "
+                "and the filter chain", VideoTrackWarning, stacklevel=2)
+    return detections
+
+
+@dataclass(frozen=True)
+class ViewSummary:
+    """Markers per record of one view: min / median / max and records without any."""
+
+    view: str
+    records: int
+    min: int
+    median: float
+    max: int
+    empty: int
+
+
+def summarize(detections: Detections) -> list[ViewSummary]:
+    """One :class:`ViewSummary` per view."""
+    counts = detections.counts()
+    rows = []
+    for v, name in enumerate(detections.view_names):
+        c = counts[:, v] if len(counts) else np.zeros(1, np.int64)
+        rows.append(ViewSummary(name, len(counts), int(c.min()), float(np.median(c)),
+                                int(c.max()), int((c == 0).sum()) if len(counts) else 0))
+    return rows
+
+
+def format_summary(rows: list[ViewSummary]) -> str:
+    """A plain-text table of :func:`summarize`."""
+    head = ("view", "records", "min", "median", "max", "empty")
+    body = [(r.view, str(r.records), str(r.min), f"{r.median:g}", str(r.max), str(r.empty))
+            for r in rows]
+    widths = [max(len(x) for x in col) for col in zip(head, *body, strict=True)]
+    lines = ["  ".join(x.ljust(w) if i == 0 else x.rjust(w)
+                       for i, (x, w) in enumerate(zip(line, widths, strict=True)))
+             for line in (head, *body)]
+    lines.insert(1, "  ".join("-" * w for w in widths))
+    return "\n".join(lines)
