@@ -10,8 +10,10 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
+import warnings
 
 from kinematics.errors import LocatedError
+from videotrack.errors import VideoTrackWarning
 
 #: Sub-command modules, in the order ``--help`` lists them.
 COMMAND_MODULES = (
@@ -46,6 +48,13 @@ def _version() -> str:
         return "videotrack (not installed)"
 
 
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """Warnings as one line on stderr, without disturbing a progress bar."""
+    from tqdm import tqdm
+
+    tqdm.write(f"videotrack: warning: {message}", file=sys.stderr)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -53,7 +62,10 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     try:
-        return int(args.func(args) or 0)
+        with warnings.catch_warnings():
+            warnings.simplefilter("always", VideoTrackWarning)
+            warnings.showwarning = _show_warning
+            return int(args.func(args) or 0)
     except LocatedError as err:
         print(f"videotrack: error: {err}", file=sys.stderr)
         return 1

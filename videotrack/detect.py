@@ -18,10 +18,10 @@ import numpy as np
 
 from videotrack.deinterlace import Deinterlace
 from videotrack.detections import FORMAT, VERSION, Detections, DetectSettings, build_detections
-from videotrack.errors import VideoTrackError
+from videotrack.errors import VideoTrackError, VideoTrackWarning
 from videotrack.filters import FilterChain
 from videotrack.markers import MarkerSettings, RegionFinder
-from videotrack.video import VideoSet, VideoTrackWarning, as_video_set, resolve_frames
+from videotrack.video import VideoSet, as_video_set, resolve_frames
 from videotrack.views import Plane, View, check_views
 
 

@@ -30,7 +30,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from videotrack.errors import VideoTrackError
+from videotrack.errors import VideoTrackError, VideoTrackWarning
 
 # Silence FFmpeg's own console messages (e.g. on truncated files): problems are reported as
 # one-line warnings instead. Must be set before the first VideoCapture; a user's value wins.
@@ -54,10 +54,6 @@ _SEEK_PROBE_MAX = 50
 
 #: Frame rate assumed for image sequences and videos that announce none.
 DEFAULT_FPS = 25.0
-
-
-class VideoTrackWarning(UserWarning):
-    """A problem VideoTrack works around (truncated video, view without markers, ...)."""
 
 
 def parse_frame_range(text: str) -> tuple[int, int | None]:

@@ -8,11 +8,11 @@ import pytest
 from videotrack.deinterlace import Deinterlace
 from videotrack.detect import detect_video, format_summary, iter_detect, summarize
 from videotrack.detections import DetectSettings
-from videotrack.errors import VideoTrackError
+from videotrack.errors import VideoTrackError, VideoTrackWarning
 from videotrack.filters import FilterChain
 from videotrack.markers import MarkerSettings
 from videotrack.render import render_markers
-from videotrack.video import VideoSource, VideoTrackWarning, open_videos
+from videotrack.video import VideoSource, open_videos
 from videotrack.views import View
 
 THRESHOLD = FilterChain([{"type": "threshold", "value": 90}])

@@ -6,11 +6,10 @@ import cv2
 import numpy as np
 import pytest
 
-from videotrack.errors import VideoTrackError
+from videotrack.errors import VideoTrackError, VideoTrackWarning
 from videotrack.video import (
     VideoSet,
     VideoSource,
-    VideoTrackWarning,
     natural_key,
     open_videos,
     parse_frame_range,

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import warnings
 from pathlib import Path
 
 EXAMPLES = """\
@@ -85,10 +84,7 @@ def run(args) -> int:
     )
     from videotrack.detections import check_fresh, load_detections, save_detections
     from videotrack.errors import VideoTrackError
-    from videotrack.video import VideoTrackWarning, open_videos, parse_frame_range, resolve_frames
-
-    def show(message, category, filename, lineno, file=None, line=None):
-        tqdm.write(f"videotrack: warning: {message}", file=sys.stderr)
+    from videotrack.video import open_videos, parse_frame_range, resolve_frames
 
     config = load_config(args.config)
     frames_text, frames_field = ((args.frames, "--frames") if args.frames is not None
@@ -99,45 +95,42 @@ def run(args) -> int:
         raise VideoTrackError(str(err), field=frames_field) from None
     output = args.output if args.output is not None else default_output(config)
 
-    with warnings.catch_warnings():
-        warnings.simplefilter("always", VideoTrackWarning)
-        warnings.showwarning = show
+    try:
+        settings = settings_from_config(config)
+        videos = open_videos(video_paths(config), colour=settings.filters.needs_colour,
+                             fps=config["video"]["fps"] or None)
+    except VideoTrackError as err:
+        raise err.located(file=config.path) from None
+    with videos:
         try:
-            settings = settings_from_config(config)
-            videos = open_videos(video_paths(config), colour=settings.filters.needs_colour,
-                                 fps=config["video"]["fps"] or None)
+            frames = resolve_frames(frames_text, videos.n_frames)
+        except VideoTrackError as err:
+            err.field = frames_field
+            if args.frames is None:  # the range comes from the config file
+                err.located(file=config.path)
+            raise err from None
+        if output.exists() and not args.force:
+            try:
+                previous = load_detections(output)
+            except VideoTrackError as err:  # never overwrite some other file unasked
+                raise VideoTrackError(f"{err.message}; not overwritten (--force does)",
+                                      file=output) from None
+            try:
+                check_fresh(previous, videos, settings, frames)
+            except VideoTrackError as err:
+                print(f"videotrack: {output} is out of date ({err.message}); detecting "
+                      "again", file=sys.stderr)
+            else:
+                print(f"{output} is up to date (--force detects again)")
+                return 0
+        try:
+            with tqdm(total=len(frames), unit="frame", desc="detecting", file=sys.stderr,
+                      leave=False, disable=None) as bar:
+                detections = detect_video(videos, settings, frames, progress=bar.update)
         except VideoTrackError as err:
             raise err.located(file=config.path) from None
-        with videos:
-            try:
-                frames = resolve_frames(frames_text, videos.n_frames)
-            except VideoTrackError as err:
-                err.field = frames_field
-                if args.frames is None:  # the range comes from the config file
-                    err.located(file=config.path)
-                raise err from None
-            if output.exists() and not args.force:
-                try:
-                    previous = load_detections(output)
-                except VideoTrackError as err:  # never overwrite some other file unasked
-                    raise VideoTrackError(f"{err.message}; not overwritten (--force does)",
-                                          file=output) from None
-                try:
-                    check_fresh(previous, videos, settings, frames)
-                except VideoTrackError as err:
-                    print(f"videotrack: {output} is out of date ({err.message}); detecting "
-                          "again", file=sys.stderr)
-                else:
-                    print(f"{output} is up to date (--force detects again)")
-                    return 0
-            try:
-                with tqdm(total=len(frames), unit="frame", desc="detecting", file=sys.stderr,
-                          leave=False, disable=None) as bar:
-                    detections = detect_video(videos, settings, frames, progress=bar.update)
-            except VideoTrackError as err:
-                raise err.located(file=config.path) from None
-        output.parent.mkdir(parents=True, exist_ok=True)
-        save_detections(detections, output)
+    output.parent.mkdir(parents=True, exist_ok=True)
+    save_detections(detections, output)
 
     unit = "half-frame" if detections.parities.max(initial=-1) >= 0 else "frame"
     start, stop = detections.metadata["frames"]
