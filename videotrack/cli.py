@@ -20,6 +20,12 @@ COMMAND_MODULES = (
     "videotrack.commands.chain",
     "videotrack.commands.synth",
     "videotrack.commands.detect",
+    "videotrack.commands.fit",
+    "videotrack.commands.histograms",
+    "videotrack.commands.gui",
+    "videotrack.commands.batch",
+    "videotrack.commands.demo",
+    "videotrack.commands.eval",
 )
 
 

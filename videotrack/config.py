@@ -10,6 +10,13 @@ A later module adds its section with ``register_section(Section("anneal", [...])
 and reads ``config["anneal"]``; the module must be imported before :func:`load_config` (the
 commands that read a section import its module).
 
+Inheritance (projects, :mod:`videotrack.project`): each file is first checked on its own by
+:func:`parse_layer` (unknown keys, types and values are reported against the file that has
+them; relative paths resolve against it), the layers are merged by :func:`merge_layers` (a
+deeper file overrides keys of the one above; lists and arrays of tables replace), and
+:func:`config_from_layers` fills defaults and checks required keys. :func:`load_config` is the
+one-layer case.
+
 Type strings
     ``str``, ``int``, ``float`` (an integer is accepted), ``bool``, ``path`` (a string, resolved
     against the config file's folder), ``table`` (a TOML table), ``list[T]`` for any type T, and
@@ -21,11 +28,12 @@ Errors name the file and the dotted key: ``run.toml: filters.steps[2].value: mus
 
 from __future__ import annotations
 
+import copy
 import json
 import os
 import re
 import tomllib
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -85,11 +93,14 @@ class Section:
         where: str | None = None,
         file: str | os.PathLike | None = None,
         base: str | os.PathLike | None = None,
+        partial: bool = False,
     ) -> dict:
         """Check ``table`` and return a new dict with defaults filled in and paths resolved.
 
         ``where`` is the dotted prefix used in error fields (default: the section name),
         ``base`` the folder relative paths resolve against (default: the working directory).
+        ``partial`` checks only the keys present and adds no defaults (one layer of an
+        inherited config; see :func:`parse_layer`).
         """
         where = self.name if where is None else where
         if not isinstance(table, Mapping):
@@ -106,6 +117,8 @@ class Section:
         for key in self.keys:
             name = f"{where}.{key.name}"
             if key.name not in table:
+                if partial:
+                    continue
                 if key.required:
                     raise VideoTrackError(f"missing (required): {key.doc}", file=file, field=name)
                 out[key.name] = key.default
@@ -160,16 +173,21 @@ class Config:
     """A validated project file: ``config["video"]`` is the checked dict of that section.
 
     An absent section holds its defaults (an absent array of tables is an empty list);
-    ``given`` lists the sections the file itself has.
+    ``given`` lists the sections the file itself has. A config merged from several files
+    (:func:`config_from_layers`) lists them in ``sources``, top first; ``base``, when set, is
+    its :attr:`folder` instead of the folder of ``path`` (a trial folder of a project).
     """
 
     path: Path
     sections: Mapping[str, Any]
     given: tuple[str, ...] = ()
+    sources: tuple[Path, ...] = ()
+    base: Path | None = None
 
     @property
     def folder(self) -> Path:
-        return self.path.parent
+        """Where default outputs go: ``base`` if set, else the folder of ``path``."""
+        return self.base if self.base is not None else self.path.parent
 
     def __getitem__(self, name: str):
         return self.sections[name]
@@ -188,52 +206,124 @@ def load_config(path: str | os.PathLike) -> Config:
         type or value.
     """
     path = Path(path).absolute()
+    return config_from_layers([parse_layer(read_toml(path), path)], path)
+
+
+def parse_config(text: str, path: str | os.PathLike) -> Config:
+    """Validate TOML ``text`` as if read from ``path`` (relative paths resolve beside it)."""
+    path = Path(path).absolute()
+    return config_from_layers([parse_layer(loads_toml(text, path), path)], path)
+
+
+def read_toml(path: str | os.PathLike) -> dict:
+    """The raw tables of a TOML file; a missing file or a syntax error (with its line) raises
+    :class:`VideoTrackError`."""
+    path = Path(path).absolute()
     try:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise VideoTrackError("no such config file", file=path) from None
     except (OSError, UnicodeDecodeError) as err:
         raise VideoTrackError(f"cannot read config file: {err}", file=path) from None
-    return parse_config(text, path)
+    return loads_toml(text, path)
 
 
-def parse_config(text: str, path: str | os.PathLike) -> Config:
-    """Validate TOML ``text`` as if read from ``path`` (relative paths resolve beside it)."""
-    path = Path(path).absolute()
+def loads_toml(text: str, path: str | os.PathLike) -> dict:
+    """:func:`read_toml` for text already read from ``path``."""
     try:
-        raw = tomllib.loads(text)
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
         msg = str(err)
         match = re.search(r"\(at line (\d+), column \d+\)", msg)
         line = int(match.group(1)) if match else None
         msg = re.sub(r"\s*\(at line \d+, column \d+\)", "", msg)
         raise VideoTrackError(f"TOML syntax: {msg}", file=path, line=line) from None
+
+
+def parse_layer(raw: Mapping, path: str | os.PathLike) -> dict:
+    """Check the tables of one config file on their own, before merging.
+
+    Unknown sections and keys, wrong types and bad values are errors naming ``path``;
+    relative paths are resolved against its folder; missing keys stay missing (a file
+    deeper in a project need only hold what it changes). Each table of an array
+    (``[[views]]``) is checked completely, because an array replaces the one above.
+
+    Returns
+    -------
+    dict
+        Section name -> checked keys (a list of checked tables for an array section).
+    """
+    path = Path(path).absolute()
     unknown = [k for k in raw if k not in SECTIONS]
     if unknown:
         raise VideoTrackError(
             f"unknown section (known: {', '.join(SECTIONS)})", file=path, field=unknown[0]
         )
-    sections: dict[str, Any] = {}
-    for name, section in SECTIONS.items():
-        value = raw.get(name)
+    layer: dict[str, Any] = {}
+    for name, value in raw.items():
+        section = SECTIONS[name]
         if section.array:
-            if value is None:
-                value = []
             if not isinstance(value, list):
                 raise VideoTrackError(
                     f"must be an array of tables ([[{name}]]), got {_kind(value)}",
                     file=path,
                     field=name,
                 )
-            sections[name] = [
+            layer[name] = [
                 section.validate(item, where=f"{name}[{i}]", file=path, base=path.parent)
                 for i, item in enumerate(value)
             ]
         else:
-            sections[name] = section.validate(
-                {} if value is None else value, file=path, base=path.parent
-            )
-    return Config(path=path, sections=sections, given=tuple(raw))
+            layer[name] = section.validate(value, file=path, base=path.parent, partial=True)
+    return layer
+
+
+def merge_layers(layers: Sequence[Mapping]) -> dict:
+    """Merge checked layers (:func:`parse_layer`), later ones overriding earlier ones.
+
+    A section merges key by key; a key's value replaces the one above whole, also when it
+    is a list or an array of tables (``[[views]]``, ``[[filters.steps]]``): a deeper file
+    that has ``[[views]]`` defines all views anew.
+    """
+    merged: dict[str, Any] = {}
+    for layer in layers:
+        for name, value in layer.items():
+            if isinstance(value, Mapping) and isinstance(merged.get(name), Mapping):
+                merged[name] = {**merged[name], **value}
+            else:
+                merged[name] = copy.deepcopy(value)
+    return merged
+
+
+def config_from_layers(
+    layers: Sequence[Mapping],
+    path: str | os.PathLike,
+    *,
+    base: str | os.PathLike | None = None,
+    sources: Sequence[str | os.PathLike] = (),
+) -> Config:
+    """Merge checked layers and validate the result: defaults filled, required keys checked.
+
+    ``path`` is the file errors of the merged config are reported against (the deepest
+    file), ``base`` the folder default outputs go to (default: the folder of ``path``),
+    ``sources`` the files merged, top first.
+    """
+    path = Path(path).absolute()
+    merged = merge_layers(layers)
+    sections: dict[str, Any] = {}
+    for name, section in SECTIONS.items():
+        value = merged.get(name)
+        if section.array:
+            sections[name] = [
+                section.validate(item, where=f"{name}[{i}]", file=path, base=path.parent)
+                for i, item in enumerate(value or [])
+            ]
+        else:
+            sections[name] = section.validate(value or {}, file=path, base=path.parent)
+    given = tuple(dict.fromkeys(name for layer in layers for name in layer))
+    return Config(path=path, sections=sections, given=given,
+                  sources=tuple(Path(s) for s in sources) or (path,),
+                  base=Path(base) if base is not None else None)
 
 
 def describe_section(section: Section | Variants, level: int = 3) -> str:
@@ -541,3 +631,67 @@ OUTPUT = register_section(Section("output", (
     Key("detections", "path", "", "Detections file; empty: '<first video>.detections.npz' "
         "beside the config file."),
 ), doc="Where results go."))
+
+
+# -- model and fitting (the fitter's parameters live in kinematics.anneal.AnnealParams; the
+# defaults below are read from it so they are written once) ---------------------------------
+def _anneal_defaults():
+    from kinematics.anneal import AnnealParams
+
+    return AnnealParams()
+
+
+_A = _anneal_defaults()
+
+CHAIN = register_section(Section("chain", (
+    Key("path", "path", "", "Chain XML file (joints, axes, segments, markers)."),
+    Key("histograms", "path", "", "Histogram archive XML applied on top of the chain's own "
+        "histograms (e.g. learned in an earlier experiment); empty for none."),
+), doc="The kinematic model fitted to the detections."))
+
+CAMERAS = register_section(Section("cameras", (
+    Key("path", "path", "", "Camera TOML file; every view's camera must be in it."),
+), doc="Where the cameras of the views are described."))
+
+ANNEAL = register_section(Section("anneal", (
+    Key("n_end", "int", _A.n_end, "N_end: iterations of one annealing run (Table 1).",
+        min=1, max=10**8),
+    Key("n_l", "int", _A.n_l, "N_l: the step length is multiplied by c_l every N_l "
+        "iterations.", min=1, max=10**8),
+    Key("n_tau", "int", _A.n_tau, "N_τ: the temperature is multiplied by c_tau every N_τ "
+        "iterations.", min=1, max=10**8),
+    Key("tau0", "float", _A.tau0, "τ0: start temperature, in pixels of E.", min=0.0, max=1e9),
+    Key("l0", "float", _A.l0, "l: start step length, in units of s(H).", min=0.0, max=1e3),
+    Key("c_l", "float", _A.c_l, "c_l: step-length cooling factor, in (0, 1].", min=1e-6,
+        max=1.0),
+    Key("c_tau", "float", _A.c_tau, "c_τ: temperature cooling factor, in (0, 1].", min=1e-6,
+        max=1.0),
+    Key("epsilon", "float", _A.epsilon, "ε: a run stops once E < ε pixels.", min=0.0,
+        max=1e9),
+    Key("plausibility_threshold", "float", 0.0, "T_h: redraw a step where the histogram bin "
+        "probability is below this; 0 means 'any non-zero bin'.", min=0.0, max=1.0),
+    Key("reanalysis_threshold", "float", _A.reanalysis_threshold, "A frame whose E exceeds "
+        "this (pixels) is analysed again.", min=0.0, max=1e9),
+    Key("max_runs", "int", _A.max_runs, "Runs per frame at most, the first included.", min=1,
+        max=1000),
+    Key("start", "str", _A.start, "Start posture of each frame: histogram means (frames "
+        "independent) or the previous frame's result.", choices=("mean", "previous")),
+    Key("refine", "bool", _A.refine, "Polish each fit by Levenberg-Marquardt (see "
+        "docs/fitting.md)."),
+    Key("error", "str", _A.error.mode, "Error function: the paper's Eq. 5 or the "
+        "bidirectional variant of Sect. 4.", choices=("paper", "bidirectional")),
+    Key("penalty_weight", "float", _A.error.penalty_weight, "Weight of the bidirectional "
+        "penalty for detections no marker claims.", min=0.0, max=1e6),
+    Key("cap_px", "float", 0.0, "Largest cost of one marker in pixels (occlusions cost at "
+        "most this); 0 for no cap.", min=0.0, max=1e9),
+    Key("seed", "int", _A.seed, "Seed of the random streams; written into every result.",
+        min=0, max=2**62),
+), doc="Simulated annealing (Eq. 6) and the error function (Eq. 5); defaults are Table 1."))
+
+FIT = register_section(Section("fit", (
+    Key("results", "path", "", "Results CSV; empty: '<detections>.results.csv' beside the "
+        "detections file."),
+    Key("plot", "bool", False, "Also write a PNG of the angle time courses with bad frames "
+        "marked (beside the results)."),
+    Key("jobs", "int", 0, "Threads for fitting; 0 uses every core.", min=0, max=1024),
+), doc="Outputs of 'videotrack fit' and 'videotrack run'."))

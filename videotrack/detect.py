@@ -4,11 +4,14 @@
 half-frame when de-interlacing) at a time; it never prints or writes, and closing it cancels
 the run. :func:`detect_video` collects a whole run into a
 :class:`~videotrack.detections.Detections`. :func:`settings_from_config` builds the settings
-from a project file.
+from a project file, and :func:`detect_project` runs a project file's detection (skipped when
+its detections file is up to date), as ``videotrack detect``, ``run`` and ``batch`` do.
 """
 
 from __future__ import annotations
 
+import contextlib
+import os
 import warnings
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -17,11 +20,20 @@ from pathlib import Path
 import numpy as np
 
 from videotrack.deinterlace import Deinterlace
-from videotrack.detections import FORMAT, VERSION, Detections, DetectSettings, build_detections
+from videotrack.detections import (
+    FORMAT,
+    VERSION,
+    Detections,
+    DetectSettings,
+    build_detections,
+    check_fresh,
+    load_detections,
+    save_detections,
+)
 from videotrack.errors import VideoTrackError, VideoTrackWarning
 from videotrack.filters import FilterChain
 from videotrack.markers import MarkerSettings, RegionFinder
-from videotrack.video import VideoSet, as_video_set, resolve_frames
+from videotrack.video import VideoSet, as_video_set, open_videos, resolve_frames
 from videotrack.views import Plane, View, check_views
 
 
@@ -79,6 +91,126 @@ def default_output(config) -> Path:
     if given:
         return Path(given)
     return config.folder / f"{video_paths(config)[0].stem}.detections.npz"
+
+
+def detect_project(
+    config,
+    frames: str | None = None,
+    force: bool = False,
+    progress: Callable[[int, int], object] | None = None,
+    *,
+    output: str | os.PathLike | None = None,
+    log: Callable[[str], object] | None = None,
+    frames_field: str = "frames",
+) -> tuple[Detections, Path, bool]:
+    """Detect the markers of a project's video(s) and save them, unless already up to date.
+
+    Parameters
+    ----------
+    config : Config
+        A loaded project config.
+    frames : str, optional
+        Frame range ``"A:B"``; default ``[video] frames`` (all when empty).
+    force : bool
+        Detect again although the detections file is up to date.
+    progress : callable, optional
+        ``progress(done, total)`` after each video frame (frames of the range).
+    output : path, optional
+        Detections file; default :func:`default_output`.
+    log : callable, optional
+        Receives a one-line note when an existing file is out of date.
+    frames_field : str
+        Name given to ``frames`` in errors (the CLI passes ``--frames``).
+
+    Returns
+    -------
+    detections : Detections
+    path : Path
+        The detections file.
+    was_up_to_date : bool
+        True when the file was made from the same video(s) with the same settings and
+        covers the frames (nothing was detected).
+
+    Raises
+    ------
+    VideoTrackError
+        Bad video or settings, a frame range outside the video, or an existing file at
+        ``output`` that is no detections file (never overwritten unless ``force``).
+    """
+    output = Path(output) if output is not None else default_output(config)
+    with _project_videos(config, frames, frames_field) as (videos, settings, frame_range):
+        if not force:
+            reason, previous = _stale_reason(output, videos, settings, frame_range)
+            if reason is None:
+                return previous, output, True
+            if log is not None and previous is not None:
+                log(f"{output} is out of date ({reason}); detecting again")
+        total = len(frame_range)
+        done = 0
+
+        def step(n: int) -> None:
+            nonlocal done
+            done += n
+            progress(done, total)
+
+        try:
+            detections = detect_video(videos, settings, frame_range,
+                                      progress=step if progress is not None else None)
+        except VideoTrackError as err:
+            raise err.located(file=config.path) from None
+    output.parent.mkdir(parents=True, exist_ok=True)
+    save_detections(detections, output)
+    return detections, output, False
+
+
+def detections_status(config, frames: str | None = None,
+                      output: str | os.PathLike | None = None
+                      ) -> tuple[str | None, Detections | None]:
+    """What :func:`detect_project` would find, without detecting: ``(why the detections
+    must be made, e.g. "no detections yet" or other filter settings, or None when the file
+    is up to date; the detections file's contents, or None when there is none)``. Opens the
+    video(s) but decodes no frame."""
+    output = Path(output) if output is not None else default_output(config)
+    with _project_videos(config, frames, "frames") as (videos, settings, frame_range):
+        return _stale_reason(output, videos, settings, frame_range)
+
+
+@contextlib.contextmanager
+def _project_videos(config, frames: str | None, frames_field: str):
+    """Open a project's videos: ``(videos, settings, frame range)``, errors located."""
+    from_config = frames is None
+    try:
+        settings = settings_from_config(config)
+        videos = open_videos(video_paths(config), colour=settings.filters.needs_colour,
+                             fps=config["video"]["fps"] or None)
+    except VideoTrackError as err:
+        raise err.located(file=config.path) from None
+    with videos:
+        try:
+            frame_range = resolve_frames(config["video"]["frames"] if from_config else frames,
+                                         videos.n_frames)
+        except VideoTrackError as err:
+            err.field = "video.frames" if from_config else frames_field
+            if from_config:
+                err.located(file=config.path)
+            raise err from None
+        yield videos, settings, frame_range
+
+
+def _stale_reason(output: Path, videos, settings, frame_range) -> tuple[str | None, object]:
+    """(why the detections at ``output`` are stale or None, the loaded detections or None)."""
+    if not output.exists():
+        return "no detections yet", None
+    try:
+        previous = load_detections(output)
+    except VideoTrackError as err:  # never overwrite some other file unasked
+        raise VideoTrackError(f"{err.message}; not overwritten (--force does)",
+                              file=output) from None
+    try:
+        check_fresh(previous, videos, settings, frame_range)
+    except VideoTrackError as err:
+        return err.message, previous
+    return None, previous
 
 
 def iter_detect(source, settings: DetectSettings, frames=None) -> Iterator[FrameDetections]:
@@ -262,12 +394,9 @@ def summarize(detections: Detections) -> list[ViewSummary]:
 
 def format_summary(rows: list[ViewSummary]) -> str:
     """A plain-text table of :func:`summarize`."""
+    from videotrack.tables import text_table
+
     head = ("view", "records", "min", "median", "max", "empty")
     body = [(r.view, str(r.records), str(r.min), f"{r.median:g}", str(r.max), str(r.empty))
             for r in rows]
-    widths = [max(len(x) for x in col) for col in zip(head, *body, strict=True)]
-    lines = ["  ".join(x.ljust(w) if i == 0 else x.rjust(w)
-                       for i, (x, w) in enumerate(zip(line, widths, strict=True)))
-             for line in (head, *body)]
-    lines.insert(1, "  ".join("-" * w for w in widths))
-    return "\n".join(lines)
+    return text_table(head, body)

@@ -327,9 +327,8 @@ class SynthProject:
 
 def project_config_text(video_names: Sequence[str], cameras: Mapping, options: SynthOptions,
                         chain_name: str, cameras_name: str, detections_name: str) -> str:
-    """A detect-ready project config for the synthetic video (TOML text)."""
-    sizes = camera_sizes(cameras)
-    rois = view_rois(sizes, options.layout)
+    """A project config for the synthetic video that ``detect``, ``fit`` and ``run`` take as
+    it is (TOML text)."""
     paths = ", ".join(f'"{v}"' for v in video_names)
     lines = [
         "# Project written by 'videotrack synth': the synthetic video, its views and a",
@@ -340,22 +339,31 @@ def project_config_text(video_names: Sequence[str], cameras: Mapping, options: S
         f'deinterlace = "{"fields" if options.interlaced else "none"}"',
         f'field_order = "{"top" if options.top_field_first else "bottom"}"',
         "",
+        detection_config_text(cameras, options, len(video_names)),
+        "[output]", f'detections = "{detections_name}"', "",
+        "[chain]", f'path = "{chain_name}"', "",
+        "[cameras]", f'path = "{cameras_name}"', "",
+        "# [anneal] keys override the paper's Table 1; ground truth is in truth.csv",
+        "",
     ]
+    return "\n".join(lines)
+
+
+def detection_config_text(cameras: Mapping, options: SynthOptions, n_videos: int = 1) -> str:
+    """The ``[[views]]``, ``[[filters.steps]]`` and ``[markers]`` tables that find the
+    markers of a synthetic video (TOML text)."""
+    rois = view_rois(camera_sizes(cameras), options.layout)
+    lines = []
     for k, (name, (x, y, w, h)) in enumerate(zip(cameras, rois, strict=True)):
         lines += ["[[views]]", f'name = "{name}"', f"roi = [{x}, {y}, {w}, {h}]",
                   f'camera = "{name}"']
-        if len(video_names) > 1:
+        if n_videos > 1:
             lines.append(f"video = {k}")
         lines.append("")
     threshold = int(options.background + options.intensity / 3)
     min_area = max(1, int(0.25 * np.pi * (options.marker_diameter / 2) ** 2))
-    lines += [
-        "[[filters.steps]]", 'type = "threshold"', f"value = {threshold}", "",
-        "[markers]", f"min_area = {min_area}", "",
-        "[output]", f'detections = "{detections_name}"', "",
-        f"# chain: {chain_name}; cameras: {cameras_name}; ground truth: truth.csv",
-        "",
-    ]
+    lines += ["[[filters.steps]]", 'type = "threshold"', f"value = {threshold}", "",
+              "[markers]", f"min_area = {min_area}", ""]
     return "\n".join(lines)
 
 
@@ -406,3 +414,63 @@ def write_synthetic_project(
         names, cameras, options, "chain.xml", "cameras.toml", "detections.npz"))
     return SynthProject(videos, out / "truth.csv", out / "cameras.toml", out / "chain.xml",
                         config, scene.angles_deg.shape[0])
+
+
+def write_synthetic_batch_project(
+    root: str | os.PathLike,
+    names: Sequence[str],
+    body: Body,
+    chain_text: str,
+    cameras: Mapping,
+    trajectory,
+    options: SynthOptions,
+    fps: float = 50.0,
+    codec: str = "ffv1",
+    anneal: Mapping | None = None,
+    progress=None,
+) -> list[Path]:
+    """A project folder of synthetic trials for ``videotrack batch`` (docs/batch.md).
+
+    ``root/config.toml`` holds what the trials share (views, filters, chain, cameras and the
+    optional ``anneal`` keys); each trial folder (``names``, e.g. ``session1/trial01``)
+    holds its video(s) and ``truth.csv``, and a config.toml naming its videos only when
+    there are several (``layout="separate"``) or image folders (``codec="png"``), which
+    ``[batch] videos`` would not find. ``trajectory(k)`` gives trial k's angles.
+    ``progress`` is called with the number of trials written. Returns the trial folders.
+    """
+    import tomli_w
+
+    from kinematics.fileio import atomic_write_text
+
+    root = Path(root)
+    folders = []
+    for k, name in enumerate(names):
+        folder = root / name
+        project = write_synthetic_project(folder, body, chain_text, cameras, trajectory(k),
+                                          options, fps, codec)
+        for shared in (project.chain, project.cameras):  # once, in the project folder
+            os.replace(shared, root / shared.name)
+        os.unlink(project.config)
+        if len(project.videos) > 1 or codec == "png":
+            paths = ", ".join(f'"{v.name}"' for v in project.videos)
+            atomic_write_text(folder / "config.toml", f"[video]\npath = [{paths}]\n")
+        folders.append(folder)
+        if progress is not None:
+            progress(k + 1)
+    lines = ["# A synthetic project written by 'videotrack synth --trials': what every trial",
+             "# shares. Trials: SESSION/TRIAL folders, each with its video and truth.csv.", ""]
+    if options.interlaced:
+        lines += ["[video]", 'deinterlace = "fields"',
+                  f'field_order = "{"top" if options.top_field_first else "bottom"}"', ""]
+    lines += [detection_config_text(cameras, options, len(cameras)
+                                    if options.layout == "separate" else 1),
+              "[chain]", 'path = "chain.xml"', "", "[cameras]", 'path = "cameras.toml"', ""]
+    if anneal:
+        lines.append(tomli_w.dumps({"anneal": dict(anneal)}))
+    atomic_write_text(root / "config.toml", "\n".join(lines))
+    return folders
+
+
+def trial_names(n: int, per_session: int = 10) -> list[str]:
+    """``session1/trial01``, ... with ``per_session`` trials per session."""
+    return [f"session{1 + k // per_session}/trial{1 + k % per_session:02d}" for k in range(n)]

@@ -17,7 +17,8 @@ from kinematics.fileio import atomic_write_text
 from videotrack.errors import VideoTrackError
 
 
-def _cell(v: float) -> str:
+def format_cell(v: float) -> str:
+    """A number as a CSV cell: shortest exact form, integers without a point, NaN empty."""
     if v != v:  # NaN
         return ""
     if v == int(v) and abs(v) < 1e15:
@@ -34,8 +35,19 @@ def format_table(columns: Sequence[str], values: np.ndarray) -> str:
     writer = csv.writer(buf, lineterminator="\n")
     writer.writerow(columns)
     for row in values.tolist():
-        writer.writerow([_cell(v) for v in row])
+        writer.writerow([format_cell(v) for v in row])
     return buf.getvalue()
+
+
+def text_table(head: Sequence[str], body: Sequence[Sequence[str]], left: int = 1) -> str:
+    """A plain-text table for the terminal: the first ``left`` columns left-aligned, the
+    others (numbers) right-aligned, a rule under the header."""
+    widths = [max(len(x) for x in col) for col in zip(head, *body, strict=True)]
+    lines = ["  ".join(x.ljust(w) if i < left else x.rjust(w)
+                       for i, (x, w) in enumerate(zip(line, widths, strict=True)))
+             for line in (head, *body)]
+    lines.insert(1, "  ".join("-" * w for w in widths))
+    return "\n".join(lines)
 
 
 def write_table(path: str | os.PathLike, columns: Sequence[str], values: np.ndarray) -> None:

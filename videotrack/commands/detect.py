@@ -14,6 +14,8 @@ examples:
   videotrack detect project.toml --frames 0:100 --output trial.detections.npz
   # detect again although the detections file is up to date
   videotrack detect project.toml --force
+  # one trial of a project folder (see 'videotrack batch'), e.g. to tune the filters
+  videotrack detect myproject --trial session1/trial01
 
 a minimal project file (paths relative to it):
   [video]
@@ -58,7 +60,11 @@ def add_parser(subparsers) -> None:
         epilog=EXAMPLES,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("config", type=Path, help="project file (TOML)")
+    p.add_argument("config", type=Path,
+                   help="project file (TOML), or with --trial a project folder")
+    p.add_argument("--trial", metavar="NAME",
+                   help="a trial of the project folder CONFIG, e.g. session1/trial01 (its "
+                        "config.toml files merged as 'videotrack batch' does)")
     p.add_argument("--frames", metavar="A:B",
                    help="frames A (included) to B (excluded), 0-based; 'A:' or ':B' also work "
                         "(default: [video] frames, else all)")
@@ -73,65 +79,30 @@ def add_parser(subparsers) -> None:
 def run(args) -> int:
     from tqdm import tqdm
 
-    from videotrack.config import load_config
-    from videotrack.detect import (
-        default_output,
-        detect_video,
-        format_summary,
-        settings_from_config,
-        summarize,
-        video_paths,
-    )
-    from videotrack.detections import check_fresh, load_detections, save_detections
+    from videotrack.detect import detect_project, format_summary, summarize
     from videotrack.errors import VideoTrackError
-    from videotrack.video import open_videos, parse_frame_range, resolve_frames
+    from videotrack.project import command_config
+    from videotrack.video import parse_frame_range
 
-    config = load_config(args.config)
-    frames_text, frames_field = ((args.frames, "--frames") if args.frames is not None
-                                 else (config["video"]["frames"], "video.frames"))
-    try:
-        parse_frame_range(frames_text)
-    except ValueError as err:
-        raise VideoTrackError(str(err), field=frames_field) from None
-    output = args.output if args.output is not None else default_output(config)
-
-    try:
-        settings = settings_from_config(config)
-        videos = open_videos(video_paths(config), colour=settings.filters.needs_colour,
-                             fps=config["video"]["fps"] or None)
-    except VideoTrackError as err:
-        raise err.located(file=config.path) from None
-    with videos:
+    config = command_config(args.config, args.trial)
+    if args.frames is not None:
         try:
-            frames = resolve_frames(frames_text, videos.n_frames)
-        except VideoTrackError as err:
-            err.field = frames_field
-            if args.frames is None:  # the range comes from the config file
-                err.located(file=config.path)
-            raise err from None
-        if output.exists() and not args.force:
-            try:
-                previous = load_detections(output)
-            except VideoTrackError as err:  # never overwrite some other file unasked
-                raise VideoTrackError(f"{err.message}; not overwritten (--force does)",
-                                      file=output) from None
-            try:
-                check_fresh(previous, videos, settings, frames)
-            except VideoTrackError as err:
-                print(f"videotrack: {output} is out of date ({err.message}); detecting "
-                      "again", file=sys.stderr)
-            else:
-                print(f"{output} is up to date (--force detects again)")
-                return 0
-        try:
-            with tqdm(total=len(frames), unit="frame", desc="detecting", file=sys.stderr,
-                      leave=False, disable=None) as bar:
-                detections = detect_video(videos, settings, frames, progress=bar.update)
-        except VideoTrackError as err:
-            raise err.located(file=config.path) from None
-    output.parent.mkdir(parents=True, exist_ok=True)
-    save_detections(detections, output)
+            parse_frame_range(args.frames)
+        except ValueError as err:
+            raise VideoTrackError(str(err), field="--frames") from None
+    with tqdm(unit="frame", desc="detecting", file=sys.stderr, leave=False,
+              disable=None) as bar:
+        def progress(done: int, total: int) -> None:
+            bar.total = total
+            bar.update(done - bar.n)
 
+        detections, output, up_to_date = detect_project(
+            config, args.frames, args.force, progress, output=args.output,
+            log=lambda note: print(f"videotrack: {note}", file=sys.stderr),
+            frames_field="--frames")
+    if up_to_date:
+        print(f"{output} is up to date (--force detects again)")
+        return 0
     unit = "half-frame" if detections.parities.max(initial=-1) >= 0 else "frame"
     start, stop = detections.metadata["frames"]
     print(f"markers per view per {unit} ({detections.n_records} {unit}s from frames "

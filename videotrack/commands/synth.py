@@ -17,6 +17,8 @@ examples:
   videotrack synth out/hard --noise 2 --ghosts 2 --flicker-ghosts 2 --occlusions 0.02
   # your chain and cameras, a trajectory from a CSV file (one column per axis, degrees)
   videotrack synth out/mine --chain leg.xml --cameras cameras.toml --angles angles.csv
+  # a project folder of 12 short trials for 'videotrack batch'
+  videotrack synth out/project --trials 12 --frames 100
 
 Output folder: video.avi (or one video per camera with --layout separate), truth.csv
 (angles, 3D points and 2D projections of every image), cameras.toml, chain.xml and
@@ -51,6 +53,10 @@ def add_parser(subparsers) -> None:
     src.add_argument("--keys", type=int, default=4,
                      help="key postures per sequence; more is faster motion (default: 4)")
     src.add_argument("--motion-seed", type=int, default=0, help="seed of the trajectory")
+    src.add_argument("--trials", type=int, metavar="N",
+                     help="write a project folder of N trials for 'videotrack batch' instead "
+                          "(SESSION/TRIAL folders, ten per session, trial k moving with "
+                          "motion seed + k; see docs/batch.md)")
     look = p.add_argument_group("how it looks")
     look.add_argument("--diameter", type=float, default=4.0, help="marker diameter, px (4)")
     look.add_argument("--intensity", type=float, default=230.0, help="marker grey level (230)")
@@ -106,11 +112,15 @@ def run(args) -> int:
         interlaced=args.interlaced, top_field_first=not args.bottom_field_first,
         layout=args.layout, seed=args.seed,
     )
-    if args.angles is not None:
-        angles = read_angles_csv(args.angles, body)
-    else:
-        angles = smooth_random_motion(body, args.frames, args.sequences, args.keys,
-                                      seed=args.motion_seed)
+    def trajectory(k: int = 0):
+        if args.angles is not None:
+            return read_angles_csv(args.angles, body)
+        return smooth_random_motion(body, args.frames, args.sequences, args.keys,
+                                    seed=args.motion_seed + k)
+
+    if args.trials is not None:
+        return _write_batch_project(args, body, chain_text, cameras, trajectory, options)
+    angles = trajectory()
     n_frames = angles.shape[0] // (2 if args.interlaced else 1)
     with tqdm(total=n_frames, unit="frame", desc="rendering", leave=False) as bar:
         project = write_synthetic_project(args.out_dir, body, chain_text, cameras, angles,
@@ -122,4 +132,21 @@ def run(args) -> int:
                  project.config):
         print(f"  {path}")
     print(f"next: videotrack detect {project.config}")
+    return 0
+
+
+def _write_batch_project(args, body, chain_text, cameras, trajectory, options) -> int:
+    from videotrack.synth import trial_names, write_synthetic_batch_project
+
+    if args.trials < 1:
+        raise VideoTrackError(f"must be at least 1, got {args.trials}", field="--trials")
+    with tqdm(total=args.trials, unit="trial", desc="rendering", leave=False) as bar:
+        folders = write_synthetic_batch_project(
+            args.out_dir, trial_names(args.trials), body, chain_text, cameras, trajectory,
+            options, args.fps, args.codec, progress=lambda k: bar.update(k - bar.n))
+    print(f"wrote a project of {len(folders)} trials of '{body.name}' through {len(cameras)} "
+          f"views ({', '.join(cameras)}): {args.out_dir / 'config.toml'}, chain.xml, "
+          f"cameras.toml and {folders[0].relative_to(args.out_dir).as_posix()} ... "
+          f"{folders[-1].relative_to(args.out_dir).as_posix()} (video and truth.csv each)")
+    print(f"next: videotrack batch {args.out_dir}")
     return 0

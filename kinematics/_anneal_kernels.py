@@ -1,0 +1,715 @@
+"""numba kernels of the posture fitter: Eq. 5, the annealing loop of Eq. 6, re-analysis and
+root-marker tracking (private; the public wrapper is :mod:`kinematics.anneal`).
+
+The readable twins are :mod:`kinematics.error_function` (Eq. 5 and its variants) and
+:func:`kinematics.anneal.anneal_reference` (the annealing loop on the same random stream);
+they are the specification and the test oracles.
+
+Layout and conventions
+----------------------
+* Angles are radians. A posture is a flat vector of ``n_axes`` angles (y, x, z per joint).
+* The body is passed in the *folded* layout of :func:`kinematics.anneal.fold_body`: the
+  constant parts of Eq. 1 (R^s, R^d, T and the rotations of locked axes before the first
+  and after the last free axis of a joint) are multiplied out once, so a joint costs one
+  3×3 product plus one 12-flop column rotation per moving axis, and locked hinge axes cost
+  nothing. Joint ``j`` keeps ``A'_j = A'_parent · G_j · Π rotations`` and
+  ``p_j = p_parent + A'_parent · g_j + A'_j · h_j``; markers sit at ``p_j + A'_j · m``.
+  Exact joint positions and marker positions; only the rotation matrices are reduced.
+* Arrays are passed one by one, never as a tuple (unpacking a tuple of arrays in a
+  non-inlined call costs atomic reference counts on every call).
+* Detections of one frame are ragged: ``points`` (n, 2) pixels, view ``v`` owning rows
+  ``view_off[v]:view_off[v + 1]``. For many frames ``det_off`` (n_frames * n_views + 1,) is
+  frame-major; frame ``f``'s view offsets are ``det_off[f * n_views: (f + 1) * n_views + 1]``.
+* Everything one annealing chain touches per iteration lives in caller-supplied scratch
+  arrays (``cur``, ``cand``, ``best``, ``cs``, ``sn``, ``rot``, ``pos``, ``proj``), so the
+  loop allocates nothing, and a later kernel can interleave many chains in SIMD lanes by
+  giving these arrays a lane axis.
+* Random numbers come from a counter-based splitmix64 stream per (seed, frame, run), so a
+  frame's result does not depend on which thread fits it or how many threads there are.
+* Hot loops are ``while i < n and not done`` loops without ``break``: a ``break`` kept
+  reference counting inside a numba SA loop and made it 6.5x slower.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+from kinematics._camera_kernels import ORTHOGRAPHIC, project_point
+
+#: Cost of a model marker whose projection is undefined (behind a pinhole camera) when no
+#: cap is set, in pixels.
+NAN_MARKER_COST = 1.0e6
+
+#: Bits of ``joint_flags`` in the folded layout.
+G_IDENTITY = 1  # G_j is the identity: skip the 3×3 product
+H_ZERO = 2  # h_j is zero: skip the translation
+
+# -- random numbers: splitmix64 (Steele, Lea & Flood 2014) --------------------------------
+_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+_MIX1 = np.uint64(0xBF58476D1CE4E5B9)
+_MIX2 = np.uint64(0x94D049BB133111EB)
+_FRAME_KEY = np.uint64(0xD1B54A32D192ED03)
+_RUN_KEY = np.uint64(0x8CB92BA72F3D8DD7)
+_S11 = np.uint64(11)
+_S27 = np.uint64(27)
+_S30 = np.uint64(30)
+_S31 = np.uint64(31)
+_TWO_M53 = 1.0 / 9007199254740992.0  # 2**-53
+
+
+@njit(cache=True, inline="always")
+def mix64(z):
+    """splitmix64's finaliser: a bijective 64-bit hash (z is uint64)."""
+    z = (z ^ (z >> _S30)) * _MIX1
+    z = (z ^ (z >> _S27)) * _MIX2
+    return z ^ (z >> _S31)
+
+
+@njit(cache=True)
+def stream_state(seed, frame, run):
+    """Start state (uint64) of the random stream of (seed, frame, run), all integers >= 0."""
+    s = mix64(np.uint64(seed) + _GOLDEN)
+    s = mix64(s ^ (np.uint64(frame) * _FRAME_KEY))
+    return mix64(s ^ (np.uint64(run) * _RUN_KEY + _GOLDEN))
+
+
+@njit(cache=True, inline="always")
+def next_uniform(state):
+    """Advance the stream; returns ``(state, u)`` with ``u`` uniform in [0, 1) (53 bits)."""
+    state = state + _GOLDEN
+    return state, np.float64(mix64(state) >> _S11) * _TWO_M53
+
+
+@njit(cache=True)
+def uniforms(state, out):
+    """Fill ``out`` with the stream's next draws (for tests); returns the new state."""
+    st = np.uint64(state)  # a Python int may arrive as int64, and int64 + uint64 is float
+    for k in range(out.shape[0]):
+        st, out[k] = next_uniform(st)
+    return st
+
+
+# -- sine and cosine ----------------------------------------------------------------------
+# Cody-Waite reduction by π/2 and the fdlibm kernels on [-π/4, π/4]: within 2 ulp of libm
+# for |x| < 1e5 and twice as fast as np.sin + np.cos, which cost a fifth of an iteration.
+_TWO_OVER_PI = 6.36619772367581382433e-01
+_PIO2_HI = 1.57079632673412561417e00
+_PIO2_LO = 6.07710050650619224932e-11
+_S1, _S2, _S3 = -1.66666666666666324348e-01, 8.33333333332248946124e-03, -1.98412698298579493134e-04
+_S4, _S5, _S6 = 2.75573137070700676789e-06, -2.50507602534068634195e-08, 1.58969099521155010221e-10
+_C1, _C2, _C3 = 4.16666666666666019037e-02, -1.38888888888741095749e-03, 2.48015872894767294178e-05
+_C4, _C5, _C6 = -2.75573143513906633035e-07, 2.08757232129817482790e-09, -1.13596475577881948265e-11
+
+
+@njit(cache=True, inline="always")
+def sincos(x):
+    """``(sin x, cos x)`` for radians x."""
+    k = np.rint(x * _TWO_OVER_PI)
+    r = (x - k * _PIO2_HI) - k * _PIO2_LO
+    z = r * r
+    s = r + r * z * (_S1 + z * (_S2 + z * (_S3 + z * (_S4 + z * (_S5 + z * _S6)))))
+    c = 1.0 - 0.5 * z + z * z * (_C1 + z * (_C2 + z * (_C3 + z * (_C4 + z * (_C5 + z * _C6)))))
+    q = int(k) & 3
+    if q == 0:
+        return s, c
+    if q == 1:
+        return c, -s
+    if q == 2:
+        return -s, -c
+    return -c, s
+
+
+# -- histogram lookup ---------------------------------------------------------------------
+@njit(cache=True, inline="always")
+def hist_at(hist, nbins, i, x):
+    """H_i(x) for x in radians: the value of the bin holding x (wraps), as
+    :meth:`kinematics.histograms.Histogram.at`; no floating modulo in the common case."""
+    n = nbins[i]
+    nf = float(n)
+    # floor((x_deg + 180) / (360 / n)) with multiplications only (a division per lookup
+    # was a measurable part of the loop).
+    k = int(np.floor(x * (nf * (0.5 / np.pi)) + 0.5 * nf))
+    if k < 0 or k >= n:
+        k = k % n
+    return hist[i, k]
+
+
+# -- forward kinematics and projection (Eq. 1-3), folded layout --------------------------
+@njit(cache=True, inline="always")
+def _project_cs(cs, sn, root_pos, parent, chain, pre_rot, pre_trans, post_trans, elem_axis,
+                elem_index, joint_flags, marker_joint, marker_local, kind, P, K, dist, R, t,
+                rot, pos, mk, proj, any_pinhole):
+    """Markers of the posture with cosines ``cs`` and sines ``sn`` (n_axes,) projected into
+    every view: fills ``proj`` (n_views, n_markers, 2); ``rot`` (nj, 3, 3), ``pos`` (nj, 3)
+    and ``mk`` (nm, 3) receive A'_j, the joint centres and the 3D markers.
+    ``any_pinhole`` says whether ``kind`` has a pinhole view."""
+    for j in range(parent.shape[0]):
+        p = parent[j]
+        if p < 0:
+            b00, b01, b02 = pre_rot[j, 0, 0], pre_rot[j, 0, 1], pre_rot[j, 0, 2]
+            b10, b11, b12 = pre_rot[j, 1, 0], pre_rot[j, 1, 1], pre_rot[j, 1, 2]
+            b20, b21, b22 = pre_rot[j, 2, 0], pre_rot[j, 2, 1], pre_rot[j, 2, 2]
+            px, py, pz = root_pos[chain[j], 0], root_pos[chain[j], 1], root_pos[chain[j], 2]
+        else:
+            q00, q01, q02 = rot[p, 0, 0], rot[p, 0, 1], rot[p, 0, 2]
+            q10, q11, q12 = rot[p, 1, 0], rot[p, 1, 1], rot[p, 1, 2]
+            q20, q21, q22 = rot[p, 2, 0], rot[p, 2, 1], rot[p, 2, 2]
+            g0, g1, g2 = pre_trans[j, 0], pre_trans[j, 1], pre_trans[j, 2]
+            px = pos[p, 0] + q00 * g0 + q01 * g1 + q02 * g2
+            py = pos[p, 1] + q10 * g0 + q11 * g1 + q12 * g2
+            pz = pos[p, 2] + q20 * g0 + q21 * g1 + q22 * g2
+            if joint_flags[j] & G_IDENTITY:
+                b00, b01, b02 = q00, q01, q02
+                b10, b11, b12 = q10, q11, q12
+                b20, b21, b22 = q20, q21, q22
+            else:
+                m00, m01, m02 = pre_rot[j, 0, 0], pre_rot[j, 0, 1], pre_rot[j, 0, 2]
+                m10, m11, m12 = pre_rot[j, 1, 0], pre_rot[j, 1, 1], pre_rot[j, 1, 2]
+                m20, m21, m22 = pre_rot[j, 2, 0], pre_rot[j, 2, 1], pre_rot[j, 2, 2]
+                b00 = q00 * m00 + q01 * m10 + q02 * m20
+                b01 = q00 * m01 + q01 * m11 + q02 * m21
+                b02 = q00 * m02 + q01 * m12 + q02 * m22
+                b10 = q10 * m00 + q11 * m10 + q12 * m20
+                b11 = q10 * m01 + q11 * m11 + q12 * m21
+                b12 = q10 * m02 + q11 * m12 + q12 * m22
+                b20 = q20 * m00 + q21 * m10 + q22 * m20
+                b21 = q20 * m01 + q21 * m11 + q22 * m21
+                b22 = q20 * m02 + q21 * m12 + q22 * m22
+        for e in range(3):
+            a = elem_axis[j, e]
+            if a >= 0:
+                # Right-multiplying by an elementary rotation about world axis a mixes the
+                # two other columns (x: columns 1, 2; y: 2, 0; z: 0, 1).
+                c = cs[elem_index[j, e]]
+                s = sn[elem_index[j, e]]
+                if a == 0:
+                    b01, b02 = c * b01 + s * b02, c * b02 - s * b01
+                    b11, b12 = c * b11 + s * b12, c * b12 - s * b11
+                    b21, b22 = c * b21 + s * b22, c * b22 - s * b21
+                elif a == 1:
+                    b02, b00 = c * b02 + s * b00, c * b00 - s * b02
+                    b12, b10 = c * b12 + s * b10, c * b10 - s * b12
+                    b22, b20 = c * b22 + s * b20, c * b20 - s * b22
+                else:
+                    b00, b01 = c * b00 + s * b01, c * b01 - s * b00
+                    b10, b11 = c * b10 + s * b11, c * b11 - s * b10
+                    b20, b21 = c * b20 + s * b21, c * b21 - s * b20
+        if not joint_flags[j] & H_ZERO:
+            h0, h1, h2 = post_trans[j, 0], post_trans[j, 1], post_trans[j, 2]
+            px += b00 * h0 + b01 * h1 + b02 * h2
+            py += b10 * h0 + b11 * h1 + b12 * h2
+            pz += b20 * h0 + b21 * h1 + b22 * h2
+        rot[j, 0, 0], rot[j, 0, 1], rot[j, 0, 2] = b00, b01, b02
+        rot[j, 1, 0], rot[j, 1, 1], rot[j, 1, 2] = b10, b11, b12
+        rot[j, 2, 0], rot[j, 2, 1], rot[j, 2, 2] = b20, b21, b22
+        pos[j, 0], pos[j, 1], pos[j, 2] = px, py, pz
+    for m in range(marker_joint.shape[0]):
+        j = marker_joint[m]
+        a0, a1, a2 = marker_local[m, 0], marker_local[m, 1], marker_local[m, 2]
+        x = pos[j, 0] + rot[j, 0, 0] * a0 + rot[j, 0, 1] * a1 + rot[j, 0, 2] * a2
+        y = pos[j, 1] + rot[j, 1, 0] * a0 + rot[j, 1, 1] * a1 + rot[j, 1, 2] * a2
+        z = pos[j, 2] + rot[j, 2, 0] * a0 + rot[j, 2, 1] * a1 + rot[j, 2, 2] * a2
+        mk[m, 0] = x
+        mk[m, 1] = y
+        mk[m, 2] = z
+        # Every view as orthographic (project_point's first case, inlined); pinhole views
+        # are overwritten below. A call to project_point inside this loop, even untaken,
+        # cost ~10 % of an iteration.
+        for v in range(kind.shape[0]):
+            proj[v, m, 0] = P[v, 0, 0] * x + P[v, 0, 1] * y + P[v, 0, 2] * z + P[v, 0, 3]
+            proj[v, m, 1] = P[v, 1, 0] * x + P[v, 1, 1] * y + P[v, 1, 2] * z + P[v, 1, 3]
+    if any_pinhole:
+        _project_pinhole(kind, P, K, dist, R, t, mk, proj)
+
+
+@njit(cache=True)
+def _project_pinhole(kind, P, K, dist, R, t, mk, proj):
+    """Project the 3D markers ``mk`` (nm, 3) into the pinhole views of ``proj``."""
+    for v in range(kind.shape[0]):
+        if kind[v] != ORTHOGRAPHIC:
+            for m in range(mk.shape[0]):
+                u, w = project_point(kind, P, K, dist, R, t, v, mk[m, 0], mk[m, 1], mk[m, 2])
+                proj[v, m, 0] = u
+                proj[v, m, 1] = w
+
+
+@njit(cache=True, inline="always")
+def _has_pinhole(kind):
+    out = False
+    for v in range(kind.shape[0]):
+        out = out or kind[v] != ORTHOGRAPHIC
+    return out
+
+
+@njit(cache=True)
+def project_posture(angles, root_pos, parent, chain, pre_rot, pre_trans, post_trans,
+                    elem_axis, elem_index, joint_flags, marker_joint, marker_local,
+                    kind, P, K, dist, R, t, cs, sn, rot, pos, mk, proj):
+    """Forward kinematics (Eq. 1, 2) and projection (Eq. 3) of every marker of posture
+    ``angles`` (n_axes,) radians into every view: fills ``proj`` (n_views, n_markers, 2);
+    ``cs``, ``sn`` (n_axes,), ``rot`` (nj, 3, 3), ``pos`` (nj, 3), ``mk`` (nm, 3) are
+    scratch (holding the joint centres and 3D markers afterwards)."""
+    for k in range(angles.shape[0]):
+        sn[k], cs[k] = sincos(angles[k])
+    _project_cs(cs, sn, root_pos, parent, chain, pre_rot, pre_trans, post_trans, elem_axis,
+                elem_index, joint_flags, marker_joint, marker_local, kind, P, K, dist, R, t,
+                rot, pos, mk, proj, _has_pinhole(kind))
+
+
+# -- Eq. 5 -------------------------------------------------------------------------------
+@njit(cache=True)
+def projection_error(proj, points, view_off, bidirectional, weight, cap, per_view, nearest):
+    """Eq. 5 and its variants for given marker projections; returns E (pixels).
+
+    ``E = sum_v sum_i min(min_c |p_i^v - d_c^v|, cap)`` over views with at least one
+    detection (a view without detections contributes nothing). With ``bidirectional``, each
+    detection that is no marker's nearest detection adds ``weight * min(min_i |p_i^v -
+    d_c^v|, cap)`` (the heuristic of Sect. 4). ``cap = inf`` is the paper's Eq. 5. Ties go
+    to the lower detection index. A marker without a finite projection costs ``cap``, or
+    :data:`NAN_MARKER_COST` without a cap.
+
+    Parameters
+    ----------
+    proj : (n_views, n_markers, 2)
+    points : (n_points, 2); view_off : (n_views + 1,)
+    per_view : (n_views,) out, E of each view; nearest : (n_markers,) int64 scratch.
+    """
+    nv = proj.shape[0]
+    nm = proj.shape[1]
+    missing = cap if cap < np.inf else NAN_MARKER_COST
+    total = 0.0
+    for v in range(nv):
+        a = view_off[v]
+        b = view_off[v + 1]
+        ev = 0.0
+        if b > a:
+            for i in range(nm):
+                px = proj[v, i, 0]
+                py = proj[v, i, 1]
+                best = np.inf
+                arg = -1
+                for c in range(a, b):
+                    dx = px - points[c, 0]
+                    dy = py - points[c, 1]
+                    d2 = dx * dx + dy * dy
+                    if d2 < best:
+                        best = d2
+                        arg = c
+                nearest[i] = arg
+                d = np.sqrt(best) if arg >= 0 else missing
+                ev += min(d, cap)
+            if bidirectional:
+                for c in range(a, b):
+                    matched = False
+                    best = np.inf
+                    for i in range(nm):
+                        matched = matched or nearest[i] == c
+                        dx = proj[v, i, 0] - points[c, 0]
+                        dy = proj[v, i, 1] - points[c, 1]
+                        best = min(best, dx * dx + dy * dy)
+                    if not matched:
+                        d = np.sqrt(best) if best < np.inf else missing
+                        ev += weight * min(d, cap)
+        per_view[v] = ev
+        total += ev
+    return total
+
+
+@njit(cache=True, inline="always")
+def _paper_error(proj, points, view_off, cap):
+    """:func:`projection_error` without the bidirectional term and per-view output: the
+    annealing loop's fast path. The minimum over detections runs in four independent
+    chains (a single chain of dependent minimums was latency-bound); min is exact, so the
+    result equals :func:`projection_error`'s."""
+    missing = cap if cap < np.inf else NAN_MARKER_COST
+    total = 0.0
+    for v in range(proj.shape[0]):
+        a = view_off[v]
+        b = view_off[v + 1]
+        ev = 0.0
+        if b > a:
+            for i in range(proj.shape[1]):
+                px = proj[v, i, 0]
+                py = proj[v, i, 1]
+                m0 = np.inf
+                m1 = np.inf
+                m2 = np.inf
+                m3 = np.inf
+                c = a
+                while c + 3 < b:
+                    dx = px - points[c, 0]
+                    dy = py - points[c, 1]
+                    m0 = min(m0, dx * dx + dy * dy)
+                    dx = px - points[c + 1, 0]
+                    dy = py - points[c + 1, 1]
+                    m1 = min(m1, dx * dx + dy * dy)
+                    dx = px - points[c + 2, 0]
+                    dy = py - points[c + 2, 1]
+                    m2 = min(m2, dx * dx + dy * dy)
+                    dx = px - points[c + 3, 0]
+                    dy = py - points[c + 3, 1]
+                    m3 = min(m3, dx * dx + dy * dy)
+                    c += 4
+                while c < b:
+                    dx = px - points[c, 0]
+                    dy = py - points[c, 1]
+                    m0 = min(m0, dx * dx + dy * dy)
+                    c += 1
+                best = min(min(m0, m1), min(m2, m3))
+                d = np.sqrt(best) if best < np.inf else missing
+                ev += min(d, cap)
+        total += ev
+    return total
+
+
+@njit(cache=True)
+def posture_error(angles, root_pos, parent, chain, pre_rot, pre_trans, post_trans,
+                  elem_axis, elem_index, joint_flags, marker_joint, marker_local,
+                  kind, P, K, dist, R, t, points, view_off, bidirectional, weight, cap,
+                  per_view):
+    """Eq. 5 (or a variant) of one posture ``angles`` (n_axes,) radians; fills ``per_view``
+    (n_views,). Allocates its scratch: for single evaluations, not for loops."""
+    na = angles.shape[0]
+    nj = parent.shape[0]
+    nm = marker_joint.shape[0]
+    cs = np.empty(na)
+    sn = np.empty(na)
+    rot = np.empty((nj, 3, 3))
+    pos = np.empty((nj, 3))
+    mk = np.empty((nm, 3))
+    proj = np.empty((kind.shape[0], nm, 2))
+    nearest = np.empty(nm, np.int64)
+    project_posture(angles, root_pos, parent, chain, pre_rot, pre_trans, post_trans,
+                    elem_axis, elem_index, joint_flags, marker_joint, marker_local,
+                    kind, P, K, dist, R, t, cs, sn, rot, pos, mk, proj)
+    return projection_error(proj, points, view_off, bidirectional, weight, cap, per_view,
+                            nearest)
+
+
+# -- simulated annealing (Sect. 2.3, Eq. 6) ----------------------------------------------
+@njit(cache=True)
+def anneal_chain(start, free_idx, step, hist, nbins, th, max_redraws,
+                 n_end, n_l, n_tau, tau0, l0, c_l, c_tau, eps, state,
+                 root_pos, parent, chain, pre_rot, pre_trans, post_trans, elem_axis,
+                 elem_index, joint_flags, marker_joint, marker_local, kind, P, K, dist, R, t,
+                 points, view_off, bidirectional, weight, cap,
+                 cur, cand, best, cs, sn, rot, pos, mk, proj, per_view, nearest):
+    """One annealing run from ``start``; the best posture seen is left in ``best``.
+
+    Each iteration draws ``j' = j + l·v`` with ``v_i = s(H_i)·r_i``, ``r_i ~ U[-1, 1]``
+    (Eq. 6) for the free axes ``free_idx`` in order; ``r_i`` is redrawn while
+    ``H_i(j'_i) < th``, at most ``max_redraws`` times, after which axis i stays where it is
+    for this iteration. A draw ``u`` made first in each iteration decides acceptance by the
+    Metropolis criterion at temperature τ: always if E does not grow, else if
+    ``ΔE < -τ·log(u)``, i.e. ``u < exp(-ΔE/τ)``. τ is multiplied by ``c_tau`` every ``n_tau``
+    iterations and l by ``c_l`` every ``n_l``. Stops after ``n_end`` iterations or once the
+    best ``E < eps``.
+
+    Parameters
+    ----------
+    start : (n_axes,) radians; locked axes hold their value and are never changed.
+    free_idx : (n_free,) int64; step : (n_axes,) s(H_i) in radians.
+    hist : (n_axes, n_bins_max), nbins : (n_axes,) int64 histogram tables.
+    state : uint64 start state of the random stream (:func:`stream_state`).
+    cur, cand, best, cs, sn : (n_axes,) scratch; rot (nj, 3, 3), pos (nj, 3), mk (nm, 3),
+    proj (n_views, n_markers, 2), per_view (n_views,), nearest (n_markers,) int64 scratch.
+
+    Returns
+    -------
+    best_error : float
+    iterations : int
+    """
+    n_free = free_idx.shape[0]
+    any_pinhole = _has_pinhole(kind)
+    rs = np.uint64(state)  # the stream state; int64 arithmetic with uint64 would be float
+    for k in range(start.shape[0]):
+        cur[k] = start[k]
+        cand[k] = start[k]
+        best[k] = start[k]
+        sn[k], cs[k] = sincos(start[k])
+    _project_cs(cs, sn, root_pos, parent, chain, pre_rot, pre_trans, post_trans, elem_axis,
+                elem_index, joint_flags, marker_joint, marker_local, kind, P, K, dist, R, t,
+                rot, pos, mk, proj, any_pinhole)
+    e_cur = projection_error(proj, points, view_off, bidirectional, weight, cap, per_view,
+                             nearest)
+    e_best = e_cur
+    tau = tau0
+    length = l0
+    to_tau = n_tau  # countdowns: two integer modulos per iteration cost more than these
+    to_l = n_l
+    it = 0
+    done = e_best < eps
+    while it < n_end and not done:
+        # Metropolis (Kirkpatrick et al. 1983): accept if u < exp(-ΔE/τ), i.e. if
+        # ΔE < τ·(-log u). The draw and its logarithm come first, off the iteration's
+        # critical path (candidate -> kinematics -> E -> acceptance).
+        rs, u = next_uniform(rs)
+        e_accept = e_cur + tau * -np.log(u)
+        for q in range(n_free):
+            i = free_idx[q]
+            scale = length * step[i]
+            ok = False
+            tries = 0
+            x = cur[i]
+            while not ok and tries <= max_redraws:
+                rs, u = next_uniform(rs)
+                x = cur[i] + scale * (2.0 * u - 1.0)
+                ok = hist_at(hist, nbins, i, x) >= th
+                tries += 1
+            x = x if ok else cur[i]
+            cand[i] = x
+            sn[i], cs[i] = sincos(x)
+        _project_cs(cs, sn, root_pos, parent, chain, pre_rot, pre_trans, post_trans,
+                    elem_axis, elem_index, joint_flags, marker_joint, marker_local, kind, P, K,
+                    dist, R, t, rot, pos, mk, proj, any_pinhole)
+        if bidirectional:
+            e = projection_error(proj, points, view_off, bidirectional, weight, cap,
+                                 per_view, nearest)
+        else:
+            e = _paper_error(proj, points, view_off, cap)
+        if e <= e_cur or e < e_accept:
+            e_cur = e
+            for q in range(n_free):
+                cur[free_idx[q]] = cand[free_idx[q]]
+            if e < e_best:
+                e_best = e
+                for q in range(n_free):
+                    best[free_idx[q]] = cand[free_idx[q]]
+        it += 1
+        to_tau -= 1
+        if to_tau == 0:
+            tau *= c_tau
+            to_tau = n_tau
+        to_l -= 1
+        if to_l == 0:
+            length *= c_l
+            to_l = n_l
+        done = e_best < eps
+    return e_best, it
+
+
+@njit(cache=True, parallel=True)
+def fit_frames(seg_off, frame_ids, det_points, det_off, root_pos, start, start_previous,
+               parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index,
+               joint_flags, marker_joint, marker_local, kind, P, K, dist, R, t,
+               free_idx, step, hist, nbins, th, max_redraws,
+               n_end, n_l, n_tau, tau0, l0, c_l, c_tau, eps, seed, reanalysis_threshold,
+               max_runs, bidirectional, weight, cap, lo, hi, refine_steps, refine_gate,
+               out_angles, out_error, out_view_error, out_runs, out_iterations, out_pairs):
+    """Fit many frames in parallel (``prange`` over segments of consecutive frames).
+
+    Frames ``seg_off[s]:seg_off[s + 1]`` form segment ``s``, fitted in order by one thread;
+    segments are independent. With ``start_previous`` a frame's first run starts from the
+    previous frame's result in its segment (the segment's first frame from ``start``);
+    otherwise every run starts from ``start``. Re-runs always start from ``start``. With
+    ``refine_steps > 0`` each run's best posture is polished by
+    :func:`kinematics._refine_kernels.refine_posture` (pairs within ``refine_gate`` pixels,
+    axis ranges ``lo``, ``hi`` in radians) before it is scored. A frame whose error exceeds
+    ``reanalysis_threshold`` is fitted again on the random stream of the next run index
+    (Table 1 note), ``max_runs`` runs at most; the run with the lowest error is kept.
+
+    Parameters
+    ----------
+    seg_off : (n_segments + 1,) int64; frame_ids : (n,) int64 frame numbers (seed streams).
+    det_points : (n_points, 2); det_off : (n * n_views + 1,) int64, frame-major.
+    root_pos : (n, n_chains, 3); start : (n_axes,) radians.
+    out_angles : (n, n_axes) radians, NaN for frames without any detection; out_error (n,);
+    out_view_error (n, n_views); out_runs, out_iterations (n,) int64 (iterations summed
+    over runs); out_pairs (n,) int64 refinement pairs of the kept run (0 without).
+    """
+    nv = kind.shape[0]
+    nj = parent.shape[0]
+    nm = marker_joint.shape[0]
+    na = start.shape[0]
+    for s in prange(seg_off.shape[0] - 1):
+        rot = np.empty((nj, 3, 3))
+        pos = np.empty((nj, 3))
+        mk = np.empty((nm, 3))
+        proj = np.empty((nv, nm, 2))
+        cs = np.empty(na)
+        sn = np.empty(na)
+        per_view = np.empty(nv)
+        nearest = np.empty(nm, np.int64)
+        cur = np.empty(na)
+        cand = np.empty(na)
+        best = np.empty(na)
+        keep = np.empty(na)
+        first = start.copy()
+        for f in range(seg_off[s], seg_off[s + 1]):
+            vo = det_off[f * nv: f * nv + nv + 1]
+            rp = root_pos[f]
+            out_runs[f] = 0
+            out_iterations[f] = 0
+            out_pairs[f] = 0
+            out_error[f] = np.nan
+            out_angles[f, :] = np.nan
+            out_view_error[f, :] = np.nan
+            if vo[nv] > vo[0]:  # else no detections at all: nothing to fit
+                e_keep = np.inf
+                run = 0
+                while run < max_runs and not e_keep <= reanalysis_threshold:
+                    state = stream_state(seed, frame_ids[f], run)
+                    origin = first if run == 0 else start
+                    e, its = anneal_chain(origin, free_idx, step, hist, nbins, th,
+                                          max_redraws, n_end, n_l, n_tau, tau0, l0, c_l,
+                                          c_tau, eps, state, rp, parent, chain, pre_rot,
+                                          pre_trans, post_trans, elem_axis, elem_index,
+                                          joint_flags, marker_joint, marker_local, kind, P,
+                                          K, dist, R, t, det_points, vo, bidirectional,
+                                          weight, cap, cur, cand, best, cs, sn, rot, pos,
+                                          mk, proj, per_view, nearest)
+                    out_iterations[f] += its
+                    pairs = 0
+                    if refine_steps > 0:
+                        _, pairs = _rk.refine_posture(
+                            best, free_idx, lo, hi, refine_steps, refine_gate, rp, parent,
+                            chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index,
+                            joint_flags, marker_joint, marker_local, kind, P, K, dist, R, t,
+                            det_points, vo)
+                        project_posture(best, rp, parent, chain, pre_rot, pre_trans,
+                                        post_trans, elem_axis, elem_index, joint_flags,
+                                        marker_joint, marker_local, kind, P, K, dist, R, t, cs,
+                                        sn, rot, pos, mk, proj)
+                        e = projection_error(proj, det_points, vo, bidirectional, weight,
+                                             cap, per_view, nearest)
+                    if e < e_keep:
+                        e_keep = e
+                        keep[:] = best
+                        out_pairs[f] = pairs
+                    run += 1
+                project_posture(keep, rp, parent, chain, pre_rot, pre_trans, post_trans,
+                                elem_axis, elem_index, joint_flags, marker_joint,
+                                marker_local, kind, P, K, dist, R, t, cs, sn, rot, pos, mk,
+                                proj)
+                out_error[f] = projection_error(proj, det_points, vo, bidirectional, weight,
+                                                cap, per_view, nearest)
+                out_view_error[f, :] = per_view
+                out_angles[f, :] = keep
+                out_runs[f] = run
+                if start_previous:
+                    first[:] = keep
+
+
+@njit(cache=True)
+def solve_spd(a, b, n):
+    """Solve ``a[:n, :n] · x = b[:n]`` for symmetric positive semi-definite ``a`` in place
+    (Cholesky without pivoting; ``a`` is overwritten by its factor, ``b`` by x). A
+    non-positive pivot zeroes that unknown (a direction the data do not constrain)."""
+    for j in range(n):
+        d = a[j, j]
+        for k in range(j):
+            d -= a[j, k] * a[j, k]
+        ok = d > 1e-300
+        d = np.sqrt(d) if ok else 0.0
+        a[j, j] = d
+        for i in range(j + 1, n):
+            s = a[i, j]
+            for k in range(j):
+                s -= a[i, k] * a[j, k]
+            a[i, j] = s / d if ok else 0.0
+    for i in range(n):
+        s = b[i]
+        for k in range(i):
+            s -= a[i, k] * b[k]
+        b[i] = s / a[i, i] if a[i, i] > 0.0 else 0.0
+    for i in range(n - 1, -1, -1):
+        s = b[i]
+        for k in range(i + 1, n):
+            s -= a[k, i] * b[k]
+        b[i] = s / a[i, i] if a[i, i] > 0.0 else 0.0
+
+
+# -- root marker tracking (Sect. 2.1, 3.3.1) ---------------------------------------------
+@njit(cache=True)
+def track_root(det_points, det_off, x0, gate, ridge, kind, P, K, dist, R, t, out):
+    """Follow one root marker through frames by nearest neighbour in every view.
+
+    For each frame in turn, the marker's previous 3D position is projected into every view;
+    the nearest detection there (within ``gate`` pixels) is its observation; the new 3D
+    position minimises the squared reprojection error over the observing views plus
+    ``ridge`` times the squared distance to the previous position (so directions no view
+    sees, e.g. depth in a single orthographic view, stay put). Gauss-Newton with numerical
+    Jacobians: exact in one step for orthographic views, a few steps for pinhole ones. A
+    frame where no view sees a detection keeps the previous position.
+
+    Parameters
+    ----------
+    det_points : (n_points, 2); det_off : (n_frames * n_views + 1,) int64, frame-major.
+    x0 : (3,) the marker's position before the first frame.
+    out : (n_frames, 3) tracked positions.
+
+    Returns
+    -------
+    n_lost : int, frames where no view observed the marker.
+    """
+    nv = kind.shape[0]
+    nf = out.shape[0]
+    obs = np.empty((nv, 2))
+    seen = np.zeros(nv, np.bool_)
+    prev = x0.copy()
+    x = x0.copy()
+    a = np.empty((3, 3))
+    g = np.empty(3)
+    jv = np.empty((2, 3))
+    n_lost = 0
+    h = 1e-6 * (1.0 + np.abs(x0).max())
+    for f in range(nf):
+        n_seen = 0
+        for v in range(nv):
+            pu, pv = project_point(kind, P, K, dist, R, t, v, prev[0], prev[1], prev[2])
+            lo = det_off[f * nv + v]
+            hi = det_off[f * nv + v + 1]
+            best = gate * gate
+            arg = -1
+            for c in range(lo, hi):
+                dx = det_points[c, 0] - pu
+                dy = det_points[c, 1] - pv
+                d2 = dx * dx + dy * dy
+                if d2 < best or (arg < 0 and d2 <= best):
+                    best = d2
+                    arg = c
+            seen[v] = arg >= 0
+            if arg >= 0:
+                obs[v, 0] = det_points[arg, 0]
+                obs[v, 1] = det_points[arg, 1]
+                n_seen += 1
+        if n_seen == 0:
+            n_lost += 1
+        else:
+            for k in range(3):
+                x[k] = prev[k]
+            for _ in range(8):
+                for r in range(3):
+                    g[r] = ridge * (prev[r] - x[r])
+                    for c in range(3):
+                        a[r, c] = ridge if r == c else 0.0
+                for v in range(nv):
+                    if seen[v]:
+                        u0, w0 = project_point(kind, P, K, dist, R, t, v, x[0], x[1], x[2])
+                        for k in range(3):
+                            x[k] += h
+                            u1, w1 = project_point(kind, P, K, dist, R, t, v, x[0], x[1], x[2])
+                            x[k] -= h
+                            jv[0, k] = (u1 - u0) / h
+                            jv[1, k] = (w1 - w0) / h
+                        ru = obs[v, 0] - u0
+                        rv = obs[v, 1] - w0
+                        for r in range(3):
+                            g[r] += jv[0, r] * ru + jv[1, r] * rv
+                            for c in range(3):
+                                a[r, c] += jv[0, r] * jv[0, c] + jv[1, r] * jv[1, c]
+                solve_spd(a, g, 3)
+                for k in range(3):
+                    x[k] += g[k]
+            for k in range(3):
+                prev[k] = x[k]
+        for k in range(3):
+            out[f, k] = prev[k]
+    return n_lost
+
+
+# Refinement runs inside the re-analysis loop of fit_frames, but its kernels build on this
+# module; importing the module object (not names) last keeps the import cycle harmless in
+# either import order (numba resolves _rk.refine_posture when fit_frames compiles).
+from kinematics import _refine_kernels as _rk  # noqa: E402

@@ -1,0 +1,851 @@
+"""Posture fitting by simulated annealing (paper Sect. 2.3: Eq. 5, Eq. 6, Table 1).
+
+:class:`Fitter` packs a body, its cameras and its histograms once and fits frames of marker
+detections: :meth:`Fitter.fit_frame` one frame, :meth:`Fitter.iter_fit` a range or a whole
+video as a generator of :class:`FrameResult` in frame order, computing chunks of frames in
+parallel on all of numba's threads. Closing the generator cancels the run (between chunks).
+The generator never prints and never touches files.
+
+Per frame (numba kernels in :mod:`kinematics._anneal_kernels`):
+
+1. start from the histogram means (Sect. 3.1) or the previous frame's result;
+2. anneal (Eq. 6 steps, histogram plausibility, Metropolis, τ and l schedules, stop after
+   ``n_end`` iterations or once E < ε), keeping the best posture seen;
+3. optionally refine it locally (:mod:`kinematics.refine`) and score it by E again;
+4. if E > ``reanalysis_threshold`` fit again on a new random stream, at most ``max_runs``
+   runs in all, keeping the run with the lowest E (Table 1 note).
+
+With refinement, E of a correct fit drops to the centroid noise level, so a much lower
+re-analysis threshold separates right from wrong minima, which is what lets a short
+schedule keep the accuracy (docs/fitting.md).
+
+Reproducibility: run ``r`` of frame ``f`` draws from a splitmix64 stream keyed by
+``(seed, f, r)``, so results are bit-identical whatever the number of threads or the chunking,
+and a single frame can be replayed from its seed and frame number.
+
+Start posture trade-off. ``start="mean"`` (the default, and the paper's spirit) makes every
+frame independent: a badly fitted frame never spoils the next one, concatenated sequences
+need no care, and all frames run in parallel. ``start="previous"`` starts each frame from the
+previous frame's result; with the Table 1 schedule this buys nothing (τ0 = 200 px lets the
+first thousands of iterations wander far from any start), but it lets a much shorter and
+colder schedule (small ``tau0`` and ``l0``) track smooth movement. It makes frames depend on
+each other, so frames are cut into independent segments of ``segment_length`` consecutive
+frames (each starting from the means), fitted one segment per thread; results still do not
+depend on the thread count. Re-runs of a frame always start from the means.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+from dataclasses import asdict, dataclass, field, fields, replace
+from typing import NamedTuple
+
+import numba
+import numpy as np
+
+from kinematics import _anneal_kernels as _ak
+from kinematics.cameras import CameraArrays, pack_cameras
+from kinematics.error_function import ErrorOptions, projection_error
+from kinematics.errors import KinematicsError
+from kinematics.fk import forward_kinematics_reference
+from kinematics.histograms import Histogram
+from kinematics.model import Body, validate_body
+from kinematics.packing import pack_body
+from kinematics.rotations import rot_x, rot_y, rot_z
+
+START_MODES = ("mean", "previous")
+STATUSES = ("ok", "reanalysed", "failed", "no-detections")
+
+#: The world axis each rotation of Eq. 1 turns about (x=0, y=1, z=2), in AXIS_ORDER.
+_WORLD_AXIS = {"x": 0, "y": 1, "z": 2}
+_ELEMENTARY = {"x": rot_x, "y": rot_y, "z": rot_z}
+
+
+# -- parameters -----------------------------------------------------------------------------
+@dataclass(frozen=True)
+class AnnealParams:
+    """Parameters of the fit; the defaults are the paper's Table 1 and its note.
+
+    Parameters
+    ----------
+    n_end : int
+        N_end, iterations per run (35 000).
+    n_l, n_tau : int
+        N_l and N_τ: the step length l is multiplied by ``c_l`` every ``n_l`` iterations
+        (3500), the temperature τ by ``c_tau`` every ``n_tau`` (1500).
+    tau0 : float
+        τ0, start temperature in pixels of E (200).
+    l0 : float
+        l, start step length in units of s(H) (1).
+    c_l, c_tau : float
+        Cooling factors in (0, 1] (0.75).
+    epsilon : float
+        ε: a run stops once E < ε pixels (1).
+    plausibility_threshold : float or None
+        T_h: a step component v_i is redrawn while ``H_i(j_i + l·v_i) < T_h``. None (default)
+        means "any non-zero bin is plausible" (redraw only where the histogram is empty: the
+        paper's initial histograms are uniform over the range, so this keeps every axis in
+        its range). A number compares with the bin probability itself, e.g. ``0.2 / n_bins``
+        to avoid bins visited five times less often than average.
+    max_redraws : int
+        Redraws of one component before the axis stays still for that iteration (16).
+    reanalysis_threshold : float
+        A frame whose final E exceeds this (pixels) is fitted again (10, Table 1 note).
+    max_runs : int
+        Runs per frame at most, the first included (5).
+    start : {"mean", "previous"}
+        Start posture of a frame's first run (see the module doc for the trade-off).
+    segment_length : int
+        Frames per independent segment with ``start="previous"``.
+    refine : bool
+        Polish every fitted posture by Levenberg-Marquardt (:mod:`kinematics.refine`); off
+        by default so the defaults reproduce the paper.
+    refine_steps : int
+        Accepted LM steps at most.
+    refine_gate_px : float
+        Marker/detection pairs farther apart than this are ignored by refinement.
+    root_gate_px : float or None
+        Root-marker tracking ignores a view whose nearest detection is farther than this from
+        the predicted root marker; None: no gate (the paper's nearest neighbour).
+    error : ErrorOptions
+        Error function: Eq. 5 (default) or a variant.
+    seed : int
+        Seed of the random streams, >= 0; recorded in every result.
+    """
+
+    n_end: int = 35000
+    n_l: int = 3500
+    n_tau: int = 1500
+    tau0: float = 200.0
+    l0: float = 1.0
+    c_l: float = 0.75
+    c_tau: float = 0.75
+    epsilon: float = 1.0
+    plausibility_threshold: float | None = None
+    max_redraws: int = 16
+    reanalysis_threshold: float = 10.0
+    max_runs: int = 5
+    start: str = "mean"
+    segment_length: int = 32
+    refine: bool = False
+    refine_steps: int = 10
+    refine_gate_px: float = 5.0
+    root_gate_px: float | None = None
+    error: ErrorOptions = field(default_factory=ErrorOptions)
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        self.validate()
+
+    def validate(self) -> None:
+        """Raise :class:`KinematicsError` naming the first invalid field."""
+        ints = {"n_end": 1, "n_l": 1, "n_tau": 1, "max_redraws": 0, "max_runs": 1,
+                "segment_length": 1, "refine_steps": 0, "seed": 0}
+        for name, least in ints.items():
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | np.integer) or (
+                    value < least):
+                raise KinematicsError(f"must be an integer >= {least}, got {value!r}",
+                                      field=name)
+        if self.seed >= 2**63:
+            raise KinematicsError(f"must be below 2**63, got {self.seed}", field="seed")
+        positive = ("tau0", "l0", "reanalysis_threshold", "refine_gate_px")
+        for name in positive:
+            value = getattr(self, name)
+            if not _is_real(value) or not (math.isfinite(value) and value > 0):
+                raise KinematicsError(f"must be a finite number > 0, got {value!r}",
+                                      field=name)
+        for name in ("c_l", "c_tau"):
+            value = getattr(self, name)
+            if not _is_real(value) or not 0 < value <= 1:
+                raise KinematicsError(f"must be in (0, 1], got {value!r}", field=name)
+        if not _is_real(self.epsilon) or not (math.isfinite(self.epsilon)
+                                              and self.epsilon >= 0):
+            raise KinematicsError(f"must be a finite number >= 0, got {self.epsilon!r}",
+                                  field="epsilon")
+        th = self.plausibility_threshold
+        if th is not None and not (_is_real(th) and math.isfinite(th) and 0 <= th <= 1):
+            raise KinematicsError(f"must be None or a number in [0, 1], got {th!r}",
+                                  field="plausibility_threshold")
+        g = self.root_gate_px
+        if g is not None and not (_is_real(g) and g > 0):
+            raise KinematicsError(f"must be None or a number > 0, got {g!r}",
+                                  field="root_gate_px")
+        if self.start not in START_MODES:
+            raise KinematicsError(f"must be one of {', '.join(START_MODES)}, got "
+                                  f"{self.start!r}", field="start")
+        if not isinstance(self.refine, bool | np.bool_):
+            raise KinematicsError(f"must be true or false, got {self.refine!r}",
+                                  field="refine")
+        if not isinstance(self.error, ErrorOptions):
+            raise KinematicsError("must be an ErrorOptions", field="error")
+
+    @property
+    def threshold(self) -> float:
+        """T_h as the kernels compare it: ``H < threshold`` is implausible. None becomes the
+        smallest positive double, so exactly the empty bins are implausible."""
+        th = self.plausibility_threshold
+        return float(np.nextafter(0.0, 1.0)) if th is None else float(th)
+
+    def with_schedule(self, n_end: int) -> AnnealParams:
+        """The same cooling schedule compressed or stretched to ``n_end`` iterations: N_l and
+        N_τ scale linearly, as in the paper's sensitivity analysis (Sect. 3.2)."""
+        scale = n_end / self.n_end
+        return replace(self, n_end=int(n_end), n_l=max(1, round(self.n_l * scale)),
+                       n_tau=max(1, round(self.n_tau * scale)))
+
+    def to_dict(self) -> dict:
+        """Plain values for a results sidecar (``error`` as a nested dict)."""
+        d = asdict(self)
+        d["error"] = self.error.to_dict()
+        return d
+
+    @classmethod
+    def from_dict(cls, values: Mapping) -> AnnealParams:
+        """Build from plain values (e.g. a project file section); unknown keys are errors."""
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise KinematicsError(f"unknown annealing parameter '{unknown[0]}'",
+                                  field=unknown[0])
+        kw = dict(values)
+        if isinstance(kw.get("error"), Mapping):
+            kw["error"] = ErrorOptions(**kw["error"])
+        return cls(**kw)
+
+
+def _is_real(value) -> bool:
+    return isinstance(value, int | float | np.integer | np.floating) and not isinstance(
+        value, bool | np.bool_)
+
+
+# -- results ------------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class FrameResult:
+    """The fit of one frame.
+
+    Attributes
+    ----------
+    frame : int
+        Index of the frame (record) in the detections.
+    angles_deg : ndarray, shape (n_axes,)
+        Fitted posture, each angle expressed within its axis range where possible; NaN when
+        the frame had no detections.
+    error : float
+        E of the fitted posture (Eq. 5 or the chosen variant), pixels; the confidence value.
+    error_per_view : ndarray, shape (n_views,)
+        The part of E from each view (NaN without detections; 0 for a view without any).
+    runs : int
+        Annealing runs made (1 + re-analyses).
+    iterations : int
+        Annealing iterations over all runs.
+    seed : int
+        The seed; run r drew from the stream of (seed, frame, r).
+    status : str
+        ``"ok"`` (E within the threshold at the first run), ``"reanalysed"`` (within it after
+        re-runs), ``"failed"`` (above it after ``max_runs``), ``"no-detections"``.
+    root_positions : ndarray, shape (n_chains, 3)
+        Root of each chain used for this frame (configured or tracked).
+    missing_views : tuple of str
+        Views without any detection in this frame (fitted from the others).
+    dropped : int
+        Detected points dropped because a coordinate was NaN or infinite.
+    refined_pairs : int or None
+        Marker/detection pairs used by refinement, None when refinement was off.
+    """
+
+    frame: int
+    angles_deg: np.ndarray
+    error: float
+    error_per_view: np.ndarray
+    runs: int
+    iterations: int
+    seed: int
+    status: str
+    root_positions: np.ndarray
+    missing_views: tuple[str, ...] = ()
+    dropped: int = 0
+    refined_pairs: int | None = None
+
+    @property
+    def ok(self) -> bool:
+        """True for ``ok`` and ``reanalysed`` frames (E within the threshold)."""
+        return self.status in ("ok", "reanalysed")
+
+
+# -- packing --------------------------------------------------------------------------------
+class FoldedBody(NamedTuple):
+    """A body in the kernels' folded layout (see :mod:`kinematics._anneal_kernels`).
+
+    Shapes: ``nj`` joints, ``nm`` markers. Joint ``j`` keeps ``A'_j = A'_parent · pre_rot[j]
+    · Π_e E(elem_axis[j, e], angle[elem_index[j, e]])`` and ``p_j = p_parent + A'_parent ·
+    pre_trans[j] + A'_j · post_trans[j]``; markers sit at ``p_j + A'_j · marker_local``.
+    """
+
+    parent: np.ndarray  # (nj,) int64, -1 for roots
+    chain: np.ndarray  # (nj,) int64
+    pre_rot: np.ndarray  # (nj, 3, 3) G_j = Q_parent · R^s · L_j
+    pre_trans: np.ndarray  # (nj, 3) g_j = Q_parent · t^s
+    post_trans: np.ndarray  # (nj, 3) h_j = Q_j · T_j
+    elem_axis: np.ndarray  # (nj, 3) int64 world axis (0 x, 1 y, 2 z) or -1
+    elem_index: np.ndarray  # (nj, 3) int64 posture index of each elementary rotation
+    joint_flags: np.ndarray  # (nj,) int64, G_IDENTITY | H_ZERO bits
+    marker_joint: np.ndarray  # (nm,) int64
+    marker_local: np.ndarray  # (nm, 3) Q_j · (t^s + R^s m)
+
+
+def fold_body(body: Body, angles_deg=None) -> FoldedBody:
+    """Fold the constant parts of Eq. 1 into per-joint constants, once per fit.
+
+    A joint's rotation ``Ry·Rx·Rz`` is split at its first and last free axis: the locked
+    rotations before (L) go into the joint's constant ``G_j = Q_parent · R^s · L``; those after
+    (S), with R^d, form ``Q_j = S · R^d``, which is folded into the joint's translation, its
+    markers and its children. The rotations from the first to the last free axis stay
+    (locked ones between them with their constant angle). Locked angles come from the body
+    (or ``angles_deg``, shape (n_axes,), when given).
+    """
+    arrays = pack_body(body)
+    refs = body.axis_refs()
+    locked = body.locked_mask()
+    values = np.deg2rad(body.mean_posture_deg() if angles_deg is None else angles_deg)
+    nj = arrays.parent.size
+    big_l, big_q = np.empty((nj, 3, 3)), np.empty((nj, 3, 3))
+    elem_axis = np.full((nj, 3), -1, np.int64)
+    elem_index = np.zeros((nj, 3), np.int64)
+    for j in range(nj):
+        idx = arrays.axis_index[j]
+        free = [e for e in range(3) if not locked[idx[e]]]
+        first, last = (free[0], free[-1]) if free else (3, 2)
+        prefix, suffix = np.eye(3), np.eye(3)
+        for e in range(3):
+            rot = refs[idx[e]].axis.rot
+            if e < first:
+                prefix = prefix @ _ELEMENTARY[rot](values[idx[e]])
+            elif e > last:
+                suffix = suffix @ _ELEMENTARY[rot](values[idx[e]])
+            else:
+                elem_axis[j, e - first] = _WORLD_AXIS[rot]
+                elem_index[j, e - first] = idx[e]
+        big_l[j] = prefix
+        big_q[j] = suffix @ arrays.post_rot[j]
+    pre_rot = np.empty((nj, 3, 3))
+    pre_trans = np.zeros((nj, 3))
+    post_trans = np.empty((nj, 3))
+    flags = np.zeros(nj, np.int64)
+    for j in range(nj):
+        p = arrays.parent[j]
+        if p < 0:
+            pre_rot[j] = big_l[j]
+        else:
+            pre_rot[j] = big_q[p] @ arrays.pre_rot[j] @ big_l[j]
+            pre_trans[j] = big_q[p] @ arrays.pre_trans[j]
+        post_trans[j] = big_q[j] @ arrays.post_trans[j]
+        if np.array_equal(pre_rot[j], np.eye(3)):
+            flags[j] |= _ak.G_IDENTITY
+        if not post_trans[j].any():
+            flags[j] |= _ak.H_ZERO
+    local = np.einsum("mij,mj->mi", big_q[arrays.marker_joint], arrays.marker_local)
+    return FoldedBody(arrays.parent, arrays.chain, np.ascontiguousarray(pre_rot), pre_trans,
+                      post_trans, elem_axis, elem_index, flags, arrays.marker_joint,
+                      np.ascontiguousarray(local.reshape(-1, 3)))
+
+
+def histogram_tables(histograms: Sequence[Histogram]) -> tuple[np.ndarray, np.ndarray,
+                                                                np.ndarray]:
+    """Histogram lookup tables for the kernels.
+
+    Returns
+    -------
+    hist : ndarray, shape (n_axes, max_bins)
+        Bin values, zero-padded.
+    nbins : ndarray of int64, shape (n_axes,)
+    step_rad : ndarray, shape (n_axes,)
+        s(H_i) in radians: the step scale of Eq. 6.
+    """
+    nbins = np.array([h.n_bins for h in histograms], dtype=np.int64)
+    hist = np.zeros((len(histograms), int(nbins.max(initial=1))))
+    for i, h in enumerate(histograms):
+        hist[i, : h.n_bins] = h.values
+    step = np.deg2rad([h.std_deg() for h in histograms])
+    return hist, nbins, np.asarray(step, dtype=float)
+
+
+# -- detections -----------------------------------------------------------------------------
+@dataclass(frozen=True)
+class _Ragged:
+    """Detections of several frames, cleaned: NaN rows dropped, layout as the kernels'."""
+
+    points: np.ndarray  # (n, 2) float64, finite
+    offsets: np.ndarray  # (n_frames * n_views + 1,) int64
+    dropped: np.ndarray  # (n_frames,) int64 rows dropped per frame
+    n_views: int
+
+    @property
+    def n_frames(self) -> int:
+        return (self.offsets.size - 1) // self.n_views
+
+    def counts(self) -> np.ndarray:
+        return np.diff(self.offsets).reshape(self.n_frames, self.n_views)
+
+    def select(self, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Points and frame-major offsets of the given frames only, in that order."""
+        nv = self.n_views
+        starts = self.offsets[frames * nv]
+        stops = self.offsets[frames * nv + nv]
+        pts = np.concatenate([self.points[a:b] for a, b in zip(starts, stops, strict=True)]
+                             ) if len(frames) else np.empty((0, 2))
+        counts = np.diff(self.offsets)[(frames[:, None] * nv + np.arange(nv)).ravel()]
+        off = np.zeros(counts.size + 1, np.int64)
+        np.cumsum(counts, out=off[1:])
+        return np.ascontiguousarray(pts.reshape(-1, 2), dtype=np.float64), off
+
+
+def _as_ragged(detections, view_names: Sequence[str]) -> _Ragged:
+    """Accept a :class:`videotrack.detections.Detections`-like object (``points`` (n, 2),
+    ``offsets`` (n_frames * n_views + 1,), optional ``view_names``) or a sequence of frames,
+    each a sequence of per-view (n_c, 2) arrays (or an object with such a ``points``)."""
+    nv = len(view_names)
+    if hasattr(detections, "offsets") and hasattr(detections, "points"):
+        names = getattr(detections, "view_names", None)
+        if names is not None and list(names) != list(view_names):
+            raise KinematicsError(f"detections are for views {list(names)} but the cameras "
+                                  f"are {list(view_names)}", field="detections")
+        pts = np.asarray(detections.points, dtype=float).reshape(-1, 2)
+        off = np.asarray(detections.offsets, dtype=np.int64).ravel()
+        if off.size < 1 or (off.size - 1) % nv or off[0] != 0 or off[-1] != len(pts) or np.any(
+                np.diff(off) < 0):
+            raise KinematicsError(f"offsets must rise from 0 to {len(pts)} in (frames x "
+                                  f"{nv} views + 1) entries", field="detections")
+    else:
+        rows, counts = [], []
+        for f, frame in enumerate(detections):
+            views = getattr(frame, "points", frame)
+            views = list(views)
+            if len(views) != nv:
+                raise KinematicsError(f"frame {f} has detections for {len(views)} views but "
+                                      f"there are {nv} cameras {list(view_names)}",
+                                      field="detections")
+            for v, det in enumerate(views):
+                a = np.asarray(det, dtype=float)
+                if a.size and (a.ndim != 2 or a.shape[1] != 2):
+                    raise KinematicsError(f"frame {f} view {view_names[v]}: points must have "
+                                          f"shape (n, 2), got {a.shape}", field="detections")
+                rows.append(a.reshape(-1, 2))
+                counts.append(len(rows[-1]))
+        pts = np.concatenate(rows) if rows else np.empty((0, 2))
+        off = np.zeros(len(counts) + 1, np.int64)
+        np.cumsum(counts, out=off[1:])
+    good = np.isfinite(pts).all(axis=1)
+    n_frames = (off.size - 1) // nv
+    if good.all():
+        return _Ragged(np.ascontiguousarray(pts), off, np.zeros(n_frames, np.int64), nv)
+    keep_before = np.concatenate([[0], np.cumsum(good)])
+    new_off = keep_before[off].astype(np.int64)
+    bad_per_cell = np.diff(off) - np.diff(new_off)
+    dropped = bad_per_cell.reshape(n_frames, nv).sum(axis=1)
+    return _Ragged(np.ascontiguousarray(pts[good]), new_off, dropped.astype(np.int64), nv)
+
+
+# -- the fitter -----------------------------------------------------------------------------
+class Fitter:
+    """Fits a body's posture to marker detections, frame by frame.
+
+    Parameters
+    ----------
+    body : Body
+        The kinematic chains with their histograms (constraints and step scales).
+    cameras : mapping name -> Camera, or sequence of Camera
+        One camera per view, in the order of the detections' views; a sequence takes the
+        cameras' names as view names.
+    params : AnnealParams, optional
+        Table 1 defaults.
+
+    Raises
+    ------
+    KinematicsError
+        The body is invalid, has no markers or no free axis, or there are no cameras.
+    """
+
+    def __init__(self, body: Body, cameras, params: AnnealParams | None = None) -> None:
+        validate_body(body)
+        self.params = params if params is not None else AnnealParams()
+        if not isinstance(self.params, AnnealParams):
+            raise KinematicsError("params must be an AnnealParams", field="params")
+        if isinstance(cameras, Mapping):
+            self.view_names = [str(k) for k in cameras]
+            self.cameras = list(cameras.values())
+        else:
+            self.cameras = list(cameras)
+            self.view_names = [getattr(c, "name", f"view{k}") for k, c in
+                               enumerate(self.cameras)]
+        if not self.cameras:
+            raise KinematicsError("no cameras: the fit needs at least one view",
+                                  field="cameras")
+        if not body.marker_names:
+            raise KinematicsError(f"body '{body.name}' has no markers: nothing to fit",
+                                  field="markers")
+        self.body = body
+        self._cams: CameraArrays = pack_cameras(self.cameras)
+        self._locked = body.locked_mask()
+        self._free = np.flatnonzero(~self._locked).astype(np.int64)
+        if self._free.size == 0:
+            raise KinematicsError(f"body '{body.name}' has no free axis: nothing to fit",
+                                  field="axes")
+        self._mean_deg = body.mean_posture_deg()
+        self._start = np.deg2rad(self._mean_deg)
+        self._folded = fold_body(body, self._mean_deg)
+        self._hist, self._nbins, self._step = histogram_tables(body.histograms())
+        ranges = body.ranges_deg()
+        self._ranges_deg = ranges
+        self._lo = np.ascontiguousarray(np.deg2rad(ranges[:, 0]))
+        self._hi = np.ascontiguousarray(np.deg2rad(ranges[:, 1]))
+        self._roots = body.root_positions()
+        self._tracked = [k for k, c in enumerate(body.chains) if c.root.mode == "marker"]
+        names = body.marker_names
+        self._root_marker = {k: names.index(body.chains[k].root.marker) for k in self._tracked}
+
+    # -- small helpers --------------------------------------------------------------------
+    @property
+    def n_views(self) -> int:
+        return len(self.cameras)
+
+    @property
+    def axis_labels(self) -> list[str]:
+        return self.body.axis_labels
+
+    @property
+    def start_posture_deg(self) -> np.ndarray:
+        """The histogram-mean start posture (Sect. 3.1), shape (n_axes,)."""
+        return self._mean_deg.copy()
+
+    def _posture_rad(self, angles_deg) -> np.ndarray:
+        a = np.asarray(angles_deg, dtype=float)
+        if a.shape != (self.body.n_axes,):
+            raise KinematicsError(f"posture needs {self.body.n_axes} angles, got shape "
+                                  f"{a.shape}", field="angles_deg")
+        if not np.all(np.isfinite(a)):
+            raise KinematicsError("posture angles must be finite", field="angles_deg")
+        a = np.where(self._locked, self._mean_deg, a)  # locked axes never move
+        return np.ascontiguousarray(np.deg2rad(a))
+
+    def _root_rad(self, root_positions) -> np.ndarray:
+        if root_positions is None:
+            return np.ascontiguousarray(self._roots, dtype=float)
+        r = np.asarray(root_positions, dtype=float)
+        if r.shape != self._roots.shape or not np.all(np.isfinite(r)):
+            raise KinematicsError(f"root positions need finite shape {self._roots.shape}, got "
+                                  f"{r.shape}", field="root_positions")
+        return np.ascontiguousarray(r)
+
+    def _frame_ragged(self, detections_frame) -> _Ragged:
+        return _as_ragged([detections_frame], self.view_names)
+
+    def _to_range_deg(self, angles_rad: np.ndarray) -> np.ndarray:
+        """Degrees, each angle moved by whole turns to lie nearest its range centre."""
+        deg = np.rad2deg(angles_rad)
+        centre = self._ranges_deg.mean(axis=1)
+        return deg + 360.0 * np.round((centre - deg) / 360.0)
+
+    # -- single evaluations ---------------------------------------------------------------
+    def project(self, angles_deg, root_positions=None) -> np.ndarray:
+        """Model markers of a posture projected into every view (the annealing kernel's
+        forward kinematics), shape (n_views, n_markers, 2) pixels."""
+        angles = self._posture_rad(angles_deg)
+        f, c = self._folded, self._cams
+        nj, na = f.parent.size, angles.size
+        proj = np.empty((self.n_views, f.marker_joint.size, 2))
+        _ak.project_posture(angles, self._root_rad(root_positions), *f, *c, np.empty(na),
+                            np.empty(na), np.empty((nj, 3, 3)), np.empty((nj, 3)),
+                            np.empty((f.marker_joint.size, 3)), proj)
+        return proj
+
+    def error(self, angles_deg, detections_frame, root_positions=None) -> tuple[float,
+                                                                                np.ndarray]:
+        """E of a posture for one frame's detections (kernel; e.g. for a manual correction).
+
+        Parameters
+        ----------
+        angles_deg : array_like, shape (n_axes,)
+        detections_frame : sequence of array_like (n_c, 2), one per view
+        root_positions : array_like, shape (n_chains, 3), optional
+
+        Returns
+        -------
+        error : float
+        error_per_view : ndarray, shape (n_views,)
+        """
+        rag = self._frame_ragged(detections_frame)
+        per_view = np.empty(self.n_views)
+        opts = self.params.error
+        e = _ak.posture_error(self._posture_rad(angles_deg), self._root_rad(root_positions),
+                              *self._folded, *self._cams, rag.points, rag.offsets,
+                              opts.bidirectional, float(opts.penalty_weight), opts.cap,
+                              per_view)
+        return float(e), per_view
+
+    # -- root tracking --------------------------------------------------------------------
+    def track_roots(self, detections, frames=None) -> np.ndarray:
+        """Root position of every chain for each frame, shape (n_frames, n_chains, 3).
+
+        Chains with ``root.mode == "marker"`` follow their root marker (Sects. 2.1, 3.3.1):
+        frame by frame, in the order of ``frames``, the marker's previous position is
+        projected into every view, the nearest detection there is taken as its image (within
+        ``params.root_gate_px`` if set), and the new 3D position is the least-squares point
+        over the observing views (orthographic or pinhole), keeping unobserved directions.
+        The first frame starts from the configured root position (the manual offset of the
+        paper) with the root marker where the start posture puts it; the root then moves by
+        the tracked marker's displacement. Fixed chains keep their position.
+        """
+        rag = _as_ragged(detections, self.view_names)
+        idx = self._frame_indices(frames, rag.n_frames)
+        return self._track(rag, idx)
+
+    def _track(self, rag: _Ragged, idx: np.ndarray) -> np.ndarray:
+        out = np.broadcast_to(self._roots, (len(idx), *self._roots.shape)).copy()
+        if not self._tracked or len(idx) == 0:
+            return out
+        pts, off = rag.select(idx)
+        gate = np.inf if self.params.root_gate_px is None else float(self.params.root_gate_px)
+        markers0 = forward_kinematics_reference(self.body, self._mean_deg).markers
+        for k in self._tracked:
+            x0 = np.ascontiguousarray(markers0[self._root_marker[k]], dtype=float)
+            track = np.empty((len(idx), 3))
+            _ak.track_root(pts, off, x0, gate, 1e-9, *self._cams, track)
+            out[:, k] = self._roots[k] + (track - x0)
+        return out
+
+    @staticmethod
+    def _frame_indices(frames, n_frames: int) -> np.ndarray:
+        if frames is None:
+            return np.arange(n_frames, dtype=np.int64)
+        if isinstance(frames, range):
+            idx = np.arange(frames.start, frames.stop, frames.step, dtype=np.int64)
+        else:
+            idx = np.asarray(list(frames) if not isinstance(frames, np.ndarray) else frames)
+            if idx.size and idx.dtype.kind not in "iu":
+                raise KinematicsError("frame numbers must be integers", field="frames")
+            idx = idx.astype(np.int64).ravel()
+        if idx.size and (idx.min() < 0 or idx.max() >= n_frames):
+            raise KinematicsError(f"frame numbers must be in [0, {n_frames}), got "
+                                  f"{idx.min()}..{idx.max()}", field="frames")
+        return idx
+
+    # -- fitting --------------------------------------------------------------------------
+    def fit_frame(self, detections_frame, frame: int = 0, *, start_deg=None,
+                  root_positions=None) -> FrameResult:
+        """Fit one frame.
+
+        Parameters
+        ----------
+        detections_frame : sequence of array_like (n_c, 2), one per view
+            Detected points of each view (NaN rows are dropped and counted).
+        frame : int
+            Frame number: keys the random streams, so a frame of a video fitted alone gives
+            the same result as within :meth:`iter_fit` (same start and root).
+        start_deg : array_like, shape (n_axes,), optional
+            Start posture of the first run; default the histogram means.
+        root_positions : array_like, shape (n_chains, 3), optional
+            Root of each chain; default the configured positions (a single frame cannot
+            track a root marker).
+        """
+        if isinstance(frame, bool) or not isinstance(frame, int | np.integer) or frame < 0:
+            raise KinematicsError(f"frame must be an integer >= 0, got {frame!r}",
+                                  field="frame")
+        rag = self._frame_ragged(detections_frame)
+        start = self._start if start_deg is None else self._posture_rad(start_deg)
+        roots = self._root_rad(root_positions)[None]
+        return self._fit_block(rag.points, rag.offsets, np.array([int(frame)], np.int64),
+                               roots, rag.dropped, start, np.array([0, 1], np.int64))[0]
+
+    def iter_fit(self, detections, frames=None, *, chunk_size: int | None = None
+                 ) -> Iterator[FrameResult]:
+        """Fit frames of a video; yields one :class:`FrameResult` per frame, in order.
+
+        Parameters
+        ----------
+        detections : Detections-like or sequence of frames
+            ``points`` (n, 2) with ``offsets`` (n_frames * n_views + 1,) (and optionally
+            ``view_names``, checked against the cameras), or a sequence of frames each
+            holding one (n_c, 2) array per view.
+        frames : iterable of int, optional
+            Frame indices to fit, in the order wanted (root tracking and
+            ``start="previous"`` follow this order); default all.
+        chunk_size : int, optional
+            Frames computed per parallel batch (default 8 per thread, or 2 segments per
+            thread with ``start="previous"``; rounded up to whole segments); closing the
+            generator takes effect between batches.
+
+        Raises
+        ------
+        KinematicsError
+            Detections whose views do not match the cameras, bad frame numbers.
+        """
+        rag = _as_ragged(detections, self.view_names)
+        idx = self._frame_indices(frames, rag.n_frames)
+        return self._iter(rag, idx, chunk_size)
+
+    def _iter(self, rag: _Ragged, idx: np.ndarray, chunk_size: int | None
+              ) -> Iterator[FrameResult]:
+        roots = self._track(rag, idx)
+        threads = numba.get_num_threads()
+        seg = self.params.segment_length if self.params.start == "previous" else 1
+        if chunk_size is None:  # enough frames (or segments) to keep every thread busy
+            chunk = 8 * threads if seg == 1 else 2 * threads * seg
+        else:
+            chunk = chunk_size
+        if isinstance(chunk, bool) or not isinstance(chunk, int | np.integer) or chunk < 1:
+            raise KinematicsError(f"chunk_size must be an integer >= 1, got {chunk!r}",
+                                  field="chunk_size")
+        chunk = -(-chunk // seg) * seg
+        for a in range(0, len(idx), chunk):
+            sel = idx[a: a + chunk]
+            pts, off = rag.select(sel)
+            n = len(sel)
+            seg_off = np.unique(np.r_[np.arange(0, n, seg), n]).astype(np.int64)
+            yield from self._fit_block(pts, off, sel, np.ascontiguousarray(roots[a: a + chunk]),
+                                       rag.dropped[sel], self._start, seg_off)
+
+    def fit(self, detections, frames=None) -> list[FrameResult]:
+        """All results of :meth:`iter_fit` as a list."""
+        return list(self.iter_fit(detections, frames))
+
+    def _fit_block(self, pts, off, frame_ids, roots, dropped, start, seg_off
+                   ) -> list[FrameResult]:
+        p, f, c = self.params, self._folded, self._cams
+        n, na, nv = len(frame_ids), self.body.n_axes, self.n_views
+        angles = np.empty((n, na))
+        err = np.empty(n)
+        view_err = np.empty((n, nv))
+        runs = np.empty(n, np.int64)
+        its = np.empty(n, np.int64)
+        pairs = np.empty(n, np.int64)
+        e = p.error
+        _ak.fit_frames(seg_off, frame_ids, pts, off, roots, start, p.start == "previous",
+                       *f, *c, self._free, self._step, self._hist, self._nbins, p.threshold,
+                       p.max_redraws, p.n_end, p.n_l, p.n_tau, float(p.tau0), float(p.l0),
+                       float(p.c_l), float(p.c_tau), float(p.epsilon), p.seed,
+                       float(p.reanalysis_threshold), p.max_runs, e.bidirectional,
+                       float(e.penalty_weight), e.cap, self._lo, self._hi,
+                       p.refine_steps if p.refine else 0, float(p.refine_gate_px), angles,
+                       err, view_err, runs, its, pairs)
+        counts = np.diff(off).reshape(n, nv)
+        out = []
+        for k in range(n):
+            if runs[k] == 0:
+                status = "no-detections"
+            elif err[k] > p.reanalysis_threshold:
+                status = "failed"
+            else:
+                status = "ok" if runs[k] == 1 else "reanalysed"
+            missing = tuple(self.view_names[v] for v in range(nv) if counts[k, v] == 0)
+            out.append(FrameResult(
+                frame=int(frame_ids[k]),
+                angles_deg=self._to_range_deg(angles[k]),
+                error=float(err[k]),
+                error_per_view=view_err[k].copy(),
+                runs=int(runs[k]),
+                iterations=int(its[k]),
+                seed=p.seed,
+                status=status,
+                root_positions=roots[k].copy(),
+                missing_views=missing,
+                dropped=int(dropped[k]),
+                refined_pairs=int(pairs[k]) if p.refine else None,
+            ))
+        return out
+
+
+# -- functional wrappers ----------------------------------------------------------------------
+def fit_frame(body: Body, cameras, detections_frame, params: AnnealParams | None = None,
+              **kwargs) -> FrameResult:
+    """:meth:`Fitter.fit_frame` without keeping a fitter (packs the body every call)."""
+    return Fitter(body, cameras, params).fit_frame(detections_frame, **kwargs)
+
+
+def iter_fit(body: Body, cameras, detections, params: AnnealParams | None = None,
+             frames: Iterable[int] | None = None, **kwargs) -> Iterator[FrameResult]:
+    """:meth:`Fitter.iter_fit` for a body, cameras and parameters."""
+    return Fitter(body, cameras, params).iter_fit(detections, frames, **kwargs)
+
+
+# -- the readable twin of the annealing kernel -----------------------------------------------
+_MASK64 = (1 << 64) - 1
+_GOLDEN = 0x9E3779B97F4A7C15
+
+
+def _mix64(z: int) -> int:
+    z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & _MASK64
+    z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & _MASK64
+    return z ^ (z >> 31)
+
+
+class SplitMix64:
+    """The kernels' random stream in plain Python: same (seed, frame, run) -> same draws."""
+
+    def __init__(self, seed: int, frame: int = 0, run: int = 0) -> None:
+        s = _mix64((seed + _GOLDEN) & _MASK64)
+        s = _mix64(s ^ ((frame * 0xD1B54A32D192ED03) & _MASK64))
+        self.state = _mix64(s ^ ((run * 0x8CB92BA72F3D8DD7 + _GOLDEN) & _MASK64))
+
+    def uniform(self) -> float:
+        """Next draw, uniform in [0, 1) with 53 bits."""
+        self.state = (self.state + _GOLDEN) & _MASK64
+        return (_mix64(self.state) >> 11) * 2.0**-53
+
+
+def anneal_reference(body: Body, cameras, detections_frame, params: AnnealParams | None = None,
+                     *, frame: int = 0, run: int = 0, start_deg=None, root_positions=None
+                     ) -> tuple[np.ndarray, float, int]:
+    """One annealing run written plainly (Sect. 2.3, Eq. 6): the specification of
+    :func:`kinematics._anneal_kernels.anneal_chain`, on the same random stream, with E from
+    :func:`kinematics.error_function.posture_error` (4×4 forward kinematics, NumPy
+    projection). Slow (tens of microseconds per iteration); for tests and benchmarks.
+
+    Returns
+    -------
+    best_deg : ndarray, shape (n_axes,)
+        Best posture seen (degrees, not wrapped).
+    best_error : float
+    iterations : int
+    """
+    p = params or AnnealParams()
+    cams = list(cameras.values()) if isinstance(cameras, Mapping) else list(cameras)
+    dets = [np.asarray(d, dtype=float).reshape(-1, 2) for d in detections_frame]
+    dets = [d[np.isfinite(d).all(axis=1)] for d in dets]
+    hists = body.histograms()
+    step_deg = np.array([h.std_deg() for h in hists])
+    free = np.flatnonzero(~body.locked_mask())
+    th = p.threshold
+    rng = SplitMix64(p.seed, frame, run)
+
+    def energy(angles_deg):
+        markers = forward_kinematics_reference(body, angles_deg, root_positions).markers
+        proj = np.stack([cam.project(markers) for cam in cams])
+        return projection_error(proj, dets, p.error)[0]
+
+    cur = body.mean_posture_deg() if start_deg is None else np.asarray(start_deg, float).copy()
+    cur[body.locked_mask()] = body.mean_posture_deg()[body.locked_mask()]
+    best, e_cur = cur.copy(), energy(cur)
+    e_best, tau, length, it = e_cur, p.tau0, p.l0, 0
+    while it < p.n_end and not e_best < p.epsilon:
+        u = rng.uniform()  # Metropolis draw first, then the step of Eq. 6
+        e_accept = e_cur + tau * -math.log(u) if u > 0 else math.inf
+        cand = cur.copy()
+        for i in free:
+            for _ in range(p.max_redraws + 1):  # Eq. 6, redrawn where implausible
+                x = cur[i] + length * step_deg[i] * (2.0 * rng.uniform() - 1.0)
+                if hists[i].at(x) >= th:
+                    cand[i] = x
+                    break
+        e = energy(cand)
+        if e <= e_cur or e < e_accept:  # Metropolis: u < exp(-(e - e_cur) / tau)
+            cur, e_cur = cand, e
+            if e < e_best:
+                best, e_best = cand.copy(), e
+        it += 1
+        if it % p.n_tau == 0:
+            tau *= p.c_tau
+        if it % p.n_l == 0:
+            length *= p.c_l
+    return best, float(e_best), it

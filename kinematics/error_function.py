@@ -1,0 +1,165 @@
+"""The error function of the posture fit (paper Eq. 5) and its variants, in plain NumPy.
+
+This module is the readable specification and the test oracle of the numba kernels in
+:mod:`kinematics._anneal_kernels` (which the fitter runs); the tests compare the two on random
+postures and detections.
+
+Eq. 5 sums, over the views k and the model markers i, the distance from the projected marker
+p_i^k to its nearest detected point in that view::
+
+    E = sum_k sum_i min_c |p_i^k - d_c^k|
+
+Variants (:class:`ErrorOptions`):
+
+* ``cap_px`` — each marker term is ``min(distance, cap_px)``, so a marker hidden in a view
+  (occlusion) costs at most ``cap_px`` instead of its distance to some unrelated point.
+* ``mode="bidirectional"`` — the heuristic proposed in Sect. 4: every detected point that is
+  no model marker's nearest detection adds ``penalty_weight`` times its distance to the nearest
+  model marker (capped as well). It penalises postures that fuse two markers onto one
+  detection and leave another unexplained (Fig. 9), but it also pulls the model toward ghost
+  markers, so use it with few ghosts or together with a cap.
+
+Conventions shared with the kernels: a view without any detection contributes nothing; ties
+in the nearest detection go to the lower index; a marker whose projection is not finite
+(behind a pinhole camera) costs ``cap_px``, or :data:`NAN_MARKER_COST` pixels without a cap.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from kinematics.errors import KinematicsError
+from kinematics.fk import forward_kinematics_reference
+
+#: Cost of a marker with no finite projection when no cap is set (same as the kernels).
+NAN_MARKER_COST = 1.0e6
+
+ERROR_MODES = ("paper", "bidirectional")
+
+
+@dataclass(frozen=True)
+class ErrorOptions:
+    """Which error function the fit minimises.
+
+    Parameters
+    ----------
+    mode : {"paper", "bidirectional"}
+        ``"paper"`` is Eq. 5; ``"bidirectional"`` adds the Sect. 4 penalty for detections
+        that no model marker claims.
+    penalty_weight : float
+        Weight of that penalty (bidirectional only), >= 0.
+    cap_px : float or None
+        Largest cost of one marker (and of one unclaimed detection) in pixels; None for no
+        cap (the paper).
+    """
+
+    mode: str = "paper"
+    penalty_weight: float = 1.0
+    cap_px: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.mode not in ERROR_MODES:
+            raise KinematicsError(f"must be one of {', '.join(ERROR_MODES)}, got {self.mode!r}",
+                                  field="error.mode")
+        if not (np.isfinite(self.penalty_weight) and self.penalty_weight >= 0):
+            raise KinematicsError(f"must be a finite number >= 0, got {self.penalty_weight!r}",
+                                  field="error.penalty_weight")
+        if self.cap_px is not None and not (np.isfinite(self.cap_px) and self.cap_px > 0):
+            raise KinematicsError(f"must be a finite number > 0 or None, got {self.cap_px!r}",
+                                  field="error.cap_px")
+
+    @property
+    def bidirectional(self) -> bool:
+        return self.mode == "bidirectional"
+
+    @property
+    def cap(self) -> float:
+        """The cap as a number (inf without a cap), as the kernels take it."""
+        return np.inf if self.cap_px is None else float(self.cap_px)
+
+    def to_dict(self) -> dict:
+        return {"mode": self.mode, "penalty_weight": self.penalty_weight, "cap_px": self.cap_px}
+
+
+def projection_error(
+    projections, detections: Sequence, options: ErrorOptions | None = None
+) -> tuple[float, np.ndarray]:
+    """Eq. 5 (or a variant) for given marker projections.
+
+    Parameters
+    ----------
+    projections : array_like, shape (n_views, n_markers, 2)
+        Model markers projected into each view, pixels.
+    detections : sequence of array_like, each shape (n_c, 2)
+        Detected points of each view, pixels (finite).
+    options : ErrorOptions, optional
+        Defaults to the paper's Eq. 5.
+
+    Returns
+    -------
+    error : float
+        E in pixels.
+    error_per_view : ndarray, shape (n_views,)
+        The part of E from each view.
+    """
+    opts = options or ErrorOptions()
+    proj = np.asarray(projections, dtype=float)
+    if proj.ndim != 3 or proj.shape[2] != 2:
+        raise KinematicsError(f"projections must have shape (views, markers, 2), got "
+                              f"{proj.shape}")
+    if len(detections) != proj.shape[0]:
+        raise KinematicsError(f"{proj.shape[0]} views projected but detections for "
+                              f"{len(detections)}")
+    cap = opts.cap
+    missing = cap if np.isfinite(cap) else NAN_MARKER_COST
+    per_view = np.zeros(proj.shape[0])
+    for v, det in enumerate(detections):
+        d = np.asarray(det, dtype=float).reshape(-1, 2)
+        if len(d) == 0:
+            continue
+        # dist[i, c]: model marker i to detection c, as the kernel: sqrt(dx*dx + dy*dy).
+        diff = proj[v][:, None, :] - d[None, :, :]
+        dist = np.sqrt(diff[..., 0] * diff[..., 0] + diff[..., 1] * diff[..., 1])
+        finite = np.isfinite(proj[v]).all(axis=1)
+        nearest = np.where(finite, np.argmin(np.where(finite[:, None], dist, 0.0), axis=1), -1)
+        marker_cost = np.where(finite, dist.min(axis=1, initial=np.inf, where=finite[:, None]),
+                               missing)
+        per_view[v] = np.minimum(marker_cost, cap).sum()
+        if opts.bidirectional:
+            claimed = np.zeros(len(d), dtype=bool)
+            claimed[nearest[nearest >= 0]] = True
+            to_model = dist[finite].min(axis=0) if finite.any() else np.full(len(d), missing)
+            per_view[v] += opts.penalty_weight * np.minimum(to_model[~claimed], cap).sum()
+    return float(per_view.sum()), per_view
+
+
+def posture_error(
+    body, cameras, angles_deg, detections: Sequence, root_positions=None,
+    options: ErrorOptions | None = None,
+) -> tuple[float, np.ndarray]:
+    """Eq. 5 (or a variant) of one posture, computed literally: forward kinematics by 4×4
+    matrices (:func:`kinematics.fk.forward_kinematics_reference`), projection by each
+    camera's NumPy ``project``, then :func:`projection_error`.
+
+    Parameters
+    ----------
+    body : Body
+    cameras : sequence of Camera, or mapping name -> Camera, one per view in order
+    angles_deg : array_like, shape (n_axes,)
+    detections : sequence of array_like (n_c, 2), one per view
+    root_positions : array_like, shape (n_chains, 3), optional
+        Defaults to the chains' configured positions.
+    options : ErrorOptions, optional
+
+    Returns
+    -------
+    error : float
+    error_per_view : ndarray, shape (n_views,)
+    """
+    cams = list(cameras.values()) if hasattr(cameras, "values") else list(cameras)
+    markers = forward_kinematics_reference(body, angles_deg, root_positions).markers
+    proj = np.stack([cam.project(markers) for cam in cams])
+    return projection_error(proj, detections, options)

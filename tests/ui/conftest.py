@@ -1,0 +1,84 @@
+"""Fixtures of the GUI tests: a small synthetic project, a session and a main window.
+
+Qt runs offscreen (no display needed); the project is the paper's locust set-up made by
+``videotrack synth`` (12 frames) and detected once per test session, then copied for each
+test so tests may save into it.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+
+import shutil
+import tomllib
+
+import pytest
+import tomli_w
+
+import ui  # noqa: F401  (guards PySide6's reference counts before any Qt call)
+from videotrack.cli import main
+
+#: A short annealing schedule (the paper's proportions) so fits take a fraction of a second.
+SHORT_ANNEAL = {"n_end": 3000, "n_l": 300, "n_tau": 130}
+
+
+@pytest.fixture(scope="session")
+def synth_project(tmp_path_factory):
+    """Folder of a detected synthetic project with a short annealing schedule."""
+    out = tmp_path_factory.mktemp("gui-project")
+    assert main(["synth", str(out), "--frames", "12", "--sequences", "1"]) == 0
+    assert main(["detect", str(out / "project.toml")]) == 0
+    config = out / "project.toml"
+    raw = tomllib.loads(config.read_text())
+    raw["anneal"] = {**raw.get("anneal", {}), **SHORT_ANNEAL}
+    config.write_text(tomli_w.dumps(raw))
+    return out
+
+
+@pytest.fixture
+def project(synth_project, tmp_path):
+    """A private copy of the synthetic project; returns its project file."""
+    folder = tmp_path / "project"
+    shutil.copytree(synth_project, folder)
+    return folder / "project.toml"
+
+
+@pytest.fixture
+def session(qtbot, project):
+    """An opened :class:`ui.session.Session`; ``session.messages`` collects its errors."""
+    from ui.session import Session
+
+    s = Session()
+    s.messages = []
+    s.error.connect(s.messages.append)
+    assert s.open_project(project)
+    yield s
+    s.close()
+
+
+@pytest.fixture
+def window(qtbot, project):
+    """The main window on the project; closing it never asks (unsaved changes discarded)."""
+    from PySide6.QtWidgets import QMessageBox
+
+    from ui.main_window import MainWindow
+
+    w = MainWindow(use_opengl=False)
+    w.ask_unsaved = lambda: QMessageBox.StandardButton.Discard
+    qtbot.addWidget(w)
+    w.resize(1400, 900)
+    w.show()
+    assert w.open_project(project)
+    yield w
+    w.session.close()
+
+
+@pytest.fixture
+def wait_idle(qtbot):
+    """``wait_idle(session)`` waits for the session's background task to end."""
+    def wait(session, timeout=30000) -> None:
+        qtbot.waitUntil(lambda: not session.busy, timeout=timeout)
+
+    return wait

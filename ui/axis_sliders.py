@@ -1,0 +1,94 @@
+"""A slider and a number box per axis, over the axis' range (degrees, 0.1° steps).
+
+Used by the manual correction panel and by the chain editor. ``moved(index, value)`` fires
+while a slider is dragged (for live re-projection), ``committed(index, value)`` when it is
+released or a number is entered; ``index`` is the axis' posture-vector index.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from PySide6.QtCore import Qt, Signal
+from PySide6.QtGui import QFont
+from PySide6.QtWidgets import QDoubleSpinBox, QGridLayout, QLabel, QSlider, QWidget
+
+#: Slider steps per degree.
+STEPS = 10
+
+
+class AxisSliders(QWidget):
+    """Rows ``label | slider | value`` for the given axes of a body."""
+
+    moved = Signal(int, float)
+    committed = Signal(int, float)
+
+    def __init__(self, parent=None) -> None:
+        super().__init__(parent)
+        self.grid = QGridLayout(self)
+        self.grid.setContentsMargins(0, 0, 0, 0)
+        self.grid.setVerticalSpacing(2)
+        self.rows: dict[int, tuple[QLabel, QSlider, QDoubleSpinBox]] = {}
+
+    def set_axes(self, body, indices) -> None:
+        """Build one row per posture index of ``body`` (free axes, typically)."""
+        for label, slider, box in self.rows.values():
+            for w in (label, slider, box):
+                self.grid.removeWidget(w)
+                w.deleteLater()
+        self.rows = {}
+        refs = body.axis_refs()
+        for row, index in enumerate(indices):
+            a = refs[index].axis
+            label = QLabel(refs[index].label)
+            slider = QSlider(Qt.Orientation.Horizontal)
+            slider.setRange(round(a.min_deg * STEPS), round(a.max_deg * STEPS))
+            slider.setMinimumWidth(120)
+            box = QDoubleSpinBox()
+            box.setRange(a.min_deg, a.max_deg)
+            box.setDecimals(1)
+            box.setSuffix("°")
+            box.setKeyboardTracking(False)
+            slider.valueChanged.connect(lambda v, i=index: self._slid(i, v))
+            slider.sliderReleased.connect(lambda i=index: self._released(i))
+            box.valueChanged.connect(lambda v, i=index: self._typed(i, v))
+            self.grid.addWidget(label, row, 0)
+            self.grid.addWidget(slider, row, 1)
+            self.grid.addWidget(box, row, 2)
+            self.rows[index] = (label, slider, box)
+
+    def set_values(self, angles_deg, pinned=()) -> None:
+        """Show a posture without emitting; ``pinned`` axes get a bold label."""
+        for index, (label, slider, box) in self.rows.items():
+            v = float(angles_deg[index])
+            if not np.isfinite(v):
+                continue
+            for w, value in ((slider, round(v * STEPS)), (box, v)):
+                w.blockSignals(True)
+                w.setValue(value)
+                w.blockSignals(False)
+            font = QFont(label.font())
+            font.setBold(index in pinned)
+            label.setFont(font)
+
+    def value(self, index: int) -> float:
+        return self.rows[index][2].value()
+
+    def _slid(self, index: int, v: int) -> None:
+        box = self.rows[index][2]
+        box.blockSignals(True)
+        box.setValue(v / STEPS)
+        box.blockSignals(False)
+        self.moved.emit(index, v / STEPS)
+        if not self.rows[index][1].isSliderDown():  # keyboard or page steps are final
+            self.committed.emit(index, v / STEPS)
+
+    def _released(self, index: int) -> None:
+        self.committed.emit(index, self.rows[index][1].value() / STEPS)
+
+    def _typed(self, index: int, v: float) -> None:
+        slider = self.rows[index][1]
+        slider.blockSignals(True)
+        slider.setValue(round(v * STEPS))
+        slider.blockSignals(False)
+        self.moved.emit(index, v)
+        self.committed.emit(index, v)

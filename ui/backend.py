@@ -1,0 +1,144 @@
+"""The GUI's one door to the fitter, the results files and the project model (no Qt).
+
+Everything the GUI uses from :mod:`kinematics.anneal`, :mod:`videotrack.pipeline` and
+:mod:`videotrack.results` goes through this module, so a rename there is a one-line change
+here. Nothing in it computes anything itself: it forwards and converts.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from kinematics.anneal import AnnealParams, Fitter, FrameResult
+from kinematics.model import Body
+from videotrack.pipeline import (
+    ProjectModel,
+    anneal_params,
+    check_detection_views,
+    load_model,
+    results_sidecar,
+)
+from videotrack.project import command_config, trial_outputs
+from videotrack.results import STATUSES, Results, read_results, read_sidecar, results_from_fit
+from videotrack.results import write_results as _write_results
+
+__all__ = [
+    "STATUSES",
+    "AnnealParams",
+    "Fitter",
+    "FrameResult",
+    "ProjectModel",
+    "anneal_params",
+    "check_detection_views",
+    "frame_results",
+    "load_model",
+    "load_project_config",
+    "make_fitter",
+    "output_paths",
+    "read_project_results",
+    "save_project_results",
+    "with_status",
+]
+
+#: Status of a frame whose posture was set by hand (the results files know it).
+CORRECTED = "corrected"
+
+
+def make_fitter(body: Body, cameras: Mapping, params: AnnealParams) -> Fitter:
+    """A :class:`~kinematics.anneal.Fitter` for a body, the cameras of the views (name ->
+    camera, in view order) and parameters."""
+    return Fitter(body, cameras, params)
+
+
+def fit_chunk_size() -> int:
+    """Frames per parallel batch of a GUI fit: two per thread, so a cancel or a new result
+    never waits long."""
+    import numba
+
+    return 2 * numba.get_num_threads()
+
+
+def manual_result(frame: int, angles_deg, roots, error: float, error_per_view, seed: int
+                  ) -> FrameResult:
+    """A :data:`CORRECTED` result for a posture set by hand without re-fitting."""
+    return FrameResult(frame=int(frame), angles_deg=np.asarray(angles_deg, float),
+                       error=float(error), error_per_view=np.asarray(error_per_view, float),
+                       runs=0, iterations=0, seed=int(seed), status=CORRECTED,
+                       root_positions=np.asarray(roots, float))
+
+
+def iter_fit(fitter: Fitter, detections, frames: Sequence[int],
+             chunk_size: int) -> Iterator[FrameResult]:
+    """The fitter's generator over ``frames``; closing it cancels between chunks."""
+    return fitter.iter_fit(detections, np.asarray(frames, dtype=np.int64),
+                           chunk_size=chunk_size)
+
+
+def with_status(result: FrameResult, status: str) -> FrameResult:
+    """A copy of ``result`` with another status (e.g. :data:`CORRECTED`)."""
+    return replace(result, status=status)
+
+
+def load_project_config(path: str | os.PathLike, trial: str | None = None):
+    """A project file, or with ``trial`` the merged config of that trial of the project
+    folder ``path`` (as ``videotrack fit PATH --trial NAME``)."""
+    return command_config(path, trial)
+
+
+def output_paths(config) -> tuple[Path, Path]:
+    """Where the project's (or trial's) detections and results files live."""
+    outputs = trial_outputs(config)
+    return outputs.detections, outputs.results
+
+
+def frame_results(table: Results, seed: int) -> dict[int, FrameResult]:
+    """The rows of a results file as the fitter's :class:`FrameResult`, keyed by frame."""
+    out = {}
+    for i in range(len(table)):
+        out[int(table.frames[i])] = FrameResult(
+            frame=int(table.frames[i]), angles_deg=np.array(table.angles_deg[i]),
+            error=float(table.error[i]), error_per_view=np.array(table.error_per_view[i]),
+            runs=int(table.runs[i]), iterations=int(table.iterations[i]), seed=int(seed),
+            status=table.status[i], root_positions=np.array(table.roots[i]))
+    return out
+
+
+def read_project_results(path: str | os.PathLike, body: Body,
+                         view_names: Sequence[str]) -> dict[int, FrameResult]:
+    """Read a results file made for ``body`` and these views.
+
+    Raises
+    ------
+    VideoTrackError
+        Unreadable file, or axes or views that are not the project's.
+    """
+    from videotrack.errors import VideoTrackError
+
+    table = read_results(path)
+    if list(table.axis_labels) != body.axis_labels:
+        raise VideoTrackError(f"results are for the axes {list(table.axis_labels)}, the chain "
+                              f"has {body.axis_labels}", file=path)
+    if list(table.view_names) != list(view_names):
+        raise VideoTrackError(f"results are for the views {list(table.view_names)}, the "
+                              f"project has {list(view_names)}", file=path)
+    seed = int(read_sidecar(path).get("seed", 0))
+    return frame_results(table, seed)
+
+
+def save_project_results(path: str | os.PathLike, model: ProjectModel, body: Body,
+                         results: Mapping[int, FrameResult], detections,
+                         detections_path: str | os.PathLike) -> Path:
+    """Write the fitted frames (in frame order) and the sidecar, atomically.
+
+    ``body`` is the session's chain (it may carry learned histograms or edits); the sidecar
+    records the files of ``model`` as the command line does, so save the chain first.
+    """
+    ordered = [results[k] for k in sorted(results)]
+    table = results_from_fit(body, ordered, model.view_names, detections)
+    sidecar = {**results_sidecar(model, Path(detections_path)), "source": "videotrack gui"}
+    return _write_results(path, table, sidecar)

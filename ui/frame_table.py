@@ -1,0 +1,173 @@
+"""The per-frame error table (Fig. 4, part 1): frame, error, error per view, runs, status.
+
+Rows above the re-analysis threshold are shaded red, frames corrected by hand blue. The
+table sorts by any column (numbers as numbers); clicking a row makes it the current frame.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from PySide6.QtCore import QAbstractTableModel, QModelIndex, QSortFilterProxyModel, Qt
+from PySide6.QtWidgets import QAbstractItemView, QHeaderView, QTableView
+
+from ui import adapters, style
+
+SORT_ROLE = Qt.ItemDataRole.UserRole
+_ROOT = QModelIndex()  # the invalid index: a table has no children
+
+
+class FrameTableModel(QAbstractTableModel):
+    """The rows of :func:`ui.adapters.frame_table`, updated frame by frame."""
+
+    def __init__(self, session, parent=None) -> None:
+        super().__init__(parent)
+        self.session = session
+        self.table = adapters.frame_table({}, 0, 0)
+        self.views: list[str] = []
+        session.projectChanged.connect(self.reset)
+        session.detectionsChanged.connect(self.reset)
+        session.resultsChanged.connect(self.update_frames)
+
+    @property
+    def headers(self) -> list[str]:
+        return ["frame", "error", *self.views, "runs", "status"]
+
+    def reset(self) -> None:
+        self.beginResetModel()
+        self.views = self.session.view_names
+        self.table = adapters.frame_table(self.session.results, self.session.n_frames,
+                                          len(self.views))
+        self.endResetModel()
+
+    def update_frames(self, frames) -> None:
+        """Refresh the rows of these frames only (results arrive while fitting)."""
+        n = len(self.table.frame)
+        frames = [f for f in frames if 0 <= f < n]
+        t = self.table
+        for f in frames:
+            t.error[f], t.error_per_view[f], t.runs[f], t.status[f] = adapters.table_row(
+                self.session.results.get(f), len(self.views))
+        if frames:
+            self.dataChanged.emit(self.index(min(frames), 0),
+                                  self.index(max(frames), self.columnCount() - 1))
+
+    def rowCount(self, parent=_ROOT) -> int:
+        return 0 if parent.isValid() else len(self.table.frame)
+
+    def columnCount(self, parent=_ROOT) -> int:
+        return 0 if parent.isValid() else len(self.headers)
+
+    def headerData(self, section, orientation, role=Qt.ItemDataRole.DisplayRole):
+        if orientation != Qt.Orientation.Horizontal:
+            return None
+        if role == Qt.ItemDataRole.DisplayRole:
+            return self.headers[section]
+        if role == Qt.ItemDataRole.ToolTipRole:
+            nv = len(self.views)
+            if section == 1:
+                return "error E of the fitted posture (Eq. 5), pixels"
+            if 2 <= section < 2 + nv:
+                return f"part of E from view '{self.views[section - 2]}', pixels"
+            if section == 2 + nv:
+                return "annealing runs (1 + re-analyses)"
+        return None
+
+    def value(self, row: int, column: int):
+        """The sort value of a cell: a number, or the status text."""
+        t, nv = self.table, len(self.views)
+        if column == 0:
+            return int(t.frame[row])
+        if column == 1:
+            return float(t.error[row])
+        if column < 2 + nv:
+            return float(t.error_per_view[row, column - 2])
+        if column == 2 + nv:
+            return int(t.runs[row])
+        return t.status[row]
+
+    def data(self, index, role=Qt.ItemDataRole.DisplayRole):
+        if not index.isValid():
+            return None
+        row, col = index.row(), index.column()
+        value = self.value(row, col)
+        if role == Qt.ItemDataRole.DisplayRole:
+            if isinstance(value, float):
+                return "–" if not np.isfinite(value) else f"{value:.2f}"
+            if col == 2 + len(self.views) and value == 0:
+                return "–"
+            return str(value)
+        if role == SORT_ROLE:
+            if isinstance(value, float) and not np.isfinite(value):
+                return float("inf")  # unfitted frames sort after the worst
+            return value
+        if role == Qt.ItemDataRole.BackgroundRole:
+            status = self.table.status[row]
+            if status == "corrected":
+                return style.CORRECTED_ROW
+            if bool(adapters.is_bad(self.table.error[row], self.session.threshold)):
+                return style.BAD_ROW
+            return None
+        if role == Qt.ItemDataRole.ForegroundRole:
+            if self.table.status[row] == adapters.NOT_FITTED:
+                return style.UNFITTED_TEXT
+            if self.data(index, Qt.ItemDataRole.BackgroundRole) is not None:
+                return style.TEXT_ON_SHADE  # shaded rows stay readable in a dark theme
+            return None
+        if role == Qt.ItemDataRole.TextAlignmentRole and col < len(self.headers) - 1:
+            return int(Qt.AlignmentFlag.AlignRight | Qt.AlignmentFlag.AlignVCenter)
+        return None
+
+    def highlighted_rows(self) -> list[int]:
+        """Frames shaded as bad (for tests and the status bar)."""
+        return [int(r) for r in np.flatnonzero(adapters.is_bad(self.table.error,
+                                                               self.session.threshold))
+                if self.table.status[r] != "corrected"]
+
+
+class FrameTable(QTableView):
+    """Sortable view of :class:`FrameTableModel` that follows the session's frame."""
+
+    def __init__(self, session, parent=None) -> None:
+        super().__init__(parent)
+        self.session = session
+        self.source = FrameTableModel(session, self)
+        self.proxy = QSortFilterProxyModel(self)
+        self.proxy.setSourceModel(self.source)
+        self.proxy.setSortRole(SORT_ROLE)
+        self.setModel(self.proxy)
+        self.setSortingEnabled(True)
+        self.sortByColumn(0, Qt.SortOrder.AscendingOrder)
+        self.setSelectionBehavior(QAbstractItemView.SelectionBehavior.SelectRows)
+        self.setSelectionMode(QAbstractItemView.SelectionMode.ExtendedSelection)
+        self.setEditTriggers(QAbstractItemView.EditTrigger.NoEditTriggers)
+        self.verticalHeader().setVisible(False)
+        self.verticalHeader().setDefaultSectionSize(20)
+        self.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.ResizeToContents)
+        self.horizontalHeader().setStretchLastSection(True)
+        self.setAlternatingRowColors(False)
+        self.clicked.connect(self._clicked)
+        session.frameChanged.connect(self.follow)
+
+    def row_of(self, frame: int) -> int:
+        """The row where ``frame`` is shown (after sorting)."""
+        return self.proxy.mapFromSource(self.source.index(frame, 0)).row()
+
+    def frame_at(self, row: int) -> int:
+        return int(self.proxy.mapToSource(self.proxy.index(row, 0)).row())
+
+    def _clicked(self, index) -> None:
+        self.session.set_frame(self.frame_at(index.row()))
+
+    def follow(self, frame: int) -> None:
+        """Scroll to the current frame (without changing a multi-row selection)."""
+        if not 0 <= frame < self.source.rowCount():
+            return
+        index = self.proxy.index(self.row_of(frame), 0)
+        self.scrollTo(index, QAbstractItemView.ScrollHint.EnsureVisible)
+        if len(self.selectionModel().selectedRows()) <= 1:
+            self.selectionModel().blockSignals(True)
+            self.selectRow(index.row())
+            self.selectionModel().blockSignals(False)
+
+    def selected_frames(self) -> list[int]:
+        return sorted(self.frame_at(i.row()) for i in self.selectionModel().selectedRows())

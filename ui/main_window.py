@@ -1,0 +1,550 @@
+"""The main window, laid out as the paper's Fig. 4.
+
+Left (1): the control panel, fitting buttons and the per-frame error table. Middle (2): one
+video view per view with the detected centroids and the model's projection. Right (3): the
+3D posture and the manual correction sliders. Bottom: playback, the frame slider and the
+timeline of angles and error. The status bar says what the program is doing.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+from PySide6.QtCore import Qt, QTimer
+from PySide6.QtGui import QAction, QKeySequence
+from PySide6.QtWidgets import (
+    QDoubleSpinBox,
+    QFileDialog,
+    QGridLayout,
+    QGroupBox,
+    QHBoxLayout,
+    QInputDialog,
+    QLabel,
+    QMainWindow,
+    QMessageBox,
+    QProgressBar,
+    QPushButton,
+    QSizePolicy,
+    QSlider,
+    QSpinBox,
+    QSplitter,
+    QStyle,
+    QToolButton,
+    QVBoxLayout,
+    QWidget,
+)
+
+from kinematics.errors import LocatedError
+from ui import adapters, style
+from ui.correction_panel import CorrectionPanel
+from ui.frame_table import FrameTable
+from ui.posture_view import PostureView
+from ui.session import Session
+from ui.timeline import TimelineView
+from ui.video_view import VideoView
+
+#: Playback never asks for more frames per second than this.
+MAX_PLAY_FPS = 30.0
+
+
+class MainWindow(QMainWindow):
+    """VideoTrack's main window around one :class:`~ui.session.Session`."""
+
+    def __init__(self, session: Session | None = None, use_opengl: bool | None = None,
+                 parent=None) -> None:
+        super().__init__(parent)
+        style.configure()
+        self.session = session or Session(self)
+        self.errors: list[str] = []  # every message shown, newest last
+        self.video_views: list[VideoView] = []
+        self.setWindowTitle("VideoTrack")
+        self.resize(1500, 900)
+        self._build_actions()
+        self._build_menus()
+        self._build_layout(use_opengl)
+        self._build_status_bar()
+        self._timeline_timer = QTimer(self, singleShot=True, interval=250)
+        self._timeline_timer.timeout.connect(self.refresh_timeline)
+        self._play_timer = QTimer(self)
+        self._play_timer.timeout.connect(self._next_play_frame)
+        self._connect()
+        self._update_actions()
+
+    # -- construction -------------------------------------------------------------------
+    def _action(self, text: str, slot, shortcut=None, tip: str = "") -> QAction:
+        action = QAction(text, self)
+        action.triggered.connect(lambda *_: slot())
+        if shortcut is not None:
+            action.setShortcut(QKeySequence(shortcut))
+        action.setStatusTip(tip)
+        action.setToolTip(tip or text)
+        return action
+
+    def _build_actions(self) -> None:
+        s = self.session
+        a = self._action
+        self.act_open = a("&Open project…", self.choose_project, QKeySequence.StandardKey.Open,
+                          "Open a project file (TOML)")
+        self.act_save = a("&Save", s.save, QKeySequence.StandardKey.Save,
+                          "Save the project config, chain and results that changed")
+        self.act_chain_file = a("Choose &chain file…", self.choose_chain_file, None,
+                                "Use another chain XML for this project")
+        self.act_quit = a("&Quit", self.close, QKeySequence.StandardKey.Quit)
+        self.act_undo = a("&Undo", s.undo, QKeySequence.StandardKey.Undo)
+        self.act_redo = a("&Redo", s.redo, QKeySequence.StandardKey.Redo)
+        self.act_chain_editor = a("Chain &editor…", self.open_chain_editor, "Ctrl+E",
+                                  "Edit lengths, orientations, markers and ranges")
+        self.act_settings = a("&Project settings…", self.open_project_dialog, "Ctrl+P",
+                              "Views, filters with live preview, chain and fitting")
+        self.act_detect = a("&Detect markers", s.detect, "Ctrl+D",
+                            "Run the filter chain on every frame and save the detections")
+        self.act_fit_all = a("Fit &all frames", lambda: s.fit(label="fit all"), "F5",
+                             "Fit every frame that was not corrected by hand")
+        self.act_fit_current = a("Fit &current frame",
+                                 lambda: s.fit([s.frame], "fit frame"), "F6")
+        self.act_fit_range = a("Fit &range…", self.fit_range, None, "Fit frames A to B")
+        self.act_fit_selected = a("Fit &selected frames", self.fit_selected, "F7",
+                                  "Fit the frames selected in the table")
+        self.act_fit_bad = a("Re-fit &bad frames", s.fit_bad, "F8",
+                             "Fit again every frame above the error threshold")
+        self.act_cancel = a("Cancel", s.cancel, "Esc", "Stop the running task")
+        self.act_histograms = a("&Histograms…", self.open_histograms, "Ctrl+H",
+                                "Each axis' histogram with the current value")
+        self.act_play = a("Play", self.toggle_play, "Space")
+        self.act_next = a("Next frame", lambda: s.step(1), "Right")
+        self.act_prev = a("Previous frame", lambda: s.step(-1), "Left")
+        self.act_next_bad = a("Next bad frame", self.next_bad, "Ctrl+Right",
+                              "Jump to the next frame above the threshold")
+        for act in (self.act_play, self.act_next, self.act_prev, self.act_next_bad):
+            act.setShortcutContext(Qt.ShortcutContext.WindowShortcut)
+            self.addAction(act)
+
+    def _build_menus(self) -> None:
+        bar = self.menuBar()
+        menus = {
+            "&File": (self.act_open, self.act_save, None, self.act_chain_file, None,
+                      self.act_quit),
+            "&Edit": (self.act_undo, self.act_redo, None, self.act_chain_editor,
+                      self.act_settings),
+            "&Analysis": (self.act_detect, None, self.act_fit_all, self.act_fit_current,
+                          self.act_fit_range, self.act_fit_selected, self.act_fit_bad, None,
+                          self.act_cancel, None, self.act_histograms),
+            "&View": (self.act_play, self.act_prev, self.act_next, self.act_next_bad),
+        }
+        for title, actions in menus.items():
+            menu = bar.addMenu(title)
+            for act in actions:
+                menu.addSeparator() if act is None else menu.addAction(act)
+
+    def _build_layout(self, use_opengl) -> None:
+        s = self.session
+        # (1) control panel and table
+        left = QWidget()
+        lv = QVBoxLayout(left)
+        lv.setContentsMargins(4, 4, 4, 4)
+        self.project_label = QLabel("No project open")
+        self.project_label.setWordWrap(True)
+        self.project_label.setStyleSheet("font-weight: bold")
+        lv.addWidget(self.project_label)
+        fit_box = QGroupBox("Fit")
+        grid = QGridLayout(fit_box)
+        buttons = [(self.act_fit_all, "Fit all"), (self.act_fit_current, "Fit current"),
+                   (self.act_fit_range, "Fit range…"), (self.act_fit_selected, "Fit selected"),
+                   (self.act_fit_bad, "Re-fit bad"), (self.act_detect, "Detect markers")]
+        for k, (act, text) in enumerate(buttons):
+            grid.addWidget(_button(act, text), k // 2, k % 2)
+        grid.addWidget(QLabel("Highlight error above"), 3, 0)
+        self.threshold = QDoubleSpinBox()
+        self.threshold.setRange(0.0, 1e6)
+        self.threshold.setDecimals(1)
+        self.threshold.setSuffix(" px")
+        self.threshold.setToolTip("The re-analysis threshold of the fit (Table 1 note)")
+        self.threshold.valueChanged.connect(self._threshold_changed)
+        grid.addWidget(self.threshold, 3, 1)
+        lv.addWidget(fit_box)
+        self.summary = QLabel()
+        lv.addWidget(self.summary)
+        self.table = FrameTable(s)
+        lv.addWidget(self.table, 1)
+        # (2) video views
+        self.views_splitter = QSplitter(Qt.Orientation.Vertical)
+        # (3) posture and correction
+        right = QSplitter(Qt.Orientation.Vertical)
+        self.posture_view = PostureView(use_opengl=use_opengl)
+        self.correction = CorrectionPanel(s)
+        right.addWidget(self.posture_view)
+        right.addWidget(self.correction)
+        right.setSizes([520, 300])
+        top = QSplitter(Qt.Orientation.Horizontal)
+        for w in (left, self.views_splitter, right):
+            top.addWidget(w)
+        top.setSizes([390, 740, 470])
+        top.setStretchFactor(1, 1)
+        # bottom: playback and timeline
+        bottom = QWidget()
+        bv = QVBoxLayout(bottom)
+        bv.setContentsMargins(4, 0, 4, 4)
+        row = QHBoxLayout()
+        icons = self.style()
+        self.play_button = QToolButton()
+        self.play_button.setDefaultAction(self.act_play)
+        self.act_play.setIcon(icons.standardIcon(QStyle.StandardPixmap.SP_MediaPlay))
+        self.act_prev.setIcon(icons.standardIcon(QStyle.StandardPixmap.SP_MediaSeekBackward))
+        self.act_next.setIcon(icons.standardIcon(QStyle.StandardPixmap.SP_MediaSeekForward))
+        for act in (self.act_prev, self.act_play, self.act_next):
+            b = QToolButton()
+            b.setDefaultAction(act)
+            row.addWidget(b)
+        self.slider = QSlider(Qt.Orientation.Horizontal)
+        self.slider.valueChanged.connect(s.set_frame)
+        row.addWidget(self.slider, 1)
+        self.frame_box = QSpinBox()
+        self.frame_box.setPrefix("frame ")
+        self.frame_box.setKeyboardTracking(False)
+        self.frame_box.valueChanged.connect(s.set_frame)
+        row.addWidget(self.frame_box)
+        self.time_label = QLabel()
+        self.time_label.setMinimumWidth(90)
+        row.addWidget(self.time_label)
+        bv.addLayout(row)
+        self.timeline = TimelineView()
+        self.timeline.frameRequested.connect(s.set_frame)
+        bv.addWidget(self.timeline, 1)
+        outer = QSplitter(Qt.Orientation.Vertical)
+        outer.addWidget(top)
+        outer.addWidget(bottom)
+        outer.setSizes([650, 280])
+        outer.setStretchFactor(0, 1)
+        self.setCentralWidget(outer)
+
+    def _build_status_bar(self) -> None:
+        bar = self.statusBar()
+        self.progress = QProgressBar()
+        self.progress.setMaximumWidth(220)
+        self.progress.setFormat("%v / %m")
+        self.progress.setVisible(False)
+        self.rate = QLabel()
+        self.cancel_button = QPushButton("Cancel")
+        self.cancel_button.clicked.connect(self.session.cancel)
+        self.cancel_button.setVisible(False)
+        for w in (self.rate, self.progress, self.cancel_button):
+            bar.addPermanentWidget(w)
+        bar.showMessage("Open a project (File ▸ Open project…)")
+
+    def _connect(self) -> None:
+        s = self.session
+        s.projectChanged.connect(self._project_changed)
+        s.frameChanged.connect(self.refresh_frame)
+        s.bodyChanged.connect(self.refresh_overlays)
+        s.bodyChanged.connect(self._schedule_timeline)
+        s.postureChanged.connect(self.refresh_overlays)
+        s.resultsChanged.connect(self._results_changed)
+        s.detectionsChanged.connect(self._project_changed)
+        s.busyChanged.connect(self._busy_changed)
+        s.progress.connect(self._progress)
+        s.status.connect(lambda msg: self.statusBar().showMessage(msg))
+        s.error.connect(self.show_error)
+        s.dirtyChanged.connect(lambda *_: self._update_title())
+        s.undoChanged.connect(self._update_actions)
+
+    # -- project ------------------------------------------------------------------------
+    def open_project(self, path, trial: str | None = None) -> bool:
+        """Open a project file (or a trial of a project folder)."""
+        return self.session.open_project(path, trial)
+
+    def choose_project(self) -> None:
+        if not self._may_discard():
+            return
+        path, _ = QFileDialog.getOpenFileName(self, "Open project", "",
+                                              "Project files (*.toml);;All files (*)")
+        if path:
+            self.open_project(path)
+
+    def choose_chain_file(self) -> None:
+        s = self.session
+        if s.config is None:
+            return
+        path, _ = QFileDialog.getOpenFileName(self, "Chain file", str(s.config.folder),
+                                              "Chain XML (*.xml);;All files (*)")
+        if path:
+            raw = dict(s.raw_config)
+            raw["chain"] = {**raw.get("chain", {}),
+                            "path": adapters.relative_path(path, s.config.folder)}
+            s.apply_config(raw)
+
+    def _project_changed(self) -> None:
+        s = self.session
+        for v in self.video_views:
+            v.setParent(None)
+            v.deleteLater()
+        self.video_views = []
+        for k, name in enumerate(s.view_names):
+            view = VideoView(k, name)
+            view.markerDragged.connect(self._marker_dragged)
+            self.views_splitter.addWidget(view)
+            self.video_views.append(view)
+        n = s.n_frames
+        for w in (self.slider, self.frame_box):
+            w.blockSignals(True)
+            w.setRange(0, max(n - 1, 0))
+            w.blockSignals(False)
+        self.threshold.blockSignals(True)
+        self.threshold.setValue(s.threshold if np.isfinite(s.threshold) else 0.0)
+        self.threshold.blockSignals(False)
+        if s.body is not None:
+            self.posture_view.set_extent(s.body.root_positions().mean(axis=0),
+                                         adapters.body_reach(s.body))
+        if s.config is not None:
+            body = s.body.name if s.body is not None else "no chain"
+            self.project_label.setText(f"{self._project_name()}\n{n} frames · "
+                                       f"{len(s.view_names)} views · {body}")
+        self._update_title()
+        self._update_actions()
+        self.refresh_timeline()
+        self.refresh_frame(s.frame)
+
+    def _project_name(self) -> str:
+        """The project file's name, or the trial folder of a merged trial config."""
+        s = self.session
+        if s.config is None:
+            return "no project"
+        return s.config.path.name if s.editable else f"trial {s.config.folder.name}"
+
+    def _update_title(self) -> None:
+        s = self.session
+        self.setWindowTitle(f"VideoTrack — {self._project_name()}{' *' if s.dirty else ''}")
+
+    def _update_actions(self) -> None:
+        s = self.session
+        has_project = s.config is not None
+        ready = has_project and not s.busy
+        can_fit = ready and s.model is not None and s.detections is not None
+        for act in (self.act_fit_all, self.act_fit_current, self.act_fit_range,
+                    self.act_fit_selected, self.act_fit_bad):
+            act.setEnabled(can_fit)
+        self.act_detect.setEnabled(ready)
+        for act in (self.act_settings, self.act_chain_file):
+            act.setEnabled(ready and s.editable)
+        for act in (self.act_chain_editor, self.act_histograms):
+            act.setEnabled(ready and s.body is not None)
+        self.act_save.setEnabled(has_project and not s.busy)
+        self.act_open.setEnabled(not s.busy)
+        self.act_cancel.setEnabled(s.busy)
+        self.act_undo.setEnabled(s.can_undo)
+        self.act_redo.setEnabled(s.can_redo)
+        self.act_undo.setText(f"&Undo {s.undo_label}".rstrip())
+        self.act_redo.setText(f"&Redo {s.redo_label}".rstrip())
+
+    # -- drawing ------------------------------------------------------------------------
+    def refresh_frame(self, frame: int | None = None) -> None:
+        """Draw the current frame: images, detections, model, 3D posture, controls."""
+        s = self.session
+        frame = s.frame
+        for w in (self.slider, self.frame_box):
+            w.blockSignals(True)
+            w.setValue(frame)
+            w.blockSignals(False)
+        self.timeline.set_frame(frame)
+        images = s.view_images()
+        detections = s.frame_detections()
+        for k, view in enumerate(self.video_views):
+            view.set_image(images[k] if k < len(images) else None)
+            view.set_detections(detections[k])
+        if s.detections is not None and frame < s.detections.n_records:
+            self.time_label.setText(f"{s.detections.times[frame]:.3f} s")
+        else:
+            self.time_label.setText(f"{frame / s.fps:.3f} s" if s.fps else "")
+        self.refresh_overlays()
+
+    def refresh_overlays(self) -> None:
+        """Re-project the drawn posture into every view and the 3D view."""
+        s = self.session
+        overlays = s.overlays()
+        names = s.display_body.marker_names if s.display_body is not None else []
+        detections = s.frame_detections()
+        result = s.results.get(s.frame)
+        for k, view in enumerate(self.video_views):
+            view.set_overlay(overlays[k] if k < len(overlays) else None, names)
+            lines = [f"{len(detections[k])} detected"]
+            if result is not None and np.isfinite(result.error_per_view[k]):
+                lines.append(f"error {result.error_per_view[k]:.2f} px")
+            view.set_info("  ".join(lines))
+        self.posture_view.set_geometry(s.geometry())
+
+    def _results_changed(self, frames) -> None:
+        if self.session.frame in frames:
+            self.refresh_overlays()
+        self._schedule_timeline()
+
+    def _schedule_timeline(self) -> None:
+        if not self._timeline_timer.isActive():
+            self._timeline_timer.start()
+
+    def refresh_timeline(self) -> None:
+        """Redraw the timeline and the summary (throttled while results stream in)."""
+        s = self.session
+        if s.body is None:
+            return
+        line = adapters.timeline(s.results, s.n_frames, s.body.n_axes)
+        labels = [(k, s.body.axis_labels[k]) for k in adapters.free_axes(s.body)]
+        self.timeline.set_data(line, labels, s.threshold)
+        self.timeline.set_frame(s.frame)
+        n_bad = len(adapters.bad_frames(s.results, s.threshold))
+        n_corr = sum(r.status == "corrected" for r in s.results.values())
+        self.summary.setText(f"{len(s.results)} of {s.n_frames} frames fitted · {n_bad} above "
+                             f"threshold · {n_corr} corrected")
+
+    # -- interaction --------------------------------------------------------------------
+    def _marker_dragged(self, view: int, marker: int, x: float, y: float) -> None:
+        self.session.drag_marker(view, marker, (x, y), refit=self.correction.refit.isChecked())
+
+    def _threshold_changed(self, value: float) -> None:
+        s = self.session
+        if s.params is not None and value > 0:
+            s.set_params(replace(s.params, reanalysis_threshold=float(value)))
+            self.table.source.reset()
+            self.refresh_timeline()
+
+    def fit_range(self) -> None:
+        from videotrack.video import parse_frame_range, resolve_frames
+
+        s = self.session
+        text, ok = QInputDialog.getText(self, "Fit range", "Frames A:B (B excluded):",
+                                        text=f"{s.frame}:{s.n_frames}")
+        if not ok:
+            return
+        try:
+            frames = resolve_frames(parse_frame_range(text), s.n_frames)
+        except (ValueError, LocatedError) as err:
+            self.show_error(f"frames '{text}': {err}")
+            return
+        s.fit(frames, "fit range")
+
+    def fit_selected(self) -> None:
+        frames = self.table.selected_frames()
+        if frames:
+            self.session.fit(frames, "fit selected")
+
+    def next_bad(self) -> None:
+        s = self.session
+        later = [f for f in adapters.bad_frames(s.results, s.threshold) if f > s.frame]
+        if later:
+            s.set_frame(later[0])
+
+    def toggle_play(self) -> None:
+        if self._play_timer.isActive():
+            self._play_timer.stop()
+            self.act_play.setIcon(self.style().standardIcon(QStyle.StandardPixmap.SP_MediaPlay))
+            return
+        if self.session.frame >= self.session.n_frames - 1:
+            self.session.set_frame(0)
+        self._play_timer.start(int(1000 / min(max(self.session.fps, 1.0), MAX_PLAY_FPS)))
+        self.act_play.setIcon(self.style().standardIcon(QStyle.StandardPixmap.SP_MediaPause))
+
+    @property
+    def playing(self) -> bool:
+        return self._play_timer.isActive()
+
+    def _next_play_frame(self) -> None:
+        s = self.session
+        if s.frame >= s.n_frames - 1:
+            self.toggle_play()
+        else:
+            s.step(1)
+
+    def _busy_changed(self, busy: bool) -> None:
+        for view in self.video_views:
+            view.markers.draggable = not busy
+        self.progress.setVisible(busy)
+        self.cancel_button.setVisible(busy)
+        self.progress.setRange(0, 0)  # busy indicator until the first progress report
+        if not busy:
+            self.rate.setText("")
+            self.table.source.reset()
+            self.refresh_timeline()
+            self.refresh_overlays()
+        self.setCursor(Qt.CursorShape.BusyCursor if busy else Qt.CursorShape.ArrowCursor)
+        self._update_actions()
+
+    def _progress(self, done: int, total: int, rate: float) -> None:
+        self.progress.setRange(0, max(total, 1))
+        self.progress.setValue(done)
+        self.rate.setText(f"{rate:.1f} frames/s")
+
+    # -- dialogs ------------------------------------------------------------------------
+    def show_error(self, message: str) -> None:
+        """Show a one-line error in a (non-blocking) dialog and the status bar."""
+        self.errors.append(message)
+        self.statusBar().showMessage(message)
+        box = QMessageBox(QMessageBox.Icon.Critical, "VideoTrack", message,
+                          QMessageBox.StandardButton.Ok, self)
+        box.setAttribute(Qt.WidgetAttribute.WA_DeleteOnClose)
+        box.open()
+
+    def open_chain_editor(self):
+        from ui.chain_editor import ChainEditor
+
+        dialog = ChainEditor(self.session, self)
+        dialog.setAttribute(Qt.WidgetAttribute.WA_DeleteOnClose)
+        dialog.open()
+        return dialog
+
+    def open_histograms(self):
+        from ui.histogram_dialog import HistogramDialog
+
+        dialog = HistogramDialog(self.session, self)
+        dialog.setAttribute(Qt.WidgetAttribute.WA_DeleteOnClose)
+        dialog.show()
+        return dialog
+
+    def open_project_dialog(self):
+        from ui.project_dialog import ProjectDialog
+
+        dialog = ProjectDialog(self.session, self)
+        dialog.setAttribute(Qt.WidgetAttribute.WA_DeleteOnClose)
+        dialog.open()
+        return dialog
+
+    # -- closing ------------------------------------------------------------------------
+    def ask_unsaved(self) -> QMessageBox.StandardButton:
+        """Ask what to do with unsaved changes: Save, Discard or Cancel."""
+        parts = ", ".join(self.session.unsaved)
+        return QMessageBox.question(
+            self, "Unsaved changes", f"The project has unsaved changes ({parts}). Save them?",
+            QMessageBox.StandardButton.Save | QMessageBox.StandardButton.Discard
+            | QMessageBox.StandardButton.Cancel, QMessageBox.StandardButton.Save)
+
+    def _may_discard(self) -> bool:
+        if not self.session.dirty:
+            return True
+        answer = self.ask_unsaved()
+        if answer == QMessageBox.StandardButton.Save:
+            return self.session.save()
+        return answer == QMessageBox.StandardButton.Discard
+
+    def closeEvent(self, event) -> None:
+        if not self._may_discard():
+            event.ignore()
+            return
+        self._play_timer.stop()
+        self.session.close()
+        event.accept()
+
+
+def _button(action: QAction, text: str) -> QToolButton:
+    """A button for an action, labelled with a short text (the action's icon text)."""
+    action.setIconText(text)
+    b = QToolButton()
+    b.setDefaultAction(action)
+    b.setToolButtonStyle(Qt.ToolButtonStyle.ToolButtonTextOnly)
+    b.setSizePolicy(QSizePolicy.Policy.Expanding, QSizePolicy.Policy.Fixed)
+    return b
+
+
+def default_path(session: Session, suffix: str) -> str:
+    """A file name beside the project for a save dialog."""
+    if session.config is None:
+        return ""
+    return str(Path(session.config.folder) / f"{session.config.path.stem}{suffix}")

@@ -1,0 +1,843 @@
+"""The GUI's one state object: project, video, views, cameras, chain, detections, results.
+
+Widgets call :class:`Session` methods and redraw when its signals fire; they keep no state
+of their own that the session also has. Long work (fitting, detection, a correction's
+re-fit) runs in a worker thread (:mod:`ui.workers`) and its results are applied here, in
+the GUI thread. Every change of results or chain is an undoable :class:`Edit`.
+"""
+
+from __future__ import annotations
+
+import copy
+import warnings
+from collections import OrderedDict
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+from PySide6.QtCore import QObject, Signal
+
+from kinematics.errors import LocatedError
+from kinematics.model import Body
+from ui import adapters, backend
+from ui.workers import FitWorker, TaskWorker, error_text
+from videotrack.config import read_toml
+from videotrack.errors import VideoTrackError, VideoTrackWarning
+
+#: Video frames kept decoded for scrubbing back and forth.
+FRAME_CACHE = 48
+
+
+@dataclass
+class Edit:
+    """One undoable change: results of some frames, their pinned axes, and/or the chain.
+
+    Each entry maps to ``(before, after)``; None stands for "absent".
+    """
+
+    label: str
+    results: dict[int, tuple] = field(default_factory=dict)
+    pins: dict[int, tuple] = field(default_factory=dict)
+    body: tuple[Body, Body] | None = None
+
+    def record_result(self, frame: int, before, after) -> None:
+        old = self.results.get(frame, (before, None))[0]
+        self.results[frame] = (old, after)
+
+    def record_pins(self, frame: int, before, after) -> None:
+        old = self.pins.get(frame, (before, None))[0]
+        self.pins[frame] = (old, after)
+
+    def __bool__(self) -> bool:
+        return bool(self.results or self.pins or self.body)
+
+
+class Session(QObject):
+    """State of one open project and every operation on it.
+
+    Signals
+    -------
+    projectChanged()
+        A project was opened or its configuration applied: everything may have changed.
+    frameChanged(int)
+        The current record (frame or half-frame) changed.
+    bodyChanged()
+        The chain drawn changed (committed, or previewed by the chain editor).
+    postureChanged()
+        The posture drawn for the current frame changed without a new result (previews).
+    resultsChanged(list)
+        Results of these frames changed.
+    detectionsChanged()
+        New detections.
+    busyChanged(bool)
+        A background task started or ended.
+    progress(int, int, float)
+        Frames done, frames in all, frames per second of the running task.
+    status(str)
+        What the session is doing, for the status bar.
+    error(str)
+        A one-line error message for a dialog.
+    dirtyChanged(bool)
+        Unsaved changes appeared or were saved.
+    undoChanged()
+        The undo or redo stack changed.
+    """
+
+    projectChanged = Signal()
+    frameChanged = Signal(int)
+    bodyChanged = Signal()
+    postureChanged = Signal()
+    resultsChanged = Signal(object)
+    detectionsChanged = Signal()
+    busyChanged = Signal(bool)
+    progress = Signal(int, int, float)
+    status = Signal(str)
+    error = Signal(str)
+    dirtyChanged = Signal(bool)
+    undoChanged = Signal()
+
+    def __init__(self, parent=None) -> None:
+        super().__init__(parent)
+        self._clear()
+
+    def _clear(self) -> None:
+        self.config = None
+        self.trial: str | None = None
+        self.raw_config: dict = {}
+        self.videos = None
+        self.settings = None
+        self.views: tuple = ()
+        self.model: backend.ProjectModel | None = None
+        self.body: Body | None = None
+        self.params: backend.AnnealParams | None = None
+        self.detections = None
+        self.detections_path: Path | None = None
+        self.results_path: Path | None = None
+        self.results: dict[int, backend.FrameResult] = {}
+        self.pins: dict[int, dict[int, float]] = {}
+        self.frame = 0
+        self.preview_body: Body | None = None
+        self.preview_angles: np.ndarray | None = None
+        self._undo: list[Edit] = []
+        self._redo: list[Edit] = []
+        self._dirty: set[str] = set()
+        self._frames: OrderedDict[int, tuple] = OrderedDict()
+        self._task = None
+        self._edit: Edit | None = None
+
+    # -- project ------------------------------------------------------------------------
+    @property
+    def config_path(self) -> Path | None:
+        return None if self.config is None else self.config.path
+
+    @property
+    def editable(self) -> bool:
+        """Whether the settings come from one project file the session can edit and save (a
+        trial's config is merged from the project's config.toml files, shared by trials)."""
+        return self.config is not None and self.trial is None
+
+    def open_project(self, path, trial: str | None = None) -> bool:
+        """Open a project file: video, views, chain and cameras, detections and results.
+
+        With ``trial``, ``path`` is a project folder and the trial's merged config is opened
+        (its settings are edited in its ``config.toml`` files, not here). What cannot be
+        loaded is reported on :attr:`error` (e.g. a missing chain file) and the rest stays
+        usable. Returns False when the project itself could not be opened.
+        """
+        if self.busy:
+            self.error.emit("wait for the running task to finish (or cancel it) first")
+            return False
+        path = Path(path).absolute()
+        try:
+            config = backend.load_project_config(path, trial)
+            raw = {} if trial is not None else read_toml(path)
+        except LocatedError as err:
+            self.error.emit(str(err))
+            return False
+        self._close_videos()
+        self._clear()
+        self.raw_config, self.trial = raw, trial
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", VideoTrackWarning)
+            problems = self._install(config, keep_body=False)
+            self._load_data()
+        self.status.emit(f"opened {path.name}: {self.n_frames} frames, views "
+                         f"{', '.join(self.view_names)}")
+        self.projectChanged.emit()
+        self.dirtyChanged.emit(False)
+        self.undoChanged.emit()
+        self.frameChanged.emit(self.frame)
+        for msg in problems:
+            self.error.emit(msg)
+        self._report_warnings(caught)
+        return True
+
+    def _report_warnings(self, caught) -> None:
+        """VideoTrack's warnings (a truncated video, a view without markers) go to the
+        status bar: they are worth seeing but need no answer."""
+        for w in caught:
+            if issubclass(w.category, VideoTrackWarning):
+                self.status.emit(f"warning: {w.message}")
+
+    def _install(self, config, keep_body: bool) -> list[str]:
+        """Build video, views and model from a validated config; returns the problems met."""
+        from videotrack.detect import settings_from_config, video_paths
+        from videotrack.video import open_videos
+        from videotrack.views import check_views
+
+        problems = []
+        self.config = config
+        try:
+            self.settings = settings_from_config(config)
+            if self.videos is None:
+                self.videos = open_videos(video_paths(config), colour=True,
+                                          fps=config["video"]["fps"] or None)
+            self.views = check_views(self.settings.views,
+                                     [(s.width, s.height) for s in self.videos.sources])
+        except LocatedError as err:
+            problems.append(str(err.located(file=config.path)))
+        old_body = self.body
+        try:
+            self.model = backend.load_model(config)
+            self.params = self.model.params
+            self.body = old_body if keep_body and old_body is not None and (
+                old_body.axis_labels == self.model.body.axis_labels) else self.model.body
+        except LocatedError as err:
+            problems.append(str(err))
+            self.model = None
+        self._frames.clear()
+        return problems
+
+    def _load_data(self) -> None:
+        """Detections and results named by the project (when they exist)."""
+        from videotrack.detections import load_detections
+
+        self.detections_path, self.results_path = backend.output_paths(self.config)
+        if self.detections_path.exists():
+            try:
+                det = load_detections(self.detections_path)
+                if self.model is not None:
+                    backend.check_detection_views(self.model, det, self.detections_path)
+                self.detections = det
+            except LocatedError as err:
+                self.error.emit(str(err))
+        if self.results_path.exists() and self.body is not None:
+            try:
+                self.results = backend.read_project_results(self.results_path, self.body,
+                                                            self.view_names)
+            except LocatedError as err:
+                self.error.emit(str(err))
+
+    def apply_config(self, raw: dict) -> bool:
+        """Validate and apply an edited project config (views, filters, chain, annealing).
+
+        The chain is reloaded when its file changed, kept with its edits otherwise; results
+        whose axes do not fit the new chain are dropped. Marks the config unsaved.
+        """
+        import tomli_w
+
+        from videotrack.config import parse_config
+        from videotrack.detect import settings_from_config
+        from videotrack.views import check_views
+
+        if not self.editable:
+            self.error.emit("this trial's settings come from several config.toml files; "
+                            "edit them there")
+            return False
+        try:
+            config = parse_config(tomli_w.dumps(raw), self.config.path)
+            if self.videos is not None:  # views must fit the frames before anything changes
+                check_views(settings_from_config(config).views,
+                            [(v.width, v.height) for v in self.videos.sources])
+        except LocatedError as err:
+            self.error.emit(str(err.located(file=self.config.path)))
+            return False
+        chain_changed = (config["chain"] != self.config["chain"]
+                         or config["cameras"] != self.config["cameras"])
+        self.raw_config = copy.deepcopy(raw)
+        problems = self._install(config, keep_body=not chain_changed)
+        if self.body is not None and self.results:
+            n_axes = self.body.n_axes
+            if any(np.size(r.angles_deg) != n_axes for r in self.results.values()):
+                self.results, self.pins = {}, {}
+                self._undo.clear()
+                self._redo.clear()
+                problems.append("the results were made with another chain and were dropped")
+        self._mark("config")
+        self._check_detections()
+        self.projectChanged.emit()
+        self.frameChanged.emit(self.frame)
+        for msg in problems:
+            self.error.emit(msg)
+        return not problems
+
+    def _check_detections(self) -> None:
+        from videotrack.detections import check_fresh
+
+        if self.detections is None or self.settings is None:
+            return
+        try:
+            check_fresh(self.detections, self.videos, self.settings)
+        except VideoTrackError as err:
+            self.status.emit(f"{err.message} (Detect markers runs them again)")
+
+    def set_params(self, params: backend.AnnealParams) -> None:
+        """Annealing parameters of the next fits (the project's ``[anneal]`` by default)."""
+        self.params = params
+
+    def _close_videos(self) -> None:
+        if self.videos is not None:
+            self.videos.close()
+
+    def close(self) -> None:
+        """Cancel running work and release the video."""
+        self.cancel(wait=True)
+        self._close_videos()
+
+    # -- what there is ------------------------------------------------------------------
+    @property
+    def view_names(self) -> list[str]:
+        return [v.name for v in self.views]
+
+    @property
+    def cameras(self) -> list:
+        """The camera of each view, in view order (empty without a model)."""
+        return [] if self.model is None else list(self.model.cameras.values())
+
+    @property
+    def n_frames(self) -> int:
+        """Records of the project: those of the detections, else the video's frames."""
+        if self.detections is not None:
+            return self.detections.n_records
+        return 0 if self.videos is None else self.videos.n_frames
+
+    @property
+    def threshold(self) -> float:
+        """The re-analysis threshold (pixels): frames above it are highlighted."""
+        return float("inf") if self.params is None else self.params.reanalysis_threshold
+
+    @property
+    def display_body(self) -> Body | None:
+        """The chain drawn: the chain editor's preview, else the session's chain."""
+        return self.preview_body if self.preview_body is not None else self.body
+
+    @property
+    def fps(self) -> float:
+        if self.detections is not None:
+            return self.detections.frame_rate
+        return 25.0 if self.videos is None else self.videos.fps
+
+    def video_frame(self, record: int) -> int:
+        """Video frame of a record (records are half-frames when de-interlacing)."""
+        if self.detections is not None and 0 <= record < self.detections.n_records:
+            return int(self.detections.video_frames[record])
+        return int(record)
+
+    # -- current frame ------------------------------------------------------------------
+    def set_frame(self, frame: int) -> None:
+        """Make ``frame`` (clipped to the records) the current one."""
+        frame = int(np.clip(frame, 0, max(self.n_frames - 1, 0)))
+        if frame != self.frame:
+            self.frame = frame
+            self.preview_angles = None
+            self.frameChanged.emit(frame)
+
+    def step(self, delta: int) -> None:
+        self.set_frame(self.frame + delta)
+
+    def view_images(self, record: int | None = None) -> list[np.ndarray]:
+        """The image of each view of a record (ROI cut and mirrored as set), BGR or grey."""
+        if self.videos is None or not self.views:
+            return []
+        index = self.video_frame(self.frame if record is None else record)
+        frames = self._frames.get(index)
+        if frames is None:
+            try:
+                frames = self.videos.read(index)
+            except VideoTrackError as err:
+                self.status.emit(str(err))
+                return []
+            self._frames[index] = frames
+            while len(self._frames) > FRAME_CACHE:
+                self._frames.popitem(last=False)
+        self._frames.move_to_end(index)
+        return [v.cut(frames[v.video]) for v in self.views]
+
+    def full_frames(self, record: int | None = None) -> tuple:
+        """Whole video frames of a record, one per video (for drawing ROIs)."""
+        self.view_images(record)
+        index = self.video_frame(self.frame if record is None else record)
+        return self._frames.get(index, ())
+
+    def frame_detections(self, record: int | None = None) -> list[np.ndarray]:
+        """Detected centroids of a record, one (n, 2) array per view."""
+        record = self.frame if record is None else record
+        return adapters.frame_detections(self.detections, record, len(self.views))
+
+    def posture(self, record: int | None = None) -> tuple[np.ndarray, np.ndarray, str]:
+        """``(angles_deg, roots, source)`` drawn for a record; source is ``preview``,
+        ``fit`` (any result, corrected included) or ``start`` (the histogram means)."""
+        record = self.frame if record is None else record
+        body = self.display_body
+        result = self.results.get(record)
+        roots = (np.asarray(result.root_positions) if result is not None
+                 else body.root_positions())
+        if record == self.frame and self.preview_angles is not None:
+            angles, source = self.preview_angles, "preview"
+        elif result is not None and np.all(np.isfinite(result.angles_deg)):
+            angles, source = np.asarray(result.angles_deg, float), "fit"
+        else:
+            return body.mean_posture_deg(), roots, "start"
+        # locked axes at the drawn chain's values (the chain editor may have moved a lock)
+        return np.where(body.locked_mask(), body.mean_posture_deg(), angles), roots, source
+
+    def geometry(self, record: int | None = None) -> adapters.PostureGeometry | None:
+        """3D points and skeleton of the drawn posture (None without a chain)."""
+        if self.display_body is None:
+            return None
+        angles, roots, _ = self.posture(record)
+        return adapters.posture_geometry(self.display_body, angles, roots)
+
+    def overlays(self, record: int | None = None) -> list[adapters.ViewOverlay]:
+        """Projected markers and skeleton of the drawn posture, one per view."""
+        geometry = self.geometry(record)
+        if geometry is None or not self.cameras:
+            return []
+        return adapters.project_geometry(geometry, self.cameras)
+
+    # -- previews (chain editor, sliders) -----------------------------------------------
+    def set_preview_body(self, body: Body | None) -> None:
+        """Draw ``body`` instead of the session's chain (None: stop previewing)."""
+        self.preview_body = body
+        self.bodyChanged.emit()
+
+    def set_preview_angles(self, angles_deg) -> None:
+        """Draw this posture in the current frame until the frame changes (None: stop)."""
+        self.preview_angles = None if angles_deg is None else np.asarray(angles_deg, float)
+        self.postureChanged.emit()
+
+    # -- edits, undo, dirty -------------------------------------------------------------
+    @property
+    def dirty(self) -> bool:
+        return bool(self._dirty)
+
+    @property
+    def unsaved(self) -> list[str]:
+        """What has unsaved changes: ``config``, ``chain`` and/or ``results``."""
+        return sorted(self._dirty)
+
+    def _mark(self, *parts: str) -> None:
+        was = self.dirty
+        self._dirty.update(parts)
+        if not was:
+            self.dirtyChanged.emit(True)
+
+    def _apply(self, edit: Edit, which: int) -> None:
+        """Set the state of ``edit``: ``which`` 0 for before (undo), 1 for after (redo)."""
+        for frame, pair in edit.results.items():
+            if pair[which] is None:
+                self.results.pop(frame, None)
+            else:
+                self.results[frame] = pair[which]
+        for frame, pair in edit.pins.items():
+            if pair[which]:
+                self.pins[frame] = dict(pair[which])
+            else:
+                self.pins.pop(frame, None)
+        if edit.results:
+            self._mark("results")
+            self.resultsChanged.emit(sorted(edit.results))
+        if edit.body is not None:
+            self.body = edit.body[which]
+            self._mark("chain")
+            self.bodyChanged.emit()
+
+    def _push(self, edit: Edit) -> None:
+        if edit:
+            self._undo.append(edit)
+            self._redo.clear()
+            self.undoChanged.emit()
+
+    @property
+    def can_undo(self) -> bool:
+        return bool(self._undo) and not self.busy
+
+    @property
+    def can_redo(self) -> bool:
+        return bool(self._redo) and not self.busy
+
+    @property
+    def undo_label(self) -> str:
+        return self._undo[-1].label if self._undo else ""
+
+    @property
+    def redo_label(self) -> str:
+        return self._redo[-1].label if self._redo else ""
+
+    def undo(self) -> None:
+        if not self.can_undo:
+            return
+        edit = self._undo.pop()
+        self._apply(edit, 0)
+        self._redo.append(edit)
+        self.status.emit(f"undid: {edit.label}")
+        self.undoChanged.emit()
+
+    def redo(self) -> None:
+        if not self.can_redo:
+            return
+        edit = self._redo.pop()
+        self._apply(edit, 1)
+        self._undo.append(edit)
+        self.status.emit(f"redid: {edit.label}")
+        self.undoChanged.emit()
+
+    def commit_body(self, body: Body, label: str = "edit chain") -> bool:
+        """Make ``body`` the session's chain (undoable); it is validated first."""
+        from kinematics.model import validate_body
+
+        try:
+            validate_body(body)
+        except LocatedError as err:
+            self.error.emit(str(err))
+            return False
+        self.preview_body = None
+        edit = Edit(label, body=(self.body, body))
+        self._apply(edit, 1)
+        self._push(edit)
+        return True
+
+    def set_results(self, results: Iterable, label: str) -> None:
+        """Store results (e.g. of a fit) as one undoable edit; their pins are released."""
+        edit = Edit(label)
+        for r in results:
+            edit.record_result(r.frame, self.results.get(r.frame), r)
+            if r.frame in self.pins and r.status != backend.CORRECTED:
+                edit.record_pins(r.frame, self.pins[r.frame], None)
+        self._apply(edit, 1)
+        self._push(edit)
+
+    # -- background tasks ---------------------------------------------------------------
+    @property
+    def busy(self) -> bool:
+        return self._task is not None
+
+    def _start(self, worker, what: str) -> None:
+        self._task = worker
+        worker.finished.connect(self._task_finished)
+        self.busyChanged.emit(True)
+        self.undoChanged.emit()
+        self.status.emit(what)
+        worker.start()
+
+    def _task_finished(self) -> None:
+        worker, self._task = self._task, None
+        if worker is not None:
+            worker.deleteLater()
+        self.busyChanged.emit(False)
+        self.undoChanged.emit()
+
+    def cancel(self, wait: bool = False) -> None:
+        """Ask the running task to stop (a fit stops after its current batch of frames)."""
+        task = self._task
+        if task is None:
+            return
+        task.cancel()
+        self.status.emit("cancelling …")
+        if wait:
+            task.wait()
+
+    def wait(self, timeout_ms: int = 60000) -> bool:
+        """Block until the running task ends (tests and closing); True when it ended."""
+        task = self._task
+        return True if task is None else task.wait(timeout_ms)
+
+    def run_task(self, fn: Callable, on_done: Callable[[object], None], what: str) -> bool:
+        """Run ``fn(worker)`` in a thread and ``on_done(result)`` in the GUI thread."""
+        if self.busy:
+            self.error.emit("another task is running; wait for it or cancel it")
+            return False
+        worker = TaskWorker(fn)
+        worker.done.connect(lambda result: None if worker.cancelled else on_done(result))
+        worker.failed.connect(self._failed)
+        worker.progressed.connect(self.progress)
+        self._start(worker, what)
+        return True
+
+    def _failed(self, message: str) -> None:
+        self.status.emit("failed")
+        self.error.emit(message)
+
+    # -- fitting ------------------------------------------------------------------------
+    def _fitter(self, body: Body | None = None):
+        if self.model is None or self.body is None:
+            raise VideoTrackError("no chain and cameras: set them under Project ▸ Settings",
+                                  file=self.config_path)
+        return backend.make_fitter(body or self.body, self.model.cameras, self.params)
+
+    def fit(self, frames: Iterable[int] | None = None, label: str = "fit") -> bool:
+        """Fit frames in the background (default: every frame not corrected by hand).
+
+        Results replace those frames' results as they arrive; the whole run is one undo
+        step. Returns False when it could not start.
+        """
+        if self.busy:
+            self.error.emit("another task is running; wait for it or cancel it")
+            return False
+        if self.detections is None:
+            self.error.emit("no detections: run Detect markers first")
+            return False
+        if frames is None:
+            frames = [f for f in range(self.n_frames)
+                      if self.results.get(f) is None or self.results[f].status
+                      != backend.CORRECTED]
+        frames = sorted({int(f) for f in frames if 0 <= int(f) < self.n_frames})
+        if not frames:
+            self.status.emit("nothing to fit")
+            return False
+        try:
+            fitter = self._fitter()
+        except LocatedError as err:
+            self.error.emit(str(err))
+            return False
+        self._edit = Edit(f"{label} ({len(frames)} frames)")
+        worker = FitWorker(fitter, self.detections, frames, backend.fit_chunk_size())
+        worker.resultsReady.connect(self._fit_results)
+        worker.progressed.connect(self.progress)
+        worker.failed.connect(self._failed)
+        worker.finished.connect(lambda: self._fit_done(worker))
+        self._start(worker, f"fitting {len(frames)} frames …")
+        return True
+
+    def _fit_results(self, batch: list) -> None:
+        edit = self._edit
+        for r in batch:
+            edit.record_result(r.frame, self.results.get(r.frame), r)
+            self.results[r.frame] = r
+            if r.frame in self.pins:
+                edit.record_pins(r.frame, self.pins.pop(r.frame), None)
+        self._mark("results")
+        self.resultsChanged.emit([r.frame for r in batch])
+
+    def _fit_done(self, worker: FitWorker) -> None:
+        edit, self._edit = self._edit, None
+        if edit is not None:
+            self._push(edit)
+        verb = "cancelled after" if worker.cancelled else "fitted"
+        self.status.emit(f"{verb} {worker.count} frames")
+
+    def fit_bad(self) -> bool:
+        """Fit again the frames whose error is above the threshold."""
+        return self.fit(adapters.bad_frames(self.results, self.threshold), "re-fit bad frames")
+
+    # -- manual correction --------------------------------------------------------------
+    def correct(self, values_deg: Mapping[int, float], refit: bool = True,
+                frame: int | None = None, label: str | None = None) -> bool:
+        """Set axes of a frame by hand and hold them while the rest is re-fitted.
+
+        The axes given (posture indices -> degrees) join those already pinned in this frame;
+        the fitter then fits a copy of the chain in which the pinned axes are locked at the
+        user's values (:func:`ui.adapters.pin_axes`), starting from the current posture.
+        Without ``refit``, or when nothing is left free, the posture is taken as it is and
+        only its error is computed. The result has status ``corrected``; undo restores the
+        frame's previous result.
+        """
+        frame = self.frame if frame is None else int(frame)
+        if self.body is None or self.model is None:
+            self.error.emit("no chain and cameras to correct")
+            return False
+        angles, roots, _ = self.posture(frame)
+        pins = {**self.pins.get(frame, {}), **{int(k): float(v) for k, v in values_deg.items()}}
+        pinned = adapters.pin_axes(self.body, pins)
+        angles = adapters.clamp_to_range(pinned, angles)
+        dets = self.frame_detections(frame)
+        seed = self.params.seed
+        label = label or "set " + ", ".join(self.body.axis_labels[k] for k in values_deg)
+
+        def finish(result) -> None:
+            if result.status == "no-detections":  # nothing to fit: keep the user's posture
+                result = backend.manual_result(frame, angles, roots, np.nan,
+                                               np.full(len(self.views), np.nan), seed)
+            result = backend.with_status(result, backend.CORRECTED)
+            edit = Edit(label)
+            edit.record_result(frame, self.results.get(frame), result)
+            edit.record_pins(frame, self.pins.get(frame), pins)
+            self.preview_angles = None
+            self._apply(edit, 1)
+            self._push(edit)
+            self.status.emit(f"frame {frame} corrected: error {result.error:.2f} px")
+
+        try:
+            if refit and adapters.free_axes(pinned):
+                fitter = self._fitter(pinned)
+                return self.run_task(
+                    lambda _w: fitter.fit_frame(dets, frame, start_deg=angles,
+                                                root_positions=roots),
+                    finish, f"re-fitting frame {frame} around the correction …")
+            error, per_view = self._fitter().error(angles, dets, roots)
+        except LocatedError as err:
+            self.error.emit(str(err))
+            return False
+        finish(backend.manual_result(frame, angles, roots, error, per_view, seed))
+        return True
+
+    def drag_marker(self, view: int, marker: int, target_xy, refit: bool = True) -> bool:
+        """Correct the current frame so that ``marker`` appears at ``target_xy`` in ``view``.
+
+        The one axis that brings the marker nearest the target is found by
+        :func:`ui.adapters.solve_marker_drag` and set; then every axis the marker depends on
+        is pinned (so the marker stays where it was dropped) and the rest of the chain, the
+        axes beyond the marker and other chains, is re-fitted as in :meth:`correct`.
+        """
+        if self.body is None or not self.cameras:
+            return False
+        angles, roots, _ = self.posture()
+        upstream = adapters.marker_axes(self.body, marker)
+        free = [k for k in upstream if k not in self.pins.get(self.frame, {})]
+        solution = adapters.solve_marker_drag(self.body, self.cameras[view], angles, roots,
+                                              marker, target_xy, axes=free)
+        if solution is None:
+            self.status.emit("no free axis moves this marker")
+            return False
+        values = {k: float(angles[k]) for k in upstream}
+        values[solution.axis] = solution.value_deg
+        return self.correct(values, refit=refit,
+                            label=f"drag {self.body.marker_names[marker]} in "
+                                  f"{self.view_names[view]}")
+
+    def release_pins(self, frame: int | None = None) -> None:
+        """Forget which axes of a frame were set by hand (undoable)."""
+        frame = self.frame if frame is None else frame
+        if self.pins.get(frame):
+            edit = Edit("release pinned axes")
+            edit.record_pins(frame, self.pins[frame], None)
+            self._apply(edit, 1)
+            self._push(edit)
+            self.postureChanged.emit()
+
+    # -- histograms ---------------------------------------------------------------------
+    def learn_histograms(self, statuses=adapters.GOOD_STATUSES) -> int:
+        """Eq. 4 learning from the analysed frames (of these statuses; None: all fitted).
+
+        Returns the number of frames learned from (0: nothing changed).
+        """
+        from kinematics.histogram_xml import apply_archive, archive_from_body, update_archive
+
+        angles = adapters.learning_angles(self.results, statuses)
+        if self.body is None or len(angles) == 0:
+            self.status.emit("no analysed frames to learn from")
+            return 0
+        archive = update_archive(archive_from_body(self.body), self.body, angles)
+        self.commit_body(apply_archive(self.body, archive),
+                         f"learn histograms from {len(angles)} frames")
+        self.status.emit(f"histograms learned from {len(angles)} frames (Eq. 4)")
+        return len(angles)
+
+    def export_histograms(self, path) -> bool:
+        """Write every axis' histogram to a histogram archive XML."""
+        from kinematics.histogram_xml import archive_from_body, save_archive
+
+        try:
+            save_archive(path, archive_from_body(self.body))
+        except (LocatedError, OSError) as err:
+            self.error.emit(error_text(err) if isinstance(err, LocatedError) else
+                            f"{path}: {err.strerror}")
+            return False
+        self.status.emit(f"wrote histograms to {path}")
+        return True
+
+    def import_histograms(self, path) -> bool:
+        """Apply a histogram archive to the chain (undoable)."""
+        from kinematics.histogram_xml import apply_archive, load_archive
+
+        try:
+            body = apply_archive(self.body, load_archive(path))
+        except LocatedError as err:
+            self.error.emit(str(err))
+            return False
+        return self.commit_body(body, f"load histograms from {Path(path).name}")
+
+    # -- chain file ---------------------------------------------------------------------
+    def save_chain_as(self, path, body: Body | None = None) -> bool:
+        """Write the chain (or ``body``) as chain XML (histograms included)."""
+        from kinematics.chain_xml import save_body
+
+        try:
+            save_body(path, body or self.body)
+        except LocatedError as err:
+            self.error.emit(str(err))
+            return False
+        self.status.emit(f"wrote chain to {path}")
+        return True
+
+    # -- detection ----------------------------------------------------------------------
+    def detect(self) -> bool:
+        """Detect markers in every frame (background) and save the detections file."""
+        from videotrack.detect import detect_video, video_paths
+        from videotrack.detections import save_detections
+        from videotrack.video import open_videos
+
+        if self.settings is None:
+            self.error.emit("the project's views or filters are not valid")
+            return False
+        config, settings, out = self.config, self.settings, self.detections_path
+
+        def work(worker: TaskWorker):
+            # Its own video handles: OpenCV captures must not be shared between threads.
+            with open_videos(video_paths(config), colour=settings.filters.needs_colour,
+                             fps=config["video"]["fps"] or None) as videos:
+                total, done = videos.n_frames, [0]
+
+                def step(n: int) -> None:
+                    worker.check_cancel()
+                    done[0] += n
+                    worker.report(done[0], total)
+
+                with warnings.catch_warnings(record=True) as caught:
+                    warnings.simplefilter("always", VideoTrackWarning)
+                    detections = detect_video(videos, settings, progress=step)
+            return save_detections(detections, out), detections, caught
+
+        def finish(result) -> None:
+            path, detections, caught = result
+            self.detections = detections
+            self._frames.clear()
+            self.set_frame(min(self.frame, max(self.n_frames - 1, 0)))
+            self.status.emit(f"wrote {path}: {len(detections.points)} markers in "
+                             f"{detections.n_records} frames")
+            self._report_warnings(caught)
+            self.detectionsChanged.emit()
+            self.frameChanged.emit(self.frame)
+
+        return self.run_task(work, finish, "detecting markers …")
+
+    # -- saving -------------------------------------------------------------------------
+    def save(self) -> bool:
+        """Write what changed: the project config, the chain file, the results file."""
+        from kinematics.chain_xml import save_body
+        from kinematics.fileio import atomic_write_text
+
+        try:
+            if "config" in self._dirty:
+                import tomli_w
+
+                atomic_write_text(self.config.path, tomli_w.dumps(self.raw_config))
+            if "chain" in self._dirty and self.model is not None:
+                save_body(self.model.chain_path, self.body)
+            if "results" in self._dirty and self.model is not None:
+                model = replace(self.model, body=self.body, params=self.params)
+                backend.save_project_results(self.results_path, model, self.body,
+                                             self.results, self.detections,
+                                             self.detections_path)
+        except LocatedError as err:
+            self.error.emit(str(err))
+            return False
+        except OSError as err:
+            self.error.emit(f"{err.filename}: {err.strerror}")
+            return False
+        saved = ", ".join(self.unsaved) or "nothing to save"
+        self._dirty.clear()
+        self.dirtyChanged.emit(False)
+        self.status.emit(f"saved {saved}")
+        return True

@@ -1,0 +1,55 @@
+"""Colours, pens and sizes shared by every view, so an overlay looks the same everywhere.
+
+Chosen to stand out on dark marker videos and on bright ones: detections are hollow green
+rings, model markers filled orange dots with a dark rim, the skeleton cyan.
+"""
+
+from __future__ import annotations
+
+import pyqtgraph as pg
+from PySide6.QtGui import QColor
+
+DETECTION = "#39ff14"
+MARKER = "#ff7f0e"
+MARKER_RIM = "#1a1a1a"
+SKELETON = "#00d5ff"
+PINNED = "#ff3df2"
+CURRENT_FRAME = "#ffd400"
+ERROR_CURVE = "#e8e8e8"
+THRESHOLD = "#ff5050"
+BAD_ROW = QColor("#ffd2d2")
+CORRECTED_ROW = QColor("#d5e6ff")
+UNFITTED_TEXT = QColor("#8a8a8a")
+TEXT_ON_SHADE = QColor("#111111")
+
+#: Screen sizes in pixels (independent of zoom).
+DETECTION_SIZE = 18
+MARKER_SIZE = 11
+LINE_WIDTH = 2.5
+
+#: Colours of curves (one per axis) and of view rectangles.
+PALETTE = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2",
+           "#bcbd22", "#17becf", "#7f7f7f")
+
+
+def configure() -> None:
+    """Global pyqtgraph options: images indexed [row, column] like NumPy and OpenCV."""
+    pg.setConfigOptions(imageAxisOrder="row-major", antialias=True)
+
+
+def colour(i: int) -> str:
+    return PALETTE[i % len(PALETTE)]
+
+
+def detection_style() -> dict:
+    return {"symbol": "o", "size": DETECTION_SIZE, "pen": pg.mkPen(DETECTION, width=2.2),
+            "brush": None, "pxMode": True}
+
+
+def marker_style() -> dict:
+    return {"symbol": "o", "size": MARKER_SIZE, "pen": pg.mkPen(MARKER_RIM, width=1.2),
+            "brush": pg.mkBrush(MARKER), "pxMode": True}
+
+
+def skeleton_pen():
+    return pg.mkPen(SKELETON, width=LINE_WIDTH)

@@ -1,0 +1,170 @@
+"""One video view: the view image with detected centroids and the projected model.
+
+Coordinates are the view image's pixels, as the cameras project and the detections are
+stored: the image is placed so that pixel ``(i, j)`` is centred on ``(x, y) = (j, i)`` and
+the y axis points down. Model markers can be dragged with the left mouse button; dragging
+anywhere else pans the view.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pyqtgraph as pg
+from PySide6.QtCore import Qt, Signal
+
+from ui import style
+
+
+def display_image(image: np.ndarray) -> np.ndarray:
+    """A view image as pyqtgraph shows it: grey as it is, OpenCV's BGR turned to RGB."""
+    return image[..., ::-1] if image.ndim == 3 else image
+
+
+class DraggableScatter(pg.ScatterPlotItem):
+    """Scatter whose points can be dragged; emits ``dragged(index, x, y)`` on release and
+    ``moving(index, x, y)`` while the mouse moves."""
+
+    dragged = Signal(int, float, float)
+    moving = Signal(int, float, float)
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self._drag: int | None = None
+        self.draggable = True
+
+    def mouseDragEvent(self, ev) -> None:
+        if ev.button() != Qt.MouseButton.LeftButton or not self.draggable:
+            ev.ignore()
+            return
+        if ev.isStart():
+            hits = self.pointsAt(ev.buttonDownPos())
+            if len(hits) == 0:
+                ev.ignore()
+                return
+            self._drag = int(hits[0].index())
+        if self._drag is None:
+            ev.ignore()
+            return
+        ev.accept()
+        pos = ev.pos()
+        if ev.isFinish():
+            index, self._drag = self._drag, None
+            self.dragged.emit(index, pos.x(), pos.y())
+        else:
+            self.moving.emit(self._drag, pos.x(), pos.y())
+
+
+class VideoView(pg.GraphicsLayoutWidget):
+    """The image of one view with its overlays.
+
+    Signals
+    -------
+    markerDragged(view, marker, x, y)
+        A model marker was dropped at (x, y) in view pixels.
+    """
+
+    markerDragged = Signal(int, int, float, float)
+
+    def __init__(self, index: int, name: str, parent=None) -> None:
+        super().__init__(parent)
+        self.index = index
+        self.name = name
+        self.setMinimumSize(200, 160)
+        self.plot = self.addPlot()
+        self.plot.setTitle(name, size="11pt")
+        self.plot.invertY(True)
+        self.plot.setAspectLocked(True)
+        self.plot.showGrid(False, False)
+        for side in ("left", "bottom"):
+            self.plot.getAxis(side).setStyle(tickFont=_small_font())
+        self.image = pg.ImageItem()
+        self.plot.addItem(self.image)
+        self.detected = pg.ScatterPlotItem(**style.detection_style())
+        self.lines = pg.PlotCurveItem(pen=style.skeleton_pen(), connect="pairs")
+        self.markers = DraggableScatter(**style.marker_style())
+        self.markers.setZValue(10)
+        self.markers.dragged.connect(self._dropped)
+        self.markers.moving.connect(self._moving)
+        for item in (self.detected, self.lines, self.markers):
+            self.plot.addItem(item)
+        self.labels: list[pg.TextItem] = []
+        self.info = pg.TextItem(anchor=(0, 0), color="#ffffff", fill=pg.mkBrush(0, 0, 0, 140))
+        self.info.setZValue(20)
+        self.plot.addItem(self.info)
+        self._marker_xy = np.empty((0, 2))
+        self._size: tuple[int, int] | None = None
+
+    # -- content ------------------------------------------------------------------------
+    def set_image(self, image: np.ndarray | None) -> None:
+        if image is None:
+            self.image.clear()
+            return
+        self.image.setImage(display_image(image), autoLevels=False, levels=(0, 255))
+        h, w = image.shape[:2]
+        self.image.setRect(-0.5, -0.5, w, h)  # pixel centres on integer coordinates
+        if self._size != (w, h):
+            self._size = (w, h)
+            self.plot.setRange(xRange=(-0.5, w - 0.5), yRange=(-0.5, h - 0.5), padding=0.01)
+        self.info.setPos(-0.5, -0.5)
+
+    def set_detections(self, points: np.ndarray) -> None:
+        pts = np.asarray(points, float).reshape(-1, 2)
+        self.detected.setData(pos=pts)
+
+    def set_overlay(self, overlay, names=()) -> None:
+        """Draw a :class:`ui.adapters.ViewOverlay` (None clears), with marker names."""
+        if overlay is None:
+            self._marker_xy = np.empty((0, 2))
+            self.markers.setData(pos=self._marker_xy)
+            self.lines.setData([], [])
+            self._set_labels([], [])
+            return
+        self._marker_xy = np.asarray(overlay.markers, float)
+        self.markers.setData(pos=self._marker_xy, data=np.arange(len(self._marker_xy)))
+        lines = np.asarray(overlay.lines, float).reshape(-1, 2)
+        self.lines.setData(lines[:, 0], lines[:, 1])
+        self._set_labels(names, self._marker_xy)
+
+    def set_info(self, text: str) -> None:
+        self.info.setText(text)
+
+    def _set_labels(self, names, xy) -> None:
+        while len(self.labels) < len(names):
+            label = pg.TextItem(color=style.MARKER, anchor=(-0.25, 1.1))
+            label.setFont(_small_font())
+            self.plot.addItem(label)
+            self.labels.append(label)
+        for k, label in enumerate(self.labels):
+            visible = k < len(names) and np.all(np.isfinite(xy[k]))
+            label.setVisible(bool(visible))
+            if visible:
+                label.setText(names[k])
+                label.setPos(*xy[k])
+
+    # -- dragging -----------------------------------------------------------------------
+    def _moving(self, index: int, x: float, y: float) -> None:
+        xy = self._marker_xy.copy()
+        xy[index] = (x, y)
+        self.markers.setData(pos=xy, data=np.arange(len(xy)))
+
+    def _dropped(self, index: int, x: float, y: float) -> None:
+        self.markers.setData(pos=self._marker_xy, data=np.arange(len(self._marker_xy)))
+        self.markerDragged.emit(self.index, index, x, y)
+
+    # -- for tests and screenshots ------------------------------------------------------
+    def drawn(self) -> dict[str, np.ndarray]:
+        """The data the items hold: ``markers``, ``lines`` (pairs) and ``detections``."""
+        mx, my = self.markers.getData()
+        lx, ly = self.lines.getData()
+        dx, dy = self.detected.getData()
+        return {"markers": np.column_stack([mx, my]),
+                "lines": np.column_stack([lx, ly]) if lx is not None else np.empty((0, 2)),
+                "detections": np.column_stack([dx, dy])}
+
+
+def _small_font():
+    from PySide6.QtGui import QFont
+
+    font = QFont()
+    font.setPointSize(8)
+    return font

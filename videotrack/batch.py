@@ -1,0 +1,529 @@
+"""Batch processing of a project: every trial detected and fitted, locally or on Dask.
+
+:func:`run_trial` does one trial from start to end — detection (skipped when up to date),
+fitting (skipped when the results are up to date, resumed from its checkpoint when an earlier
+run was killed), the plot — and never raises for a problem of the trial: it returns a
+:class:`TrialReport` saying ``done``, ``up to date`` or ``failed``. :func:`run_batch` runs
+trials in this process, in a pool of worker processes, or as tasks of a Dask cluster, and
+reports each as it finishes; :func:`plan_trial` says what a run would do (``--dry-run``).
+
+A trial's outputs are the same whichever way it runs: each frame's fit depends only on the
+seed and the frame number, never on the thread count or on the other trials.
+
+Every output is written atomically, so a killed run leaves complete files or none, plus
+temporary files named like :func:`kinematics.fileio.atomic_write` names them, which
+:func:`remove_stray_temporaries` deletes when the trial is run again.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import glob
+import io
+import os
+import platform
+import sys
+import threading
+import time
+import traceback
+import uuid
+import warnings
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from kinematics.errors import LocatedError
+from kinematics.fileio import atomic_write_text
+from videotrack.errors import VideoTrackError, VideoTrackWarning
+from videotrack.project import Project, Trial, TrialOutputs, trial_outputs
+from videotrack.tables import text_table
+
+#: States of a finished trial.
+DONE, UP_TO_DATE, FAILED = "done", "up to date", "failed"
+#: Columns of the project summary table.
+SUMMARY_COLUMNS = ("trial", "state", "frames", "median_error_px", "bad_frames_pct", "time_s",
+                   "message")
+
+#: progress(frames done, frames added to the total) — the frames bar of a batch.
+Progress = Callable[[int, int], object]
+
+
+@dataclass(frozen=True)
+class TrialReport:
+    """How one trial went.
+
+    Attributes
+    ----------
+    name : str
+    state : {"done", "up to date", "failed"}
+    frames : int
+        Rows of the results file (0 when there is none).
+    median_error : float
+        Median view error E of the results, pixels (NaN without results).
+    bad_pct : float
+        Percentage of frames whose fit failed or that had no detections.
+    seconds : float
+        Time this run spent on the trial.
+    message : str
+        Why it failed, one line.
+    steps : tuple of str
+        What was computed: ``"detect"``, ``"fit"``, ``"plot"``.
+    log : tuple of str
+        Lines for the run's log file (notes, the traceback of an unexpected error).
+    warnings : tuple of str
+        Warnings raised while processing (truncated video, view without markers, ...).
+    """
+
+    name: str
+    state: str
+    frames: int = 0
+    median_error: float = float("nan")
+    bad_pct: float = float("nan")
+    seconds: float = 0.0
+    message: str = ""
+    steps: tuple[str, ...] = ()
+    log: tuple[str, ...] = ()
+    warnings: tuple[str, ...] = ()
+
+
+def available_cores() -> int:
+    """CPU cores this process may use."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+#: Serialises loading chains in one process: libxml2 fails when two threads build the chain
+#: schema at once (kinematics.safe_xml caches it, but builds it outside its lock), as on a
+#: Dask worker with several threads.
+_LOAD_LOCK = threading.Lock()
+
+
+# -- one trial --------------------------------------------------------------------------------
+def run_trial(trial: Trial, force: bool = False, threads: int = 1,
+              progress: Progress | None = None) -> TrialReport:
+    """Detect and fit one trial (each step skipped when its outputs are up to date).
+
+    Parameters
+    ----------
+    trial : Trial
+    force : bool
+        Recompute although the outputs are up to date.
+    threads : int
+        numba threads for fitting, unless the trial's ``[fit] jobs`` sets them.
+    progress : callable, optional
+        ``progress(done, added_to_total)``: the frames to fit are announced once, then each
+        fitted frame counts one.
+
+    Returns
+    -------
+    TrialReport
+        Problems of the trial (bad config, unreadable video, ...) are a ``failed`` report,
+        never an exception; only KeyboardInterrupt passes.
+    """
+    t0 = time.perf_counter()
+    lines: list[str] = []
+    if trial.config is None:
+        return TrialReport(trial.name, FAILED, message=trial.error or "no config")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", VideoTrackWarning)
+        try:
+            report = _run_trial(trial, force, threads, progress, lines)
+        except LocatedError as err:
+            report = TrialReport(trial.name, FAILED, message=str(err))
+        except Exception as err:  # a bug must not stop the other trials; the log has it
+            lines.append(traceback.format_exc().rstrip())
+            report = TrialReport(trial.name, FAILED, message=f"{type(err).__name__}: {err}")
+    notes = tuple(f"{w.category.__name__}: {w.message}" for w in caught)
+    return replace(report, seconds=time.perf_counter() - t0, log=(*lines, *notes),
+                   warnings=tuple(str(w.message) for w in caught
+                                  if issubclass(w.category, VideoTrackWarning)))
+
+
+def _run_trial(trial: Trial, force: bool, threads: int, progress: Progress | None,
+               lines: list[str]) -> TrialReport:
+    import numba
+
+    from videotrack.detect import detect_project
+    from videotrack.pipeline import (
+        check_detection_views,
+        discard_checkpoint,
+        fit_project,
+        load_model,
+        results_stale_reason,
+    )
+    from videotrack.results import read_results
+
+    config = trial.config
+    numba.set_num_threads(max(1, min(config["fit"]["jobs"] or threads,
+                                     numba.config.NUMBA_NUM_THREADS)))
+    out = trial_outputs(config)
+    for path in remove_stray_temporaries(out):
+        lines.append(f"removed {path.name}, left by an interrupted run")
+    steps = []
+    detections, det_path, fresh = detect_project(config, force=force, output=out.detections,
+                                                 log=lines.append)
+    if not fresh:
+        steps.append("detect")
+        lines.append(f"detected {detections.n_records} records into {det_path.name}")
+    with _LOAD_LOCK:
+        model = load_model(config)
+    check_detection_views(model, detections, det_path)
+    n = detections.n_records
+    reason = "--force" if force else results_stale_reason(model, det_path, out.results, n)
+    if reason is None:
+        results = read_results(out.results)
+        discard_checkpoint(out.results)  # left if a run was killed right after its last write
+    else:
+        lines.append(f"fitting {n} records ({reason}), {numba.get_num_threads()} thread(s)")
+        if progress is not None:
+            progress(0, n)
+        results = fit_project(model, detections, det_path, out.results,
+                              progress=None if progress is None else lambda r: progress(1, 0))
+        steps.append("fit")
+    if config["fit"]["plot"] and (steps or _older(out.plot, out.results)):
+        from videotrack.plots import plot_angles
+
+        plot_angles(results, out.plot, model.body.locked_mask())
+        steps.append("plot")
+    ok = results.ok_mask()
+    err = results.error[np.isfinite(results.error)]
+    return TrialReport(trial.name, DONE if steps else UP_TO_DATE, frames=len(results),
+                       median_error=float(np.median(err)) if err.size else float("nan"),
+                       bad_pct=100.0 * float(1 - ok.mean()) if len(results) else float("nan"),
+                       steps=tuple(steps))
+
+
+def _older(path: Path, than: Path) -> bool:
+    """True when ``path`` is missing or older than ``than`` (e.g. a plot of earlier results)."""
+    return not path.exists() or path.stat().st_mtime_ns < than.stat().st_mtime_ns
+
+
+def remove_stray_temporaries(outputs: TrialOutputs) -> list[Path]:
+    """Delete the temporary files a killed run left beside a trial's outputs.
+
+    :func:`kinematics.fileio.atomic_write` writes ``NAME`` through ``.NAME.<random>.tmp``;
+    only such files of this trial's outputs are removed. Returns the paths removed.
+    """
+    removed = []
+    for path in outputs.files():
+        for tmp in path.parent.glob(f".{glob.escape(path.name)}.*.tmp"):
+            with contextlib.suppress(FileNotFoundError):
+                tmp.unlink()
+                removed.append(tmp)
+    return removed
+
+
+def plan_trial(trial: Trial, force: bool = False) -> tuple[str, str]:
+    """What :func:`run_trial` would do, without doing it: ``(action, why)``.
+
+    Actions: ``"detect + fit"``, ``"fit"``, ``"plot"``, ``"up to date"``, ``"fails"``.
+    Reads the videos' headers, the detections and the results' sidecars; writes nothing.
+    """
+    from videotrack.detect import detections_status
+    from videotrack.pipeline import check_detection_views, load_model, results_stale_reason
+
+    if trial.config is None:
+        return "fails", trial.error or "no config"
+    if force:
+        return "detect + fit", "--force"
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", VideoTrackWarning)
+            out = trial_outputs(trial.config)
+            reason, detections = detections_status(trial.config, output=out.detections)
+            if reason is not None:
+                return "detect + fit", reason
+            with _LOAD_LOCK:
+                model = load_model(trial.config)
+            check_detection_views(model, detections, out.detections)
+            reason = results_stale_reason(model, out.detections, out.results,
+                                          detections.n_records)
+            if reason is not None:
+                return "fit", reason
+            if trial.config["fit"]["plot"] and _older(out.plot, out.results):
+                return "plot", "no plot of the current results"
+            return "up to date", ""
+    except LocatedError as err:
+        return "fails", str(err)
+
+
+# -- many trials --------------------------------------------------------------------------------
+def run_batch(
+    trials: Sequence[Trial],
+    *,
+    force: bool = False,
+    jobs: int = 1,
+    scheduler: str | None = None,
+    on_report: Callable[[TrialReport], object] | None = None,
+    progress: Progress | None = None,
+) -> list[TrialReport]:
+    """Run trials and return their reports in the order of ``trials``.
+
+    Parameters
+    ----------
+    trials : sequence of Trial
+    force : bool
+        Recompute up-to-date outputs.
+    jobs : int
+        Trials at a time on this machine, each in its own process with
+        ``cores // jobs`` numba threads (1: in this process, on every core).
+    scheduler : str, optional
+        Address (``tcp://host:8786``) or scheduler file (JSON) of a Dask cluster: each
+        trial is a task there, on one thread unless its ``[fit] jobs`` says otherwise;
+        ``jobs`` is then ignored. Workers need VideoTrack installed and the project's
+        files at the same paths.
+    on_report : callable, optional
+        Called in this process with each report as its trial finishes.
+    progress : callable, optional
+        ``progress(done, added_to_total)`` for a frames bar (per finished trial with Dask).
+    """
+    reports: dict[str, TrialReport] = {}
+
+    def finished(report: TrialReport) -> None:
+        reports[report.name] = report
+        if on_report is not None:
+            on_report(report)
+
+    if scheduler is not None:
+        _run_dask(trials, force, scheduler, finished, progress)
+    elif jobs <= 1 or len(trials) <= 1:
+        threads = available_cores()
+        for trial in trials:
+            finished(run_trial(trial, force, threads, progress))
+    else:
+        _run_pool(trials, force, jobs, finished, progress)
+    return [reports[t.name] for t in trials]
+
+
+#: The frames-progress queue of a pool worker (set by :func:`_init_worker`).
+_QUEUE = None
+
+
+def _init_worker(queue, parent: int) -> None:
+    """Pool worker start: report progress through ``queue``; die with the batch process."""
+    global _QUEUE
+    _QUEUE = queue
+    if sys.platform.startswith("linux"):  # a killed batch must not leave workers writing
+        import ctypes
+        import signal
+
+        with contextlib.suppress(OSError, AttributeError):
+            ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+        if os.getppid() != parent:  # the parent died before prctl took effect
+            os._exit(1)
+
+
+def _queue_progress(done: int, total: int) -> None:
+    _QUEUE.put((done, total))
+
+
+def _run_pool(trials, force, jobs, finished, progress) -> None:
+    """Trials on ``jobs`` worker processes; a crashed worker costs its trials one retry."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures.process import BrokenProcessPool
+
+    # spawn: fork would copy the locks of this process's threads (progress bars, queues)
+    ctx = multiprocessing.get_context("spawn")
+    queue = ctx.SimpleQueue()
+    threads = max(1, available_cores() // jobs)
+    drain = None
+    if progress is not None:
+        def pump() -> None:
+            while (item := queue.get()) is not None:
+                progress(*item)
+
+        drain = threading.Thread(target=pump, daemon=True)
+        drain.start()
+    order = {t.name: i for i, t in enumerate(trials)}
+    pending, crashes = list(trials), dict.fromkeys(order, 0)
+    try:
+        while pending:
+            pool = ProcessPoolExecutor(min(jobs, len(pending)), mp_context=ctx,
+                                       initializer=_init_worker, initargs=(queue, os.getpid()))
+            try:
+                futures = {pool.submit(run_trial, t, force, threads,
+                                       _queue_progress if progress else None): t
+                           for t in pending}
+                pending = []
+                for future in as_completed(futures):
+                    trial = futures[future]
+                    try:
+                        finished(future.result())
+                    except BrokenProcessPool:
+                        crashes[trial.name] += 1
+                        if crashes[trial.name] < 2:
+                            pending.append(trial)
+                        else:
+                            finished(TrialReport(trial.name, FAILED, message=(
+                                "its worker process died twice (killed, or out of memory?)")))
+            except BaseException:
+                pool.shutdown(wait=False, cancel_futures=True)
+                for proc in list(getattr(pool, "_processes", {}).values()):
+                    with contextlib.suppress(OSError):
+                        proc.kill()
+                raise
+            pool.shutdown()
+            pending.sort(key=lambda t: order[t.name])
+    finally:
+        if drain is not None:
+            queue.put(None)
+            drain.join(timeout=5)
+
+
+def connect(address: str, timeout: float = 30.0):
+    """A Dask client for a scheduler address or a scheduler file (waits for the file, as
+    when the scheduler has just been started beside).
+
+    Raises
+    ------
+    VideoTrackError
+        dask.distributed missing, no scheduler file after ``timeout``, scheduler unreachable.
+    """
+    try:
+        from dask.distributed import Client
+    except ImportError:
+        raise VideoTrackError("needs dask.distributed: python -m pip install "
+                              "'videotrack[dask]'", field="--scheduler") from None
+    is_file = "://" not in address and (address.endswith(".json") or Path(address).is_file())
+    try:
+        if is_file:
+            deadline = time.monotonic() + timeout
+            while not Path(address).is_file():
+                if time.monotonic() > deadline:
+                    raise VideoTrackError(f"no scheduler file after {timeout:g} s",
+                                          file=address, field="--scheduler")
+                time.sleep(0.1)
+            return Client(scheduler_file=address, timeout=timeout)
+        return Client(address, timeout=timeout)
+    except (OSError, TimeoutError, ValueError) as err:
+        raise VideoTrackError(f"cannot connect to the Dask scheduler {address}: {err}",
+                              field="--scheduler") from None
+
+
+def _run_dask(trials, force, address, finished, progress) -> None:
+    """Trials as tasks of a Dask cluster; a lost task is a failed trial."""
+    from dask.distributed import as_completed
+
+    client = connect(address)
+    batch = uuid.uuid4().hex[:8]
+    with client:
+        futures = {client.submit(run_trial, t, force, 1, None, pure=False,
+                                 key=f"videotrack-{batch}-{i}"): t
+                   for i, t in enumerate(trials)}
+        try:
+            for future in as_completed(futures):
+                trial = futures[future]
+                try:
+                    report = future.result()
+                except Exception as err:  # a worker died, or the cluster lost the task
+                    report = TrialReport(trial.name, FAILED,
+                                         message=f"Dask task failed: {type(err).__name__}: "
+                                                 f"{err}")
+                if progress is not None and "fit" in report.steps:
+                    progress(report.frames, report.frames)
+                finished(report)
+        except BaseException:
+            client.cancel(list(futures))
+            raise
+
+
+# -- reporting ----------------------------------------------------------------------------------
+def _num(value: float, digits: int) -> str:
+    return "" if value != value else f"{value:.{digits}f}"
+
+
+def summary_rows(reports: Sequence[TrialReport]) -> list[tuple[str, ...]]:
+    """One row per trial, the cells of :data:`SUMMARY_COLUMNS`."""
+    return [(r.name, r.state, str(r.frames) if r.frames else "", _num(r.median_error, 3),
+             _num(r.bad_pct, 1), f"{r.seconds:.1f}", r.message) for r in reports]
+
+
+def summary_csv(reports: Sequence[TrialReport]) -> str:
+    """The project summary table as CSV text."""
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    writer.writerow(SUMMARY_COLUMNS)
+    writer.writerows(summary_rows(reports))
+    return buf.getvalue()
+
+
+def write_summary(reports: Sequence[TrialReport], path: str | os.PathLike) -> Path:
+    """Write :func:`summary_csv` atomically."""
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(path, summary_csv(reports))
+    return Path(path)
+
+
+def format_summary(reports: Sequence[TrialReport]) -> str:
+    """The summary as a terminal table (failures' messages listed below it)."""
+    head = ("trial", "state", "frames", "median E (px)", "bad (%)", "time (s)")
+    table = text_table(head, [row[:6] for row in summary_rows(reports)], left=2)
+    failed = [f"  {r.name}: {r.message}" for r in reports if r.state == FAILED]
+    return table + ("\nfailed:\n" + "\n".join(failed) if failed else "")
+
+
+def count_states(reports: Sequence[TrialReport]) -> str:
+    """``"3 done, 1 up to date, 1 failed"``."""
+    counts = {s: sum(r.state == s for r in reports) for s in (DONE, UP_TO_DATE, FAILED)}
+    return ", ".join(f"{n} {s}" for s, n in counts.items() if n) or "nothing"
+
+
+class RunLog:
+    """The log of one batch run: ``PROJECT/logs/batch-<date>-<time>.log``, written as the
+    run goes (so a killed run's log shows how far it got)."""
+
+    def __init__(self, project: Project) -> None:
+        project.logs.mkdir(parents=True, exist_ok=True)
+        stamp = time.strftime("%Y%m%d-%H%M%S")
+        for k in range(1000):
+            self.path = project.logs / f"batch-{stamp}{'' if not k else f'-{k}'}.log"
+            try:
+                self._fh = open(self.path, "x", encoding="utf-8", buffering=1)  # noqa: SIM115
+                break
+            except FileExistsError:
+                continue
+        self.write(f"videotrack batch, {time.strftime('%Y-%m-%d %H:%M:%S')}: python "
+                   f"{platform.python_version()}, {platform.node()}, {available_cores()} cores")
+
+    def write(self, line: str) -> None:
+        self._fh.write(line + "\n")
+
+    def report(self, r: TrialReport) -> None:
+        what = f" ({', '.join(r.steps)})" if r.steps else ""
+        text = (f"{r.name}: {r.state}{what} in {r.seconds:.1f} s" + (
+            f": {r.message}" if r.message else
+            f": {r.frames} frames, median E {r.median_error:.3f} px, {r.bad_pct:.1f} % bad"))
+        self.write(f"[{time.strftime('%H:%M:%S')}] {text}")
+        for line in r.log:
+            self.write("    " + line.replace("\n", "\n    "))
+
+    def close(self) -> None:
+        self._fh.close()
+
+
+@contextlib.contextmanager
+def project_lock(project: Project) -> Iterator[None]:
+    """Hold the project for one batch run (two at once would undo each other's temporary
+    files); the lock goes with the process, also when it is killed."""
+    project.logs.mkdir(parents=True, exist_ok=True)
+    try:
+        import fcntl
+    except ImportError:  # no advisory locks on this platform
+        yield
+        return
+    fd = os.open(project.logs, os.O_RDONLY)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise VideoTrackError("another 'videotrack batch' is running on this project",
+                                  file=project.root) from None
+        yield
+    finally:
+        os.close(fd)

@@ -1,0 +1,148 @@
+"""``videotrack batch``: detect and fit every trial of a project, resumably, on all cores or
+a Dask cluster."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+EXAMPLES = """\
+examples:
+  # every trial of the project, one per core; run it again after a crash or a reboot
+  videotrack batch myproject
+  # what would run, and why (nothing is written)
+  videotrack batch myproject --dry-run
+  # two trials of session 1 again, recomputing although they are up to date
+  videotrack batch myproject --trial 'session1/trial0[12]' --force
+  # on a Dask cluster (a scheduler address, or the file 'dask scheduler' wrote)
+  videotrack batch myproject --scheduler tcp://head-node:8786
+
+a project (see docs/batch.md):
+  myproject/config.toml                 settings all trials share, e.g.
+                                          [chain]      path = "chain.xml"
+                                          [cameras]    path = "cameras.toml"
+                                          [[views]] ... [[filters.steps]] ...
+  myproject/session1/config.toml        optional: keys that differ in session 1
+  myproject/session1/trial01/walk.avi   a trial: a folder with its video(s)
+  myproject/session1/trial01/config.toml  optional: keys that differ in this trial
+
+Outputs go beside each video (walk.detections.npz, walk.results.csv + .json, .png with
+[fit] plot); myproject/summary.csv lists every trial (frames, median error, % bad frames,
+time) and myproject/logs/ holds one log per run. Trials whose outputs are up to date
+(same videos, files and parameters) are skipped; an interrupted fit resumes where it
+stopped. Exit status 1 when a trial failed (the others still ran).
+"""
+
+
+def add_parser(subparsers) -> None:
+    p = subparsers.add_parser(
+        "batch",
+        help="detect and fit every trial of a project folder (resumable, parallel, Dask)",
+        description=(
+            "Find every trial of a project folder (its config.toml files are inherited "
+            "down the tree), detect markers and fit the chain in each, skipping what is up "
+            "to date, and write a summary table. Trials run in parallel on this machine "
+            "(--jobs) or as tasks of a Dask cluster (--scheduler); results are the same "
+            "either way. A failing trial is reported and the others go on."
+        ),
+        epilog=EXAMPLES,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("project", type=Path, help="project folder (holding config.toml)")
+    p.add_argument("--trial", "-t", action="append", default=[], metavar="PATTERN",
+                   help="only trials whose names (e.g. session1/trial01) match this glob "
+                        "pattern (repeatable)")
+    p.add_argument("--jobs", "-j", type=int, metavar="N",
+                   help="trials at a time, one process each (default: [batch] jobs, else "
+                        "one per core); each gets cores/N fitting threads")
+    p.add_argument("--force", action="store_true",
+                   help="recompute although the outputs are up to date")
+    p.add_argument("--dry-run", "-n", action="store_true",
+                   help="list what would run and why; write nothing")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="run the trials on this Dask cluster: tcp://host:port or a "
+                        "scheduler file (JSON)")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from tqdm import tqdm
+
+    from videotrack.batch import (
+        FAILED,
+        RunLog,
+        available_cores,
+        count_states,
+        format_summary,
+        plan_trial,
+        project_lock,
+        run_batch,
+        write_summary,
+    )
+    from videotrack.errors import VideoTrackError
+    from videotrack.project import open_project
+    from videotrack.tables import text_table
+
+    if args.jobs is not None and args.jobs < 0:
+        raise VideoTrackError("must be at least 0 (0: one per core)", field="--jobs")
+    project = open_project(args.project)
+    trials = project.select(args.trial)
+    cores = available_cores()
+    jobs = args.jobs if args.jobs is not None else project.batch["jobs"]
+    jobs = min(jobs or cores, len(trials))
+    if args.dry_run:
+        rows = []
+        for trial in tqdm(trials, desc="checking", unit="trial", leave=False, file=sys.stderr,
+                          disable=None):
+            rows.append((trial.name, *plan_trial(trial, args.force)))
+        print(text_table(("trial", "action", "why"), rows, left=3))
+        work = sum(r[1] not in ("up to date", "fails") for r in rows)
+        print(f"{len(rows)} trials: {work} to process, "
+              f"{sum(r[1] == 'up to date' for r in rows)} up to date, "
+              f"{sum(r[1] == 'fails' for r in rows)} failing (dry run: nothing written)")
+        for folder, why in project.ignored:
+            print(f"not a trial: {folder.relative_to(project.root).as_posix()} ({why})")
+        return 0
+
+    with project_lock(project):
+        log = RunLog(project)
+        try:
+            where = (f"Dask cluster {args.scheduler}" if args.scheduler else
+                     f"{jobs} process(es) x {max(1, cores // jobs)} thread(s)" if jobs > 1
+                     else f"this process, {cores} thread(s)")
+            log.write(f"command: videotrack {' '.join(sys.argv[1:])}")
+            log.write(f"project {project.root}: {len(trials)} trial(s) on {where}"
+                      f"{', --force' if args.force else ''}")
+            for folder, why in project.ignored:
+                log.write(f"not a trial: {folder.relative_to(project.root).as_posix()} ({why})")
+            with tqdm(total=len(trials), desc="trials", unit="trial", file=sys.stderr,
+                      position=0, disable=None) as trial_bar, \
+                    tqdm(total=0, desc="frames", unit="frame", file=sys.stderr, position=1,
+                         leave=False, disable=None) as frame_bar:
+                def on_report(report) -> None:
+                    log.report(report)
+                    for warning in report.warnings:
+                        tqdm.write(f"videotrack: warning: {report.name}: {warning}",
+                                   file=sys.stderr)
+                    if report.state == FAILED:
+                        tqdm.write(f"videotrack: {report.name} failed: {report.message}",
+                                   file=sys.stderr)
+                    trial_bar.update(1)
+
+                def on_frames(done: int, total: int) -> None:
+                    if total:
+                        frame_bar.total += total
+                        frame_bar.refresh()
+                    frame_bar.update(done)
+
+                reports = run_batch(trials, force=args.force, jobs=jobs,
+                                    scheduler=args.scheduler, on_report=on_report,
+                                    progress=on_frames)
+            summary = write_summary(reports, project.summary_path)
+            log.write(f"finished: {count_states(reports)}; summary {summary}")
+        finally:
+            log.close()
+    print(format_summary(reports))
+    print(f"{len(reports)} trials: {count_states(reports)}; wrote {summary}; log {log.path}")
+    return 1 if any(r.state == FAILED for r in reports) else 0

@@ -1,0 +1,152 @@
+"""``videotrack histograms``: learn (Eq. 4), merge and inspect joint-angle histograms."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+EXAMPLES = """\
+examples:
+  # learn from two analysed videos (frames with status ok), write an archive
+  videotrack histograms update chain.xml walk01.results.csv walk02.results.csv -o learned.xml
+  # the same, written as a complete chain file with the learned histograms inside
+  videotrack histograms update chain.xml walk*.results.csv --as-chain -o chain-learned.xml
+  # combine archives of several experiments (weighted by their trial counts N)
+  videotrack histograms merge labA.xml labB.xml -o combined.xml
+  # look at them: a table per axis, and bar plots
+  videotrack histograms show chain-learned.xml --plot histograms.png
+
+Use a learned archive in a project with [chain] histograms = "learned.xml"; the annealing
+then steps by the learned spreads s(H) and stays where the movement was seen (Sect. 2.2).
+"""
+
+
+def add_parser(subparsers) -> None:
+    p = subparsers.add_parser(
+        "histograms", help="learn, merge and show joint-angle histograms",
+        description="Joint-angle histograms are the constraints and priors of the fit "
+                    "(paper Sect. 2.2): 360 one-degree bins per axis with a trial count N.",
+        epilog=EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = p.add_subparsers(dest="histograms_command", metavar="ACTION", required=True)
+
+    up = sub.add_parser("update", help="apply Eq. 4 with the angles of results files",
+                        description="Update the chain's histograms (or --archive) with the "
+                        "fitted angles of one or more results files, by Eq. 4 (each frame is "
+                        "one trial). Locked axes are left alone.", epilog=EXAMPLES,
+                        formatter_class=argparse.RawDescriptionHelpFormatter)
+    up.add_argument("chain", type=Path, help="chain XML the results were fitted with")
+    up.add_argument("results", type=Path, nargs="+", help="results CSV file(s)")
+    up.add_argument("--archive", type=Path, help="start from this archive instead")
+    up.add_argument("--all-frames", action="store_true",
+                    help="also learn from frames whose fit failed (default: ok frames only)")
+    up.add_argument("--as-chain", action="store_true",
+                    help="write a chain file with the histograms inside, not an archive")
+    up.add_argument("-o", "--output", type=Path, required=True, help="file to write")
+    up.set_defaults(func=run_update)
+
+    mg = sub.add_parser("merge", help="combine archives weighted by their trial counts",
+                        description="Merge histogram archives axis by axis: "
+                        "H = sum(N_i H_i) / sum(N_i).")
+    mg.add_argument("archives", type=Path, nargs="+", help="archive or chain XML files")
+    mg.add_argument("-o", "--output", type=Path, required=True, help="archive to write")
+    mg.set_defaults(func=run_merge)
+
+    sh = sub.add_parser("show", help="print (and plot) the histograms of a file",
+                        description="Per axis: trial count N, mean, s(H) and the support.")
+    sh.add_argument("file", type=Path, help="chain or archive XML")
+    sh.add_argument("--axis", action="append", metavar="JOINT.AXIS",
+                    help="only this axis (repeatable)")
+    sh.add_argument("--plot", type=Path, metavar="PNG", help="write bar plots to this PNG")
+    sh.set_defaults(func=run_show)
+
+
+def _load_any(path: Path):
+    """An archive from an archive file or from a chain file's histograms."""
+    from kinematics.chain_xml import load_body
+    from kinematics.errors import KinematicsError
+    from kinematics.histogram_xml import archive_from_body, load_archive
+
+    try:
+        return load_archive(path)
+    except KinematicsError as err:
+        if "root element is <body>" not in err.message:
+            raise
+    return archive_from_body(load_body(path))
+
+
+def _angles_for(body, results_paths, all_frames: bool):
+    import numpy as np
+
+    from videotrack.errors import VideoTrackError
+    from videotrack.results import read_results
+
+    rows = []
+    for path in results_paths:
+        res = read_results(path)
+        missing = [lb for lb in body.axis_labels if lb not in res.axis_labels]
+        if missing:
+            raise VideoTrackError(f"no column for axis {missing[0]} of the chain",
+                                  file=path, line=1)
+        cols = [res.axis_labels.index(lb) for lb in body.axis_labels]
+        keep = np.ones(len(res), bool) if all_frames else res.ok_mask()
+        rows.append(res.angles_deg[keep][:, cols])
+    return np.concatenate(rows) if rows else np.empty((0, body.n_axes))
+
+
+def run_update(args) -> int:
+    from kinematics.chain_xml import load_body, save_body
+    from kinematics.histogram_xml import (
+        apply_archive,
+        archive_from_body,
+        load_archive,
+        save_archive,
+        update_archive,
+    )
+
+    body = load_body(args.chain)
+    archive = load_archive(args.archive) if args.archive else archive_from_body(body)
+    angles = _angles_for(body, args.results, args.all_frames)
+    learned = update_archive(archive, body, angles)
+    args.output.parent.mkdir(parents=True, exist_ok=True)
+    if args.as_chain:
+        save_body(args.output, apply_archive(body, learned))
+    else:
+        save_archive(args.output, learned)
+    kind = "chain" if args.as_chain else "archive"
+    print(f"learned from {angles.shape[0]} frames of {len(args.results)} file(s); "
+          f"wrote {kind} {args.output}")
+    return 0
+
+
+def run_merge(args) -> int:
+    from kinematics.histogram_xml import merge_archives, save_archive
+
+    merged = merge_archives([_load_any(p) for p in args.archives])
+    args.output.parent.mkdir(parents=True, exist_ok=True)
+    save_archive(args.output, merged)
+    print(f"merged {len(args.archives)} archives ({len(merged)} axes); wrote {args.output}")
+    return 0
+
+
+def run_show(args) -> int:
+    from videotrack.errors import VideoTrackError
+
+    archive = _load_any(args.file)
+    items = [(f"{joint}.{axis}", h) for (_, joint, axis), h in archive.items()]
+    if args.axis:
+        unknown = [a for a in args.axis if a not in dict(items)]
+        if unknown:
+            raise VideoTrackError(f"no axis {unknown[0]} (have {', '.join(n for n, _ in items)})",
+                                  field="--axis")
+        items = [(n, h) for n, h in items if n in args.axis]
+    print(f"{'axis':<20} {'N':>7} {'mean':>8} {'s(H)':>7}  support")
+    for name, h in items:
+        lo, hi = h.support_deg()
+        mean = lo + (h.mean_deg() - lo) % 360.0  # within the support, e.g. 182 not -178
+        print(f"{name:<20} {h.n_trials:>7} {mean:>8.1f} {h.std_deg():>7.2f}  "
+              f"[{lo:g}, {hi:g}]")
+    if args.plot:
+        from videotrack.plots import plot_histograms
+
+        print(f"wrote {plot_histograms(items, args.plot)}")
+    return 0

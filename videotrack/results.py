@@ -1,0 +1,236 @@
+"""Results files: one CSV per video a person can open, plus a JSON sidecar.
+
+The CSV has one row per analysed image (frame, or field when de-interlaced)::
+
+    frame, video_frame, field, time, <joint>.<axis> ... (degrees), error, error.<view> ...,
+    runs, iterations, status, <chain>.root.x/y/z ..., <marker>.x/y/z ..., <joint>.x/y/z ...
+
+``status`` is ``ok``, ``reanalysed``, ``failed``, ``no-detections`` or ``corrected`` (set by
+hand in the GUI). Empty cells are NaN. The sidecar ``<results>.json`` records the seed, every
+fitting parameter, the chain, cameras and detections used (with content hashes) so any run
+can be replayed and stale results recognised. Both are written atomically.
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import io
+import json
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from kinematics.fileio import atomic_write_text
+from kinematics.fk import forward_kinematics
+from kinematics.model import Body
+from kinematics.packing import pack_body
+from videotrack.errors import VideoTrackError
+from videotrack.tables import format_cell
+
+STATUSES = ("ok", "reanalysed", "failed", "no-detections", "corrected")
+RESULTS_FORMAT = 1
+
+
+@dataclass(frozen=True, eq=False)
+class Results:
+    """Fitted postures of a video, with everything the CSV holds.
+
+    Shapes: ``n`` rows, ``a`` axes, ``v`` views, ``c`` chains, ``m`` markers, ``j`` joints.
+    """
+
+    axis_labels: tuple[str, ...]
+    view_names: tuple[str, ...]
+    chain_names: tuple[str, ...]
+    marker_names: tuple[str, ...]
+    joint_names: tuple[str, ...]
+    frames: np.ndarray  # (n,) record index in the detections
+    video_frames: np.ndarray  # (n,) frame of the video
+    fields: np.ndarray  # (n,) 0/1 field parity, -1 for whole frames
+    times: np.ndarray  # (n,) seconds
+    angles_deg: np.ndarray  # (n, a)
+    error: np.ndarray  # (n,)
+    error_per_view: np.ndarray  # (n, v)
+    runs: np.ndarray  # (n,)
+    iterations: np.ndarray  # (n,)
+    status: tuple[str, ...]  # (n,)
+    roots: np.ndarray  # (n, c, 3)
+    markers: np.ndarray  # (n, m, 3)
+    joints: np.ndarray  # (n, j, 3)
+
+    def __len__(self) -> int:
+        return self.frames.size
+
+    def ok_mask(self) -> np.ndarray:
+        """Rows whose fit met the error threshold (ok, re-analysed or corrected by hand)."""
+        return np.isin(np.array(self.status), ("ok", "reanalysed", "corrected"))
+
+    @property
+    def columns(self) -> list[str]:
+        cols = ["frame", "video_frame", "field", "time", *self.axis_labels, "error"]
+        cols += [f"error.{v}" for v in self.view_names]
+        cols += ["runs", "iterations", "status"]
+        cols += [f"{c}.root.{a}" for c in self.chain_names for a in "xyz"]
+        cols += [f"{p}.{a}" for p in (*self.marker_names, *self.joint_names) for a in "xyz"]
+        return cols
+
+
+def results_from_fit(body: Body, fit_results: Sequence, view_names: Sequence[str],
+                     detections=None) -> Results:
+    """Build :class:`Results` from the fitter's per-frame results (3D points by FK).
+
+    ``detections`` (a :class:`videotrack.detections.Detections`) supplies video frame, field
+    and time of each record; without it the record index stands for all three.
+    """
+    n = len(fit_results)
+    frames = np.array([r.frame for r in fit_results], dtype=np.int64)
+    angles = np.array([r.angles_deg for r in fit_results], dtype=float).reshape(n, body.n_axes)
+    roots = np.array([r.root_positions for r in fit_results], dtype=float).reshape(
+        n, len(body.chains), 3)
+    markers = np.full((n, len(body.marker_names), 3), np.nan)
+    joints = np.full((n, len(body.joint_names), 3), np.nan)
+    good = np.all(np.isfinite(angles), axis=1) & np.all(np.isfinite(roots), axis=(1, 2))
+    if good.any():
+        pose = forward_kinematics(pack_body(body), angles[good], roots[good])
+        markers[good], joints[good] = pose.markers, pose.joints
+    if detections is not None:
+        video_frames = np.asarray(detections.video_frames)[frames]
+        fields = np.asarray(detections.parities)[frames]
+        times = np.asarray(detections.times)[frames]
+    else:
+        video_frames, fields, times = frames.copy(), np.full(n, -1), frames.astype(float)
+    return Results(
+        axis_labels=tuple(body.axis_labels), view_names=tuple(view_names),
+        chain_names=tuple(c.name for c in body.chains),
+        marker_names=tuple(body.marker_names), joint_names=tuple(body.joint_names),
+        frames=frames, video_frames=np.asarray(video_frames, dtype=np.int64),
+        fields=np.asarray(fields, dtype=np.int64), times=np.asarray(times, dtype=float),
+        angles_deg=angles, error=np.array([r.error for r in fit_results], dtype=float),
+        error_per_view=np.array([r.error_per_view for r in fit_results], dtype=float).reshape(
+            n, len(view_names)),
+        runs=np.array([r.runs for r in fit_results], dtype=np.int64),
+        iterations=np.array([r.iterations for r in fit_results], dtype=np.int64),
+        status=tuple(r.status for r in fit_results), roots=roots, markers=markers,
+        joints=joints,
+    )
+
+
+def format_results(results: Results) -> str:
+    """CSV text of the results (see the module docstring for the columns)."""
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    writer.writerow(results.columns)
+    for i in range(len(results)):
+        numbers = [results.frames[i], results.video_frames[i], results.fields[i],
+                   results.times[i], *results.angles_deg[i], results.error[i],
+                   *results.error_per_view[i], results.runs[i], results.iterations[i]]
+        points = [*results.roots[i].ravel(), *results.markers[i].ravel(),
+                  *results.joints[i].ravel()]
+        writer.writerow([*(format_cell(float(v)) for v in numbers), results.status[i],
+                         *(format_cell(float(v)) for v in points)])
+    return buf.getvalue()
+
+
+def write_results(path: str | os.PathLike, results: Results, sidecar: Mapping) -> Path:
+    """Write ``path`` (CSV) and ``path`` with suffix ``.json`` (the sidecar), atomically.
+
+    The CSV is written last, so a complete CSV always has a matching sidecar; the sidecar
+    records the CSV's SHA-256 (``csv_sha256``), so a CSV left from an earlier run beside a
+    newer sidecar is recognised.
+    """
+    path = Path(path)
+    side = sidecar_path(path)
+    text = format_results(results)
+    # The CSV's hash tells a complete pair from one cut between the two writes.
+    meta = {"format": RESULTS_FORMAT, **sidecar, "rows": len(results),
+            "csv_sha256": hashlib.sha256(text.encode("utf-8")).hexdigest()}
+    atomic_write_text(side, json.dumps(meta, indent=2, sort_keys=True) + "\n")
+    atomic_write_text(path, text)
+    return path
+
+
+def sidecar_path(path: str | os.PathLike) -> Path:
+    path = Path(path)
+    return path.with_name(path.name + ".json")
+
+
+def read_sidecar(path: str | os.PathLike) -> dict:
+    """The sidecar of a results file ({} when absent)."""
+    side = sidecar_path(path)
+    if not side.exists():
+        return {}
+    try:
+        return json.loads(side.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+        raise VideoTrackError(f"unreadable results sidecar ({err})", file=side) from None
+
+
+def read_results(path: str | os.PathLike) -> Results:
+    """Read a results CSV written by :func:`write_results` (names come from its header)."""
+    try:
+        with open(path, newline="", encoding="utf-8") as fh:
+            rows = list(csv.reader(fh))
+    except FileNotFoundError:
+        raise VideoTrackError("no such results file", file=path) from None
+    except (OSError, UnicodeDecodeError, csv.Error) as err:
+        raise VideoTrackError(f"cannot read results: {err}", file=path) from None
+    if not rows or rows[0][:4] != ["frame", "video_frame", "field", "time"]:
+        raise VideoTrackError("not a VideoTrack results file (header must start with "
+                              "frame,video_frame,field,time)", file=path, line=1)
+    header = rows[0]
+    try:
+        i_err, i_runs, i_status = (header.index(k) for k in ("error", "runs", "status"))
+    except ValueError as err:
+        raise VideoTrackError(f"results header lacks a column ({err})", file=path,
+                              line=1) from None
+    axis_labels = tuple(header[4:i_err])
+    views = tuple(h[len("error."):] for h in header[i_err + 1:i_runs])
+    point_cols = header[i_status + 1:]
+    chains = tuple(h[:-len(".root.x")] for h in point_cols[::3] if h.endswith(".root.x"))
+    names = [h[:-2] for h in point_cols[3 * len(chains)::3]]
+    side = read_sidecar(path)
+    n_markers = int(side.get("markers", len(names)))
+    data = np.full((len(rows) - 1, len(header)), np.nan)
+    status = []
+    for r, row in enumerate(rows[1:]):
+        if len(row) != len(header):
+            raise VideoTrackError(f"row has {len(row)} cells, header has {len(header)}",
+                                  file=path, line=r + 2)
+        for c, cell in enumerate(row):
+            if c == i_status:
+                if cell not in STATUSES:
+                    raise VideoTrackError(f"unknown status '{cell}'", file=path, line=r + 2,
+                                          field="status")
+                status.append(cell)
+            elif cell:
+                try:
+                    data[r, c] = float(cell)
+                except ValueError:
+                    raise VideoTrackError(f"'{cell}' is not a number", file=path, line=r + 2,
+                                          field=header[c]) from None
+    n = data.shape[0]
+    points = data[:, i_status + 1:].reshape(n, -1, 3)
+    nc = len(chains)
+    return Results(
+        axis_labels=axis_labels, view_names=views, chain_names=chains,
+        marker_names=tuple(names[:n_markers]), joint_names=tuple(names[n_markers:]),
+        frames=data[:, 0].astype(np.int64), video_frames=data[:, 1].astype(np.int64),
+        fields=data[:, 2].astype(np.int64), times=data[:, 3],
+        angles_deg=data[:, 4:i_err], error=data[:, i_err],
+        error_per_view=data[:, i_err + 1:i_runs], runs=data[:, i_runs].astype(np.int64),
+        iterations=data[:, i_runs + 1].astype(np.int64), status=tuple(status),
+        roots=points[:, :nc], markers=points[:, nc:nc + n_markers],
+        joints=points[:, nc + n_markers:],
+    )
+
+
+def file_sha256(path: str | os.PathLike) -> str:
+    """Content hash recorded in sidecars (which inputs produced a result)."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
