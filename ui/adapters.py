@@ -138,8 +138,7 @@ def frame_table(results: Mapping, n_frames: int, n_views: int) -> FrameTable:
     status = [NOT_FITTED] * n_frames
     for f, r in results.items():
         if 0 <= f < n_frames:
-            error[f], runs[f], status[f] = r.error, r.runs, r.status
-            per_view[f] = r.error_per_view
+            error[f], per_view[f], runs[f], status[f] = table_row(r, n_views)
     return FrameTable(np.arange(n_frames, dtype=np.int64), error, per_view, runs, status)
 
 

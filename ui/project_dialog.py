@@ -406,8 +406,7 @@ class ProjectDialog(QDialog):
         self.step_list.blockSignals(True)
         self.step_list.clear()
         for k, step in enumerate(self.steps):
-            args = ", ".join(f"{a}={json.dumps(v)}" for a, v in step.items() if a != "type")
-            self.step_list.addItem(f"{k + 1}. {step['type']}" + (f" ({args})" if args else ""))
+            self.step_list.addItem(_step_text(k, step))
         if self.steps:
             self.step_list.setCurrentRow(min(select, len(self.steps) - 1))
         self.step_list.blockSignals(False)
@@ -430,10 +429,7 @@ class ProjectDialog(QDialog):
 
     def _step_edited(self, row: int) -> None:
         self.steps[row] = {"type": self.steps[row]["type"], **self.step_form.values()}
-        item = self.step_list.item(row)
-        args = ", ".join(f"{a}={json.dumps(v)}" for a, v in self.steps[row].items()
-                         if a != "type")
-        item.setText(f"{row + 1}. {self.steps[row]['type']}" + (f" ({args})" if args else ""))
+        self.step_list.item(row).setText(_step_text(row, self.steps[row]))
         self.schedule_preview()
 
     def set_step_value(self, row: int, key: str, value) -> None:
@@ -486,11 +482,8 @@ class ProjectDialog(QDialog):
         return raw
 
     def edited_config(self):
-        import tomli_w
-
-        from videotrack.config import parse_config
-
-        return parse_config(tomli_w.dumps(self.edited_raw()), self.session.config.path)
+        """The edited settings, validated (raises :class:`VideoTrackError`)."""
+        return self.session.parse_raw(self.edited_raw())
 
     # -- preview ------------------------------------------------------------------------
     def schedule_preview(self) -> None:
@@ -606,6 +599,12 @@ class ProjectDialog(QDialog):
     def reject(self) -> None:
         self._stop_preview()
         super().reject()
+
+
+def _step_text(row: int, step: dict) -> str:
+    """How a filter step is listed: ``2. erode (size=5)``."""
+    args = ", ".join(f"{k}={json.dumps(v)}" for k, v in step.items() if k != "type")
+    return f"{row + 1}. {step['type']}" + (f" ({args})" if args else "")
 
 
 def _start_value(key):

@@ -229,15 +229,21 @@ class Session(QObject):
             except LocatedError as err:
                 self.error.emit(str(err))
 
+    def parse_raw(self, raw: dict):
+        """Validate an edited project table as if it were the project file; returns the
+        :class:`~videotrack.config.Config` or raises :class:`VideoTrackError`."""
+        import tomli_w
+
+        from videotrack.config import parse_config
+
+        return parse_config(tomli_w.dumps(raw), self.config.path)
+
     def apply_config(self, raw: dict) -> bool:
         """Validate and apply an edited project config (views, filters, chain, annealing).
 
         The chain is reloaded when its file changed, kept with its edits otherwise; results
         whose axes do not fit the new chain are dropped. Marks the config unsaved.
         """
-        import tomli_w
-
-        from videotrack.config import parse_config
         from videotrack.detect import settings_from_config
         from videotrack.views import check_views
 
@@ -246,7 +252,7 @@ class Session(QObject):
                             "edit them there")
             return False
         try:
-            config = parse_config(tomli_w.dumps(raw), self.config.path)
+            config = self.parse_raw(raw)
             if self.videos is not None:  # views must fit the frames before anything changes
                 check_views(settings_from_config(config).views,
                             [(v.width, v.height) for v in self.videos.sources])
@@ -257,12 +263,16 @@ class Session(QObject):
                          or config["cameras"] != self.config["cameras"])
         self.raw_config = copy.deepcopy(raw)
         problems = self._install(config, keep_body=not chain_changed)
+        if chain_changed:
+            # edits of the old chain are gone with it, and so is undoing them
+            self._dirty.discard("chain")
+            self._undo.clear()
+            self._redo.clear()
+            self.undoChanged.emit()
         if self.body is not None and self.results:
             n_axes = self.body.n_axes
             if any(np.size(r.angles_deg) != n_axes for r in self.results.values()):
                 self.results, self.pins = {}, {}
-                self._undo.clear()
-                self._redo.clear()
                 problems.append("the results were made with another chain and were dropped")
         self._mark("config")
         self._check_detections()
