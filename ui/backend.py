@@ -24,7 +24,13 @@ from videotrack.pipeline import (
     results_sidecar,
 )
 from videotrack.project import command_config, trial_outputs
-from videotrack.results import STATUSES, Results, read_results, read_sidecar, results_from_fit
+from videotrack.results import (
+    STATUSES,
+    frame_results,
+    read_results,
+    read_sidecar,
+    results_from_fit,
+)
 from videotrack.results import write_results as _write_results
 
 __all__ = [
@@ -94,18 +100,6 @@ def output_paths(config) -> tuple[Path, Path]:
     """Where the project's (or trial's) detections and results files live."""
     outputs = trial_outputs(config)
     return outputs.detections, outputs.results
-
-
-def frame_results(table: Results, seed: int) -> dict[int, FrameResult]:
-    """The rows of a results file as the fitter's :class:`FrameResult`, keyed by frame."""
-    out = {}
-    for i in range(len(table)):
-        out[int(table.frames[i])] = FrameResult(
-            frame=int(table.frames[i]), angles_deg=np.array(table.angles_deg[i]),
-            error=float(table.error[i]), error_per_view=np.array(table.error_per_view[i]),
-            runs=int(table.runs[i]), iterations=int(table.iterations[i]), seed=int(seed),
-            status=table.status[i], root_positions=np.array(table.roots[i]))
-    return out
 
 
 def read_project_results(path: str | os.PathLike, body: Body,

@@ -29,6 +29,7 @@ from videotrack.errors import VideoTrackError
 from videotrack.results import (
     Results,
     file_sha256,
+    frame_results,
     read_results,
     read_sidecar,
     results_from_fit,
@@ -262,11 +263,4 @@ def _resume(partial: Path, sidecar: dict) -> dict[int, FrameResult]:
         table = read_results(partial)
     except VideoTrackError:
         return {}
-    out = {}
-    for i in range(len(table)):
-        out[int(table.frames[i])] = FrameResult(
-            frame=int(table.frames[i]), angles_deg=table.angles_deg[i], error=table.error[i],
-            error_per_view=table.error_per_view[i], runs=int(table.runs[i]),
-            iterations=int(table.iterations[i]), seed=int(meta["seed"]),
-            status=table.status[i], root_positions=table.roots[i])
-    return out
+    return frame_results(table, int(meta["seed"]))

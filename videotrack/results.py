@@ -227,6 +227,21 @@ def read_results(path: str | os.PathLike) -> Results:
     )
 
 
+def frame_results(table: Results, seed: int) -> dict:
+    """The rows of a results table as the fitter's ``FrameResult`` records, keyed by frame
+    (to resume a fit, or to edit results in the GUI)."""
+    from kinematics.anneal import FrameResult
+
+    return {
+        int(table.frames[i]): FrameResult(
+            frame=int(table.frames[i]), angles_deg=np.array(table.angles_deg[i]),
+            error=float(table.error[i]), error_per_view=np.array(table.error_per_view[i]),
+            runs=int(table.runs[i]), iterations=int(table.iterations[i]), seed=int(seed),
+            status=table.status[i], root_positions=np.array(table.roots[i]))
+        for i in range(len(table))
+    }
+
+
 def file_sha256(path: str | os.PathLike) -> str:
     """Content hash recorded in sidecars (which inputs produced a result)."""
     digest = hashlib.sha256()

@@ -108,9 +108,11 @@ def test_table_highlights_sorts_and_jumps(window, qtbot, wait_idle):
     assert s.frame == next(f for f in bad if f > 0)
 
 
-def test_cancel_from_the_window(window, qtbot, wait_idle):
+def test_cancel_from_the_window(window, qtbot, wait_idle, monkeypatch):
     from kinematics.anneal import AnnealParams
+    from ui import backend
 
+    monkeypatch.setattr(backend, "fit_chunk_size", lambda: 2)  # whatever the core count
     s = window.session
     s.set_params(AnnealParams(epsilon=0.0, max_runs=1).with_schedule(400_000))
     s.resultsChanged.connect(lambda *_: window.cancel_button.click())
@@ -120,6 +122,36 @@ def test_cancel_from_the_window(window, qtbot, wait_idle):
     assert 0 < len(s.results) < 12
     assert not window.cancel_button.isVisible()
     assert window.statusBar().currentMessage().startswith("cancelled after")
+
+
+def test_window_stays_responsive_while_fitting(window, qtbot, monkeypatch):
+    import time
+
+    from PySide6.QtCore import QTimer
+
+    from kinematics.anneal import AnnealParams
+    from ui import backend
+
+    monkeypatch.setattr(backend, "fit_chunk_size", lambda: 2)
+    s = window.session
+    # long enough (seconds) that a blocked event loop would show as one long gap
+    s.set_params(AnnealParams(epsilon=0.0, max_runs=1).with_schedule(2_000_000))
+    ticks = []
+    timer = QTimer()
+    timer.timeout.connect(lambda: ticks.append(time.perf_counter()))
+    timer.start(10)
+    arrived = []
+    s.resultsChanged.connect(lambda frames: arrived.append(len(s.results)))
+    window.act_fit_all.trigger()
+    while s.busy:  # the user steps through frames while the fit runs
+        window.act_next.trigger()
+        qtbot.wait(20)
+    timer.stop()
+    assert len(s.results) == 12 and len(arrived) > 1  # results came in several batches
+    gaps = np.diff(ticks)
+    busy = ticks[-1] - ticks[0]
+    assert len(ticks) > 10 and gaps.max() < min(1.0, busy / 2), (gaps.max(), busy)
+    assert s.frame == 11
 
 
 def test_chain_editor_length_edit_reprojects_and_commits(window, qtbot):

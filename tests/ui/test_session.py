@@ -79,7 +79,10 @@ def test_background_fit_to_completion_then_undo_redo(session, qtbot, wait_idle):
     assert len(s.results) == 12
 
 
-def test_cancel_a_fit_midway_keeps_what_arrived(session, qtbot, wait_idle):
+def test_cancel_a_fit_midway_keeps_what_arrived(session, qtbot, wait_idle, monkeypatch):
+    from ui import backend
+
+    monkeypatch.setattr(backend, "fit_chunk_size", lambda: 2)  # whatever the core count
     s = session
     # a long schedule without early stop: each batch of frames takes a noticeable time
     s.set_params(AnnealParams(epsilon=0.0, max_runs=1).with_schedule(400_000))
