@@ -63,6 +63,7 @@ def main() -> int:
     from PySide6.QtWidgets import QApplication, QMessageBox
 
     from ui.main_window import MainWindow
+    from videotrack.tables import read_table
 
     app = QApplication.instance() or QApplication([])
     app.setApplicationName("VideoTrack")
@@ -79,11 +80,14 @@ def main() -> int:
         settle(app, s)
         errors = {f: r.error for f, r in s.results.items()}
         worst = max(errors, key=errors.get)
-        # one frame set by hand, as a user fixing a bad frame would
+        # the worst frame fixed by hand, as a user would: the femur-tibia angle set to what
+        # the video shows (here: the ground truth), the rest re-fitted
+        columns, truth = read_table(folder / "truth.csv")
         s.set_frame(worst)
-        angles, _, _ = s.posture()
-        s.correct({8: float(angles[8])})
+        s.correct({8: float(truth[worst, columns.index("J2.gamma")])})
         settle(app, s)
+        print(f"frame {worst}: error {errors[worst]:.1f} px, corrected "
+              f"{s.results[worst].error:.1f} px")
         s.learn_histograms()
         good = sorted(f for f, r in s.results.items() if r.status == "ok")
         s.set_frame(good[len(good) // 2])

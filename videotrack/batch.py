@@ -129,6 +129,8 @@ def run_trial(trial: Trial, force: bool = False, threads: int = 1,
     lines: list[str] = []
     if trial.config is None:
         return TrialReport(trial.name, FAILED, message=trial.error or "no config")
+    # (The warnings machinery is per process: on a Dask worker running several trials in
+    # threads, a warning may be listed with another of its trials.)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", VideoTrackWarning)
         try:
@@ -362,9 +364,10 @@ def _run_pool(trials, force, jobs, finished, progress) -> None:
                         else:
                             finished(TrialReport(trial.name, FAILED, message=(
                                 "its worker process died twice (killed, or out of memory?)")))
-            except BaseException:
+            except BaseException:  # Ctrl-C: stop the workers now, not after their trials
+                workers = list((getattr(pool, "_processes", None) or {}).values())
                 pool.shutdown(wait=False, cancel_futures=True)
-                for proc in list(getattr(pool, "_processes", {}).values()):
+                for proc in workers:
                     with contextlib.suppress(OSError):
                         proc.kill()
                 raise
@@ -488,6 +491,9 @@ class RunLog:
                 break
             except FileExistsError:
                 continue
+            except OSError as err:
+                raise VideoTrackError(f"cannot write the log: {err.strerror}",
+                                      file=self.path) from None
         self.write(f"videotrack batch, {time.strftime('%Y-%m-%d %H:%M:%S')}: python "
                    f"{platform.python_version()}, {platform.node()}, {available_cores()} cores")
 

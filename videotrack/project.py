@@ -61,8 +61,9 @@ def _patterns_rule(patterns: list) -> str | None:
 
 BATCH = register_section(Section("batch", (
     Key("trials", "list[str]", ["*/*"], "Glob patterns of the trial folders, relative to the "
-        "project folder ('*/*': PROJECT/SESSION/TRIAL; '*': PROJECT/TRIAL). A folder without "
-        "a video is not a trial. Project config.toml only.", check=_patterns_rule),
+        "project folder ('*/*': PROJECT/SESSION/TRIAL; '*': PROJECT/TRIAL; '.': the project "
+        "folder is the one trial). A folder without a video is not a trial. Project "
+        "config.toml only.", check=_patterns_rule),
     Key("videos", "list[str]", ["*.avi", "*.mp4", "*.mov", "*.mkv"], "File-name patterns of "
         "a trial's videos in its folder; several matches are synchronised cameras, in name "
         "order (a view's 'video' index). Ignored where [video] path is set in the trial's "
@@ -179,7 +180,9 @@ def open_project(path: str | os.PathLike) -> Project:
     batch = BATCH.validate(root_layer.get("batch", {}), file=config_path, base=root)
     folders: dict[Path, None] = {}
     for pattern in batch["trials"]:
-        for folder in root.glob(pattern):
+        # "." (a single trial: the project folder itself) is no glob pattern to pathlib
+        for folder in [root] if PurePosixPath(pattern) == PurePosixPath(".") else root.glob(
+                pattern):
             rel = folder.relative_to(root).parts
             if folder.is_dir() and not any(p.startswith(".") for p in rel) and (
                     not rel or rel[0] != LOGS_NAME):

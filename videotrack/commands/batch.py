@@ -55,7 +55,8 @@ def add_parser(subparsers) -> None:
                         "pattern (repeatable)")
     p.add_argument("--jobs", "-j", type=int, metavar="N",
                    help="trials at a time, one process each (default: [batch] jobs, else "
-                        "one per core); each gets cores/N fitting threads")
+                        "one per core); each gets cores/N fitting threads; 1: one trial "
+                        "after the other in this process, on every core")
     p.add_argument("--force", action="store_true",
                    help="recompute although the outputs are up to date")
     p.add_argument("--dry-run", "-n", action="store_true",
@@ -141,6 +142,9 @@ def run(args) -> int:
                                     progress=on_frames)
             summary = write_summary(reports, project.summary_path)
             log.write(f"finished: {count_states(reports)}; summary {summary}")
+        except KeyboardInterrupt:
+            log.write("interrupted: run the same command again to go on")
+            raise
         finally:
             log.close()
     print(format_summary(reports))
