@@ -246,8 +246,8 @@ def validate_body(body: Body) -> None:
     """Raise :class:`KinematicsError` naming the element for the first rule broken.
 
     Rules: units known; names non-empty and unique per kind (joint names are unique in the
-    body because posture columns are ``joint.axis``); no marker named like a joint (3D
-    point columns are ``name.x``); each joint has one axis per rotation
+    body because posture columns are ``joint.axis``); no marker named like a joint and no
+    axis named x, y or z (3D point columns are ``name.x``); each joint has one axis per rotation
     y, x, z with unique names; numbers finite; min <= max; locked values inside the range;
     segment lengths >= 0; a ``marker`` root names a marker of its chain.
     """
@@ -278,6 +278,12 @@ def validate_body(body: Body) -> None:
         names = [a.name for a in joint.axes]
         if len(set(names)) != 3:
             raise KinematicsError(f"duplicate axis names {names}", field=where)
+        for a in joint.axes:
+            if a.name in AXIS_ORDER:
+                raise KinematicsError(
+                    f"axis name '{a.name}' would read like a 3D coordinate in results "
+                    f"('{joint.name}.{a.name}'); name it e.g. 'r{a.name}'",
+                    field=f"{where} axis '{a.name}'")
         for a in joint.axes:
             _check_axis(a, f"{where} axis '{a.name}'")
         for seg in joint.segments:

@@ -169,6 +169,9 @@ def _syntax_error(data: bytes, err: etree.XMLSyntaxError, max_depth: int) -> Kin
         msg = "file holds no XML element"
     elif msg.startswith("Excessive depth"):  # libxml2's own limit, hit within one chunk
         msg = _too_deep(max_depth)
+    elif line is not None and line >= data.count(b"\n") + 1 and data.rfind(b"<") > data.rfind(
+            b">"):  # an unclosed tag at the very end
+        msg = "file ends in the middle of a tag; truncated file?"
     else:
         msg = "malformed XML: " + msg[:1].lower() + msg[1:]
     return KinematicsError(msg.strip(), line=line)
@@ -189,8 +192,8 @@ def _schema() -> etree.XMLSchema:
 def validate(elem: Element) -> None:
     """Validate a parsed document against ``chain.xsd`` (filling in attribute defaults);
     raise :class:`KinematicsError` with the line and element of the first problem."""
-    schema = _schema()
-    with _SCHEMA_LOCK:  # one schema object, shared; its error_log is per call
+    with _SCHEMA_LOCK:  # one schema object, built once and shared; libxml2 is not re-entrant
+        schema = _schema()
         if schema.validate(elem):
             return
         first = schema.error_log[0]

@@ -16,7 +16,7 @@ SHARED_DATA = REPO.parent / "shared" / "data"
 def hinge(name: str, axis_name: str, lo: float, hi: float, segment: Segment,
           orientation=(0.0, 0.0, 0.0)) -> Joint:
     """A joint with y and x locked at 0 and a free z axis (the paper's hinge joints)."""
-    return Joint(name, (Axis.fixed("y", "y"), Axis.fixed("x", "x"),
+    return Joint(name, (Axis.fixed("ry", "y"), Axis.fixed("rx", "x"),
                         Axis.free(axis_name, "z", lo, hi)), orientation, (0, 0, 0), (segment,))
 
 
@@ -49,7 +49,7 @@ def stick_insect_body() -> Body:
     thorax = Segment("thorax", 12.0, (90.0, 0.0, 0.0),
                      markers=(Marker("M0", (0, 0, -12.0)), Marker("M1", (0, 0, -3.0))),
                      joints=(j1,))
-    j0 = Joint("J0", (Axis.free("pi", "y", -35, 35), Axis.fixed("x", "x"),
+    j0 = Joint("J0", (Axis.free("pi", "y", -35, 35), Axis.fixed("rx", "x"),
                       Axis.free("rho", "z", 0, 20)), segments=(thorax,))
     chain = Chain("frontleg-right", j0, Root("marker", marker="M0"))
     return Body("stick-insect-frontleg", (chain,), units="mm")

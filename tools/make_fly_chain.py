@@ -40,7 +40,7 @@ LENGTHS = {"F": (0.365, 0.705, 0.518, 0.565), "M": (0.181, 0.784, 0.667, 0.607),
 
 
 def hinge(name: str, lo: float, hi: float, segment: Segment) -> Joint:
-    return Joint(name, (Axis.fixed("y", "y"), Axis.fixed("x", "x"),
+    return Joint(name, (Axis.fixed("ry", "y"), Axis.fixed("rx", "x"),
                         Axis.free("pitch", "z", lo, hi)), segments=(segment,))
 
 
@@ -56,7 +56,7 @@ def leg(side: str, pos: str) -> Chain:
     tibia_seg = Segment(f"{p}_tibia", tibia, markers=(Marker(f"{p}_TiTa_mk"),), joints=(tita,))
     fti = hinge(f"{p}_FTi", -170, 0, tibia_seg)
     femur_seg = Segment(f"{p}_femur", femur, markers=(Marker(f"{p}_FTi_mk"),), joints=(fti,))
-    ctr = Joint(f"{p}_CTr", (Axis.fixed("y", "y"), Axis.free("roll", "x", -90, 90),
+    ctr = Joint(f"{p}_CTr", (Axis.fixed("ry", "y"), Axis.free("roll", "x", -90, 90),
                              Axis.free("pitch", "z", 20, 160)), segments=(femur_seg,))
     coxa_seg = Segment(f"{p}_coxa", coxa,
                        markers=(Marker(f"{p}_ThC_mk", (-coxa, 0.0, 0.0)), Marker(f"{p}_CTr_mk")),

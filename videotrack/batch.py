@@ -97,12 +97,6 @@ def available_cores() -> int:
         return os.cpu_count() or 1
 
 
-#: Serialises loading chains in one process: libxml2 fails when two threads build the chain
-#: schema at once (kinematics.safe_xml caches it, but builds it outside its lock), as on a
-#: Dask worker with several threads.
-_LOAD_LOCK = threading.Lock()
-
-
 # -- one trial --------------------------------------------------------------------------------
 def run_trial(trial: Trial, force: bool = False, threads: int = 1,
               progress: Progress | None = None) -> TrialReport:
@@ -172,8 +166,7 @@ def _run_trial(trial: Trial, force: bool, threads: int, progress: Progress | Non
     if not fresh:
         steps.append("detect")
         lines.append(f"detected {detections.n_records} records into {det_path.name}")
-    with _LOAD_LOCK:
-        model = load_model(config)
+    model = load_model(config)
     check_detection_views(model, detections, det_path)
     n = detections.n_records
     reason = "--force" if force else results_stale_reason(model, det_path, out.results, n)
@@ -240,8 +233,7 @@ def plan_trial(trial: Trial, force: bool = False) -> tuple[str, str]:
             reason, detections = detections_status(trial.config, output=out.detections)
             if reason is not None:
                 return "detect + fit", reason
-            with _LOAD_LOCK:
-                model = load_model(trial.config)
+            model = load_model(trial.config)
             check_detection_views(model, detections, out.detections)
             reason = results_stale_reason(model, out.detections, out.results,
                                           detections.n_records)

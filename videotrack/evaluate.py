@@ -7,8 +7,6 @@ degrees and ``point.x/y/z`` in chain units, such as the ``truth.csv`` of
 detections: NaN angles) are left out of the scores and counted.
 
 Angle differences are wrapped into [-180°, 180°), so 359° against 1° is an error of 2°.
-An axis and a joint centre's coordinate may share a column name (axis ``J1.x``, point
-``J1.x``): an axis is the first column of its name, a coordinate the last.
 Derived axes (the paper's α+β) are given as sums of axes, ``J0.alpha+J1.beta``; a sum is
 compared with the same sum of the true angles, then wrapped.
 """
@@ -147,7 +145,7 @@ def evaluate(results: Results, truth_columns: Sequence[str], truth: np.ndarray,
     VideoTrackError
         No ``frame`` column, no axis in common, a bad sum.
     """
-    cols, last = _columns(truth_columns)
+    cols = _columns(truth_columns)
     labels = list(results.axis_labels)
     if not any(lb in cols for lb in labels):
         raise VideoTrackError(f"no axis of the results ({', '.join(labels)}) is a column of "
@@ -184,9 +182,9 @@ def evaluate(results: Results, truth_columns: Sequence[str], truth: np.ndarray,
                           (results.joint_names, results.joints)):
         for m, name in enumerate(names):
             keys = [f"{name}.{a}" for a in "xyz"]
-            if not all(k in last for k in keys):
+            if not all(k in cols for k in keys):
                 continue
-            t = truth[rows_t[scored]][:, [last[k] for k in keys]]
+            t = truth[rows_t[scored]][:, [cols[k] for k in keys]]
             d = np.linalg.norm(points[sel, m] - t, axis=1)
             d = d[np.isfinite(d)]
             stats.append(ErrorStats(name, "point", len(d), _rms(d), _median(d), _max(d),
@@ -200,7 +198,7 @@ def truth_angles(results: Results, truth_columns: Sequence[str], truth: np.ndarr
                  ) -> np.ndarray:
     """The true angles of each results row, shape (n_rows, n_axes), degrees; NaN where the
     truth has no such frame or axis (e.g. to draw beside the fit)."""
-    cols, _ = _columns(truth_columns)
+    cols = _columns(truth_columns)
     rows_t = _truth_rows(results, cols, truth)
     out = np.full(results.angles_deg.shape, np.nan)
     for i, lb in enumerate(results.axis_labels):
@@ -209,15 +207,15 @@ def truth_angles(results: Results, truth_columns: Sequence[str], truth: np.ndarr
     return out
 
 
-def _columns(truth_columns: Sequence[str]) -> tuple[dict, dict]:
-    """Column index by name: (first occurrence, last occurrence)."""
-    # A joint's axis and its centre's coordinate can share a name (axis J1.x, point J1.x):
-    # axes are the first column of a name, point coordinates the last (truth.csv and results
-    # files both list angles before points).
-    first = {c: i for i, c in reversed(list(enumerate(truth_columns)))}
-    if "frame" not in first:
+def _columns(truth_columns: Sequence[str]) -> dict:
+    """Column index by name (names are unique: axes may not be called x, y or z)."""
+    cols = {c: i for i, c in enumerate(truth_columns)}
+    if len(cols) != len(truth_columns):
+        dup = next(c for c in truth_columns if list(truth_columns).count(c) > 1)
+        raise VideoTrackError(f"column '{dup}' appears twice", field=dup)
+    if "frame" not in cols:
         raise VideoTrackError("the truth table needs a 'frame' column", field="frame")
-    return first, {c: i for i, c in enumerate(truth_columns)}
+    return cols
 
 
 def _truth_rows(results: Results, cols: dict, truth: np.ndarray) -> np.ndarray:

@@ -29,8 +29,8 @@ def test_axes_without_histogram_entry_get_the_initial_histograms():
     body = loads_body(LOCUST_TEXT)
     axes = {r.label: r.axis for r in body.axis_refs()}
     assert axes["J0.phi"].histogram == Histogram.uniform(120, 220)
-    assert axes["J1.y"].histogram == Histogram.locked(0)
-    assert axes["J1.y"].locked and axes["J1.y"].min_deg == axes["J1.y"].max_deg == 0
+    assert axes["J1.ry"].histogram == Histogram.locked(0)
+    assert axes["J1.ry"].locked and axes["J1.ry"].min_deg == axes["J1.ry"].max_deg == 0
 
 
 @pytest.mark.parametrize("path", CHAIN_FILES, ids=lambda p: p.name)
@@ -47,7 +47,7 @@ def awkward_body() -> Body:
     rng = np.random.default_rng(7)
     learned = Histogram.uniform(-40, 40).updated(rng.uniform(-40, 40, 50))
     coarse = Histogram(rng.random(7) * (rng.random(7) > 0.3) + np.eye(7)[3], n_trials=12)
-    hinge = (Axis.fixed("y", "y"), Axis.fixed("x", "x", -0.0),
+    hinge = (Axis.fixed("ry", "y"), Axis.fixed("rx", "x", -0.0),
              replace(Axis.free("gamma", "z", 1 / 3, 170.1), histogram=coarse))
     tip = Segment("tibia", 77.25, (0.0, 1e-300, -0.1),
                   markers=(Marker("M3", (0.1, 0.2, 0.30000000000000004)),))
@@ -83,7 +83,7 @@ def test_saved_file_is_readable():
     assert 'length="13"' in text and 'length="77.25"' in text  # ints without ".0"
     assert 'offset="0.1 0.2 0.30000000000000004"' in text  # repr where needed
     assert '<axis rot="x" name="psi" min="-10" max="10" locked="2.5"/>' in text
-    assert '<axis rot="y" name="y" locked="0"/>' in text
+    assert '<axis rot="y" name="ry" locked="0"/>' in text
     assert '<segment name="spur" length="0"/>' in text
     assert re.search(r'\n {6}<segment name="coxa"', text)  # pretty-printed, 2 spaces a level
     names = re.findall(r'<(?:joint|segment|marker) name="([^"]+)"', text)
@@ -124,7 +124,7 @@ def test_histogram_section_sets_histograms():
       <run from="0" to="10" value="2"/>
       <run from="10" to="20" value="6"/>
     </histogram>
-    <histogram chain="hindleg" joint="J1" axis="y" bins="4"><run from="-90" to="0" value="1"/>
+    <histogram chain="hindleg" joint="J1" axis="ry" bins="4"><run from="-90" to="0" value="1"/>
     </histogram>
   </histograms>
 </body>""")
@@ -134,7 +134,7 @@ def test_histogram_section_sets_histograms():
     assert np.array_equal(beta.values[180:190], np.full(10, 0.025))
     assert np.array_equal(beta.values[190:200], np.full(10, 0.075))
     assert beta.values.sum() == pytest.approx(1.0)
-    assert axes["J1.y"].histogram == Histogram(np.array([0.0, 1.0, 0.0, 0.0]))
+    assert axes["J1.ry"].histogram == Histogram(np.array([0.0, 1.0, 0.0, 0.0]))
     assert axes["J0.phi"].histogram == Histogram.uniform(120, 220)
 
 
@@ -167,7 +167,7 @@ BROKEN = {
                         "duplicate joint name 'J1'"),
     "duplicate marker": ('name="M2" offset="0 0 0"', 'name="M1" offset="0 0 0.0"', "0 0 0.0",
                          "duplicate marker name 'M1'"),
-    "duplicate axis": ('name="beta"', 'name="y"', 'rot="z" name="y"', "duplicate axis names"),
+    "duplicate axis": ('name="beta"', 'name="ry"', 'rot="z" name="ry"', "duplicate axis names"),
     "duplicate segment": ('name="tibia"', 'name="coxa"', 'name="coxa" length="77"',
                           "duplicate segment name"),
     "duplicate chain": ("</chain>", EXTRA_CHAIN, 'name="Q"', "duplicate chain name"),

@@ -104,18 +104,18 @@ def odd_body() -> Body:
     R^d, a joint translation, a locked prefix (hinge about z after locked y, x at non-zero
     values), a locked suffix, two chains, markers off the segment axis."""
     tip = Segment("tip", 5.0, (0.0, 20.0, 0.0), markers=(Marker("m4", (1.0, 2.0, -1.0)),))
-    j2 = Joint("j2", (Axis.fixed("y", "y", 15.0), Axis.fixed("x", "x", -25.0),
+    j2 = Joint("j2", (Axis.fixed("ry", "y", 15.0), Axis.fixed("rx", "x", -25.0),
                       Axis.free("g", "z", 0, 90)), (10.0, 0.0, 30.0), (0.5, 0.0, 0.0), (tip,))
     mid = Segment("mid", 8.0, (5.0, -10.0, 30.0), markers=(Marker("m2", (0.0, 1.0, 0.0)),),
                   joints=(j2,))
-    j1 = Joint("j1", (Axis.free("a", "y", -60, 60), Axis.fixed("x", "x", 10.0),
+    j1 = Joint("j1", (Axis.free("a", "y", -60, 60), Axis.fixed("rx", "x", 10.0),
                       Axis.free("c", "z", -45, 45)), (0.0, 30.0, 0.0), (0.0, 1.0, 0.0), (mid,))
     base = Segment("base", 10.0, markers=(Marker("m0", (-10.0, 0.0, 0.0)), Marker("m1")),
                    joints=(j1,))
     j0 = Joint("j0", (Axis.free("p", "y", 120, 220), Axis.free("q", "x", -40, 40),
-                      Axis.fixed("z", "z", 12.0)), (0.0, 0.0, 5.0), segments=(base,))
-    other = Joint("k0", (Axis.fixed("y", "y"), Axis.free("r", "x", -30, 30),
-                         Axis.fixed("z", "z", -20.0)),
+                      Axis.fixed("rz", "z", 12.0)), (0.0, 0.0, 5.0), segments=(base,))
+    other = Joint("k0", (Axis.fixed("ry", "y"), Axis.free("r", "x", -30, 30),
+                         Axis.fixed("rz", "z", -20.0)),
                   segments=(Segment("s", 4.0, markers=(Marker("n0", (0.0, 0.0, 1.0)),)),))
     return Body("odd", (Chain("a", j0), Chain("b", other)))
 

@@ -193,3 +193,16 @@ def test_marker_may_not_share_a_joint_name(locust):
         j0, segments=(coxa,)))
     with pytest.raises(KinematicsError, match="name of a joint"):
         dataclasses.replace(locust, chains=(chain,)).validate()
+
+
+def test_axis_may_not_be_named_like_a_coordinate(locust):
+    import dataclasses
+
+    from kinematics.errors import KinematicsError
+    from kinematics.model import Axis
+
+    j0 = locust.chains[0].root_joint
+    bad = dataclasses.replace(j0, axes=(j0.axes[0], j0.axes[1], Axis.free("z", "z", -10, 10)))
+    chain = dataclasses.replace(locust.chains[0], root_joint=bad)
+    with pytest.raises(KinematicsError, match="like a 3D coordinate"):
+        dataclasses.replace(locust, chains=(chain,)).validate()

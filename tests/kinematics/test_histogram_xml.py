@@ -92,7 +92,7 @@ def test_eq4_update_matches_hand_arithmetic(locust):
     assert beta.at(16.5) == pytest.approx((1 / 90 + 1) / 4)
     assert beta.at(0.0) == pytest.approx((1 / 90) / 4)
     # Locked axes are never updated or added.
-    assert ("hindleg", "J1", "y") not in out
+    assert ("hindleg", "J1", "ry") not in out
     assert out.body == locust.name
 
 

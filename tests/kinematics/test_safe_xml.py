@@ -274,3 +274,18 @@ def test_only_safe_xml_imports_lxml():
         if re.search(r"^\s*(import lxml|from lxml)", p.read_text(), re.M)
     )
     assert importers == ["kinematics/safe_xml.py"]
+
+
+def test_chains_load_from_many_threads_at_once():
+    """The shared schema is built and used under a lock (libxml2 is not re-entrant)."""
+    from concurrent.futures import ThreadPoolExecutor
+    from pathlib import Path
+
+    from kinematics import safe_xml
+    from kinematics.chain_xml import load_body
+
+    safe_xml._schema.cache_clear()
+    path = Path(__file__).resolve().parents[2] / "chains" / "fly_six_legs.xml"
+    with ThreadPoolExecutor(8) as pool:
+        bodies = list(pool.map(lambda _: load_body(path), range(32)))
+    assert all(b == bodies[0] for b in bodies)

@@ -22,7 +22,7 @@ def test_show_prints_the_tree(capsys):
     assert re.search(r"axis phi +\(rot y\)  range \[120, 220\] deg  H: 170\.0 ± 28\.9 deg, N=1",
                      out)
     assert re.search(r"axis gamma \(rot z\)  range \[20, 160\] deg", out)
-    assert re.search(r"axis y +\(rot y\)  locked at 0 deg", out)
+    assert re.search(r"axis ry +\(rot y\)  locked at 0 deg", out)
     assert "joint J2: orientation (0, 0, 180) deg" in out
     assert "segment femur: length 91 px, rotation (0, 0, 0) deg" in out
     assert "marker M0 at (-13, 0, 0) px" in out and "marker M3 at (0, 0, 0) px" in out

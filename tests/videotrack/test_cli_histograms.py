@@ -40,7 +40,7 @@ def test_update_applies_eq4_to_ok_frames(results_file, tmp_path, capsys):
     assert h.n_trials == 3
     assert h.values[bin_index(30.5)] == pytest.approx((1 / 140 + 1) / 3)
     assert h.values[bin_index(32.5)] == pytest.approx((1 / 140) / 3)
-    locked = load_archive(out)[("hindleg", "J1", "x")]
+    locked = load_archive(out)[("hindleg", "J1", "rx")]
     assert locked.n_trials == 1  # locked axes are not learned
     # as a chain file, with every frame
     chain_out = tmp_path / "chain2.xml"

@@ -13,7 +13,7 @@ from videotrack.evaluate import evaluate, evaluation_csv, parse_sum, wrap_deg
 from videotrack.results import Results, write_results
 from videotrack.tables import write_table
 
-AXES = ("J0.phi", "J0.psi", "J1.x", "J1.beta")  # J1.x: a locked axis named like a coordinate
+AXES = ("J0.phi", "J0.psi", "J1.rx", "J1.beta")  # J1.rx: a locked axis
 
 
 def make_results(angles, markers, joints, frames=None) -> Results:
@@ -29,7 +29,7 @@ def make_results(angles, markers, joints, frames=None) -> Results:
 
 
 def truth_table(angles, markers, joints):
-    """Columns as synth writes them: frame, axes, points (J1.x twice: axis, then point)."""
+    """Columns as synth writes them: frame, axes, then points."""
     cols = ["frame", *AXES, "M0.x", "M0.y", "M0.z", "J1.x", "J1.y", "J1.z"]
     n = len(angles)
     values = np.column_stack([np.arange(n), angles, np.reshape(markers, (n, 3)),
@@ -56,7 +56,7 @@ def test_errors_per_axis_sum_and_point(case):
     fit, (cols, truth), err = case
     ev = evaluate(fit, cols, truth, sums=["J0.phi+J1.beta"], threshold_deg=5.0)
     assert [r.name for r in ev.rows] == ["J0.phi", "J0.psi", "J1.beta", "J0.phi+J1.beta",
-                                         "M0", "J1"]  # the locked J1.x is left out
+                                         "M0", "J1"]  # the locked J1.rx is left out
     phi = ev.row("J0.phi")
     assert phi.rmse == pytest.approx(np.sqrt(np.mean(err[:, 0] ** 2)))
     assert phi.median == pytest.approx(2.0) and phi.max == pytest.approx(12.0)
