@@ -30,12 +30,12 @@ def test_demo_prints_table2_and_keeps_files(tmp_path, capsys):
     assert "videotrack eval" in out  # says what to do next
 
 
-def test_demo_without_out_leaves_nothing(tmp_path, capsys, monkeypatch):
+def test_demo_with_temp_leaves_nothing(tmp_path, capsys, monkeypatch):
     import tempfile
 
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
     monkeypatch.chdir(tmp_path)
-    assert main(["demo", "--frames", "12", "--n-end", "1000"]) == 0
+    assert main(["demo", "--temp", "--frames", "12", "--n-end", "1000"]) == 0
     assert "RMSE, this run" in capsys.readouterr().out
     assert list(tmp_path.iterdir()) == []
     assert main(["demo", "--frames", "0"]) == 1

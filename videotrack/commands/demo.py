@@ -10,10 +10,12 @@ from videotrack.paper_setup import PAPER_FRAMES
 
 EXAMPLES = f"""\
 examples:
-  # the whole method in a few seconds: render, detect, fit, score
+  # the whole method in a few seconds: render, detect, fit, score (files in ./videotrack-demo)
   videotrack demo
-  # keep the files, and draw fitted against true angles
-  videotrack demo --out demo --plot
+  # elsewhere, and draw fitted against true angles
+  videotrack demo --out mydemo --plot
+  # leave no files behind
+  videotrack demo --temp
   # a quicker look: 100 frames with a 5x shorter annealing schedule
   videotrack demo --frames 100 --n-end 7000
 
@@ -23,7 +25,8 @@ above with 4-px markers at the joints ('videotrack synth'), detects the markers 
 fits the chain by simulated annealing with the paper's Table 1 parameters ('fit'), and scores
 the joint angles against the ground truth ('eval'), beside the paper's Table 2. The first
 run after installing compiles the numba kernels (about half a minute); later runs start
-at once. With --out the folder is a complete project: 'videotrack run DIR/project.toml'.
+at once. The output folder is a complete project: open it with 'videotrack gui
+DIR/project.toml', or fit it again with 'videotrack run DIR/project.toml'.
 """
 
 
@@ -38,8 +41,11 @@ def add_parser(subparsers) -> None:
         epilog=EXAMPLES,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--out", type=Path, metavar="DIR",
-                   help="keep everything in DIR (default: a temporary folder, deleted)")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--out", type=Path, metavar="DIR", default=Path("videotrack-demo"),
+                       help="write the project here (default: ./videotrack-demo)")
+    where.add_argument("--temp", action="store_true",
+                       help="work in a temporary folder and delete it afterwards")
     p.add_argument("--frames", type=int, default=PAPER_FRAMES,
                    help=f"frames of the video (default: {PAPER_FRAMES}, as the paper)")
     p.add_argument("--n-end", type=int, metavar="N",
@@ -48,7 +54,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed of the fit (default 0)")
     p.add_argument("--plot", nargs="?", const="", metavar="PNG",
                    help="draw fitted and true angles (default file: DIR/angles.png, or "
-                        "demo_angles.png here without --out)")
+                        "demo_angles.png here with --temp)")
     p.set_defaults(func=run)
 
 
@@ -84,8 +90,8 @@ def run(args) -> int:
                     disable=None)
 
     with contextlib.ExitStack() as stack:
-        out = args.out or Path(stack.enter_context(
-            tempfile.TemporaryDirectory(prefix="videotrack-demo-")))
+        out = Path(stack.enter_context(tempfile.TemporaryDirectory(
+            prefix="videotrack-demo-"))) if args.temp else args.out
         print(f"VideoTrack demo: the paper's accuracy test (Sect. 3.2), a locust hind leg "
               f"seen from the side and from above, {args.frames} frames")
         t0 = time.perf_counter()
@@ -141,13 +147,15 @@ def run(args) -> int:
             from videotrack.plots import plot_angles
 
             png = Path(args.plot) if args.plot else (
-                out / "angles.png" if args.out else Path("demo_angles.png"))
+                Path("demo_angles.png") if args.temp else out / "angles.png")
             plot_angles(results, png, model.body.locked_mask(),
                         truth=truth_angles(results, columns, truth))
             print(f"wrote {png}")
-        if args.out:
-            print(f"files in {out}: video.avi, truth.csv, project.toml, detections.npz, "
-                  "detections.results.csv; next:\n"
+        if not args.temp:
+            print(f"\nresults: {out / 'detections.results.csv'} (joint angles, errors, 3D "
+                  f"points per frame)\nproject: {out / 'project.toml'} (video.avi, "
+                  "truth.csv, detections.npz beside it); next:\n"
+                  f"  videotrack gui {out / 'project.toml'}\n"
                   f"  videotrack eval {out / 'detections.results.csv'} {out / 'truth.csv'} "
                   "--sum J0.alpha+J1.beta")
     return 0
