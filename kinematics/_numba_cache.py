@@ -1,0 +1,26 @@
+"""Keep numba's cache of compiled kernels out of the installed package.
+
+numba's default (``cache=True``) writes ``__pycache__/*.nbi|nbc`` beside the source files, i.e.
+into site-packages. pip does not know those files, so after ``pip uninstall`` (or an upgrade,
+or switching to an editable install) the package folder survives as an empty namespace package
+that shadows the new install. Here the cache goes to the user's cache folder instead,
+``$XDG_CACHE_HOME/videotrack/numba`` (``~/.cache/...``; ``%LOCALAPPDATA%`` on Windows), unless
+``NUMBA_CACHE_DIR`` is set. numba keys the cache by source path, so installs never mix.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from numba.core import config
+
+
+def default_cache_dir() -> Path:
+    base = os.environ.get("XDG_CACHE_HOME") or (
+        os.environ.get("LOCALAPPDATA") if os.name == "nt" else None)
+    return Path(base or Path.home() / ".cache") / "videotrack" / "numba"
+
+
+if not config.CACHE_DIR:  # must run before any kernel module is decorated
+    config.CACHE_DIR = str(default_cache_dir())
