@@ -76,7 +76,7 @@ def toml_blocks():
                 yield pytest.param(path, body, id=f"{path.name}-{i}")
 
 
-@pytest.mark.parametrize("path, body", toml_blocks())
+@pytest.mark.parametrize("path, body", list(toml_blocks()))
 def test_toml_examples_load(path, body, tmp_path):
     raw = tomllib.loads(body)
     # a project config (not a camera file, whose [cameras.NAME] tables share a name)
