@@ -23,8 +23,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -33,6 +31,8 @@ import numba
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from _report import machine, print_table
 
 from kinematics import _refine_kernels as rk
 from kinematics.anneal import AnnealParams, Fitter, _as_ragged, anneal_reference
@@ -74,16 +74,6 @@ def fps_on(threads: int, fitter: Fitter, dets, repeats: int) -> tuple[float, lis
     finally:
         numba.set_num_threads(before)
     return len(dets) / t, out[-1]
-
-
-def machine() -> str:
-    try:
-        name = subprocess.run(["lscpu"], capture_output=True, text=True).stdout
-        name = next((ln.split(":", 1)[1].strip() for ln in name.splitlines()
-                     if ln.startswith("Model name")), platform.processor())
-    except OSError:
-        name = platform.processor() or platform.machine()
-    return f"{name}, {os.cpu_count()} CPUs"
 
 
 def main() -> int:
@@ -172,11 +162,7 @@ def main() -> int:
     print(f"Posture-fit speed: {args.frames} frames; {machine()}; numba {numba.__version__}, "
           f"{threads} threads ({numba.threading_layer()}); load average {load:.2f} at the "
           "start (other processes take cores from the timings)")
-    width = max(len(r[0]) for r in rows)
-    print(f"| {'measurement'.ljust(width)} | result | target |")
-    print(f"| {'-' * width} | --- | --- |")
-    for name, value, goal in rows:
-        print(f"| {name.ljust(width)} | {value} | {goal} |")
+    print_table(rows, "target")
     return 0
 
 

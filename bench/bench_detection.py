@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import sys
 import tempfile
 import time
@@ -34,6 +33,8 @@ import cv2
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from _report import machine, print_table
 
 from videotrack.detect import FrameDetector, detect_video
 from videotrack.detections import DetectSettings
@@ -154,15 +155,10 @@ def main() -> int:
         sizes = ", ".join(f"{name} {os.path.getsize(p) / n / 1024:.0f} KiB"
                           for name, p in videos)
 
-    cpu = platform.processor() or platform.machine()
     print(f"marker detection: {n} frames {WIDTH}x{HEIGHT}, 2 views, {2 * PER_VIEW} markers per "
-          f"frame, 4 px, noise sigma 2; one thread ({cpu}, {os.cpu_count()} CPUs seen); "
+          f"frame, 4 px, noise sigma 2; one thread ({machine()} seen); "
           f"per frame: {sizes}")
-    width = max(len(r[0]) for r in rows)
-    print(f"| {'measurement'.ljust(width)} | result | goal |")
-    print(f"| {'-' * width} | --- | --- |")
-    for name, value, goal in rows:
-        print(f"| {name.ljust(width)} | {value} | {goal} |")
+    print_table(rows)
     return 0
 
 
