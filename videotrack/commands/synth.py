@@ -112,6 +112,9 @@ def run(args) -> int:
         interlaced=args.interlaced, top_field_first=not args.bottom_field_first,
         layout=args.layout, seed=args.seed,
     )
+    if args.angles is None and args.frames < 1:
+        raise VideoTrackError(f"must be at least 1, got {args.frames}", field="--frames")
+
     def trajectory(k: int = 0):
         if args.angles is not None:
             return read_angles_csv(args.angles, body)
