@@ -17,7 +17,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from kinematics.fileio import atomic_write_text
+from kinematics.fileio import update_generated_file
 from videotrack.cli import build_parser
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "cli.md"
@@ -70,15 +70,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--check", action="store_true", help="only check; exit 1 if out of date")
     args = ap.parse_args()
-    text = render()
-    current = DOC.read_text(encoding="utf-8") if DOC.exists() else ""
-    if args.check:
-        print("docs/cli.md is up to date" if text == current else
-              "docs/cli.md is out of date: run python tools/make_cli_docs.py")
-        return 0 if text == current else 1
-    atomic_write_text(DOC, text)
-    print(f"wrote {DOC}")
-    return 0
+    return update_generated_file(DOC, render(), args.check, "run python tools/make_cli_docs.py")
 
 
 if __name__ == "__main__":

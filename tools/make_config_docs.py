@@ -21,7 +21,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import videotrack.project  # noqa: F401  (registers [batch])
-from kinematics.fileio import atomic_write_text
+from kinematics.fileio import update_generated_file
 from videotrack.config import FILTER_STEPS, SECTIONS, describe_section
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "config.md"
@@ -51,15 +51,8 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--check", action="store_true", help="only check; exit 1 if out of date")
     args = ap.parse_args()
-    current = DOC.read_text(encoding="utf-8")
-    text = render(current)
-    if args.check:
-        print("docs/config.md is up to date" if text == current else
-              "docs/config.md is out of date: run python tools/make_config_docs.py")
-        return 0 if text == current else 1
-    atomic_write_text(DOC, text)
-    print(f"wrote {DOC}")
-    return 0
+    text = render(DOC.read_text(encoding="utf-8"))
+    return update_generated_file(DOC, text, args.check, "run python tools/make_config_docs.py")
 
 
 if __name__ == "__main__":
