@@ -43,6 +43,18 @@ def test_run_fits_planted_postures(project, capsys):
     np.testing.assert_allclose(d, 77.0, atol=1e-9)
 
 
+def test_up_to_date_results_are_not_fitted_again(project, capsys):
+    csv = project / "detections.results.csv"
+    before = csv.stat().st_mtime_ns
+    assert main(["run", str(project / "project.toml"), "--n-end", "7000"]) == 0
+    assert "is up to date (--force fits again)" in capsys.readouterr().out
+    assert csv.stat().st_mtime_ns == before
+    # other parameters make them stale
+    assert main(["fit", str(project / "project.toml"), "--n-end", "7000", "--seed", "1"]) == 0
+    assert "fitted 16 frames" in capsys.readouterr().out
+    assert main(["fit", str(project / "project.toml"), "--n-end", "7000"]) == 0  # restore
+
+
 def test_results_round_trip(project, tmp_path):
     res = read_results(project / "detections.results.csv")
     write_results(tmp_path / "r.csv", res, read_sidecar(project / "detections.results.csv"))

@@ -95,12 +95,13 @@ def run_fit(args) -> int:
     from videotrack.errors import VideoTrackError
     from videotrack.pipeline import (
         check_detection_views,
-        default_plot_path,
         default_results_path,
         fit_project,
         load_model,
+        results_stale_reason,
     )
     from videotrack.project import command_config
+    from videotrack.results import read_results
     from videotrack.video import parse_frame_range
 
     config = command_config(args.config, args.trial)
@@ -126,6 +127,11 @@ def run_fit(args) -> int:
         numba.set_num_threads(max(1, min(jobs, numba.config.NUMBA_NUM_THREADS)))
     out = args.results or default_results_path(config, det_path)
     out.parent.mkdir(parents=True, exist_ok=True)
+    if not args.force and frames is None and results_stale_reason(
+            model, det_path, out, detections.n_records) is None:
+        print(f"{out} is up to date (--force fits again)")
+        _maybe_plot(args, config, read_results(out), out, model)
+        return 0
     total = detections.n_records if frames is None else len(frames)
     bad = done = 0
     t0 = time.perf_counter()
@@ -147,12 +153,18 @@ def run_fit(args) -> int:
           f"{np.nanmedian(results.error) if n else float('nan'):.2f} px")
     print("status: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
     print(f"wrote {out} (+ .json sidecar)")
+    _maybe_plot(args, config, results, out, model)
+    return 0
+
+
+def _maybe_plot(args, config, results, out, model) -> None:
+    """The angle plot, when asked for on the command line or in [fit] plot."""
     if args.plot or (args.plot is None and config["fit"]["plot"]):
+        from videotrack.pipeline import default_plot_path
         from videotrack.plots import plot_angles
 
         png = plot_angles(results, default_plot_path(out), model.body.locked_mask())
         print(f"wrote {png}")
-    return 0
 
 
 def _check_detections_fresh(config, detections, det_path) -> None:
