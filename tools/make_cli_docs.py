@@ -17,7 +17,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from kinematics.fileio import update_generated_file
+from tools._docgen import update_generated_file
 from videotrack.cli import build_parser
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "cli.md"

@@ -21,7 +21,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import videotrack.project  # noqa: F401  (registers [batch])
-from kinematics.fileio import update_generated_file
+from tools._docgen import update_generated_file
 from videotrack.config import FILTER_STEPS, SECTIONS, describe_section
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "config.md"
