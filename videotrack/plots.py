@@ -14,13 +14,7 @@ from videotrack.results import Results
 def plot_angles(results: Results, path: str | os.PathLike, locked=None, truth=None) -> Path:
     """PNG of every free axis over time and the error E below; frames whose fit failed or
     had no detections are marked red. ``truth`` (n, n_axes) is drawn dashed if given."""
-    import io
-
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = _pyplot()
     free = [i for i in range(len(results.axis_labels)) if locked is None or not locked[i]]
     bad = ~results.ok_mask()
     t = results.times
@@ -45,24 +39,14 @@ def plot_angles(results: Results, path: str | os.PathLike, locked=None, truth=No
     n_bad = int(bad.sum())
     fig.suptitle(f"{len(results)} frames, {n_bad} bad ({100 * n_bad / max(len(results), 1):.1f} %)"
                  f", median E {np.nanmedian(results.error):.2f} px")
-    fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=90)
-    plt.close(fig)
-    atomic_write_bytes(path, buf.getvalue())
-    return Path(path)
+    return _save_png(fig, path, dpi=90)
 
 
 def plot_histograms(items, path: str | os.PathLike) -> Path:
     """PNG of bar plots, one per (name, Histogram) in ``items``, zoomed on each support."""
-    import io
-
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     from kinematics.histograms import bin_centres
+
+    plt = _pyplot()
 
     n = max(len(items), 1)
     cols = min(3, n)
@@ -80,9 +64,26 @@ def plot_histograms(items, path: str | os.PathLike) -> Path:
         ax.set_xlabel("angle (°)", fontsize=8)
     for ax in axes.ravel()[len(items):]:
         ax.set_visible(False)
+    return _save_png(fig, path, dpi=80)
+
+
+def _pyplot():
+    """matplotlib's pyplot on the file-only Agg backend (no display needed)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _save_png(fig, path: str | os.PathLike, dpi: int) -> Path:
+    """Lay out, render and write ``fig`` as a PNG atomically, then free it."""
+    import io
+
     fig.tight_layout()
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=80)
-    plt.close(fig)
+    fig.savefig(buf, format="png", dpi=dpi)
+    _pyplot().close(fig)
     atomic_write_bytes(path, buf.getvalue())
     return Path(path)
