@@ -27,61 +27,12 @@ in the nearest detection go to the lower index; a marker whose projection is not
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 
 from kinematics.errors import KinematicsError
 from kinematics.fk import forward_kinematics_reference
-
-#: Cost of a marker with no finite projection when no cap is set (same as the kernels).
-NAN_MARKER_COST = 1.0e6
-
-ERROR_MODES = ("paper", "bidirectional")
-
-
-@dataclass(frozen=True)
-class ErrorOptions:
-    """Which error function the fit minimises.
-
-    Parameters
-    ----------
-    mode : {"paper", "bidirectional"}
-        ``"paper"`` is Eq. 5; ``"bidirectional"`` adds the Sect. 4 penalty for detections
-        that no model marker claims.
-    penalty_weight : float
-        Weight of that penalty (bidirectional only), >= 0.
-    cap_px : float or None
-        Largest cost of one marker (and of one unclaimed detection) in pixels; None for no
-        cap (the paper).
-    """
-
-    mode: str = "paper"
-    penalty_weight: float = 1.0
-    cap_px: float | None = None
-
-    def __post_init__(self) -> None:
-        if self.mode not in ERROR_MODES:
-            raise KinematicsError(f"must be one of {', '.join(ERROR_MODES)}, got {self.mode!r}",
-                                  field="error.mode")
-        if not (np.isfinite(self.penalty_weight) and self.penalty_weight >= 0):
-            raise KinematicsError(f"must be a finite number >= 0, got {self.penalty_weight!r}",
-                                  field="error.penalty_weight")
-        if self.cap_px is not None and not (np.isfinite(self.cap_px) and self.cap_px > 0):
-            raise KinematicsError(f"must be a finite number > 0 or None, got {self.cap_px!r}",
-                                  field="error.cap_px")
-
-    @property
-    def bidirectional(self) -> bool:
-        return self.mode == "bidirectional"
-
-    @property
-    def cap(self) -> float:
-        """The cap as a number (inf without a cap), as the kernels take it."""
-        return np.inf if self.cap_px is None else float(self.cap_px)
-
-    def to_dict(self) -> dict:
-        return {"mode": self.mode, "penalty_weight": self.penalty_weight, "cap_px": self.cap_px}
+from kinematics.settings import ERROR_MODES, NAN_MARKER_COST, ErrorOptions  # noqa: F401
 
 
 def projection_error(
