@@ -135,12 +135,14 @@ def main() -> int:
     starts = np.deg2rad([r.angles_deg for r in res])
     rag = _as_ragged(dets, one.view_names)
     roots = np.zeros((len(dets), 1, 3))
+    rots = one.problem.identity_rotations(len(dets))
     sse, pairs = np.empty(len(dets)), np.empty(len(dets), np.int64)
 
     def kernel_all():
         a = starts.copy()
-        rk.refine_frames(a, rag.points, rag.offsets, roots, one._free, one._lo, one._hi, 10,
-                         5.0, *one._folded, *one._cams, sse, pairs)
+        pr = one.problem
+        rk.refine_frames(a, rag.points, rag.offsets, roots, rots, pr.free_idx, pr.lo, pr.hi,
+                         pr.dof_kind, 10, 5.0, *pr.folded, *pr.cams, sse, pairs)
 
     kernel_all()
     numba.set_num_threads(1)

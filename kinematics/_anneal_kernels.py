@@ -44,6 +44,12 @@ NAN_MARKER_COST = 1.0e6
 #: Bits of ``joint_flags`` in the folded layout.
 G_IDENTITY = 1  # G_j is the identity: skip the 3×3 product
 H_ZERO = 2  # h_j is zero: skip the translation
+ROOT_POSE = 4  # a free root: per-frame seed rotation and state translation (slide_index)
+
+#: Kinds of state entries (``dof_kind``): an angle whose histogram decides plausibility, or
+#: a value (translation, or a free root's rotation offset) that must stay in [lo, hi].
+DOF_HISTOGRAM = 0
+DOF_RANGE = 1
 
 # -- random numbers: splitmix64 (Steele, Lea & Flood 2014) --------------------------------
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
@@ -137,9 +143,9 @@ def hist_at(hist, nbins, i, x):
 
 # -- forward kinematics and projection (Eq. 1-3), folded layout --------------------------
 @njit(cache=True, inline="always")
-def _project_cs(cs, sn, root_pos, parent, chain, pre_rot, pre_trans, post_trans, elem_axis,
-                elem_index, joint_flags, marker_joint, marker_local, kind, P, K, dist, R, t,
-                rot, pos, mk, proj, any_pinhole):
+def _project_cs(values, cs, sn, root_pos, root_rot, parent, chain, pre_rot, pre_trans,
+                post_trans, elem_axis, elem_index, joint_flags, marker_joint, marker_local,
+                slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj, any_pinhole):
     """Markers of the posture with cosines ``cs`` and sines ``sn`` (n_axes,) projected into
     every view: fills ``proj`` (n_views, n_markers, 2); ``rot`` (nj, 3, 3), ``pos`` (nj, 3)
     and ``mk`` (nm, 3) receive A'_j, the joint centres and the 3D markers.
@@ -147,10 +153,31 @@ def _project_cs(cs, sn, root_pos, parent, chain, pre_rot, pre_trans, post_trans,
     for j in range(parent.shape[0]):
         p = parent[j]
         if p < 0:
+            c = chain[j]
             b00, b01, b02 = pre_rot[j, 0, 0], pre_rot[j, 0, 1], pre_rot[j, 0, 2]
             b10, b11, b12 = pre_rot[j, 1, 0], pre_rot[j, 1, 1], pre_rot[j, 1, 2]
             b20, b21, b22 = pre_rot[j, 2, 0], pre_rot[j, 2, 1], pre_rot[j, 2, 2]
-            px, py, pz = root_pos[chain[j], 0], root_pos[chain[j], 1], root_pos[chain[j], 2]
+            px, py, pz = root_pos[c, 0], root_pos[c, 1], root_pos[c, 2]
+            if joint_flags[j] & ROOT_POSE:
+                # A free root: the frame's seed rotation root_rot[c] comes first and the
+                # state's translation entries (slide_index) move the root in the world.
+                q = root_rot[c]
+                m00, m01, m02 = b00, b01, b02
+                m10, m11, m12 = b10, b11, b12
+                m20, m21, m22 = b20, b21, b22
+                b00 = q[0, 0] * m00 + q[0, 1] * m10 + q[0, 2] * m20
+                b01 = q[0, 0] * m01 + q[0, 1] * m11 + q[0, 2] * m21
+                b02 = q[0, 0] * m02 + q[0, 1] * m12 + q[0, 2] * m22
+                b10 = q[1, 0] * m00 + q[1, 1] * m10 + q[1, 2] * m20
+                b11 = q[1, 0] * m01 + q[1, 1] * m11 + q[1, 2] * m21
+                b12 = q[1, 0] * m02 + q[1, 1] * m12 + q[1, 2] * m22
+                b20 = q[2, 0] * m00 + q[2, 1] * m10 + q[2, 2] * m20
+                b21 = q[2, 0] * m01 + q[2, 1] * m11 + q[2, 2] * m21
+                b22 = q[2, 0] * m02 + q[2, 1] * m12 + q[2, 2] * m22
+                k = slide_index[j]
+                px += values[k]
+                py += values[k + 1]
+                pz += values[k + 2]
         else:
             q00, q01, q02 = rot[p, 0, 0], rot[p, 0, 1], rot[p, 0, 2]
             q10, q11, q12 = rot[p, 1, 0], rot[p, 1, 1], rot[p, 1, 2]
@@ -243,8 +270,8 @@ def _has_pinhole(kind):
 
 
 @njit(cache=True)
-def project_posture(angles, root_pos, parent, chain, pre_rot, pre_trans, post_trans,
-                    elem_axis, elem_index, joint_flags, marker_joint, marker_local,
+def project_posture(angles, root_pos, root_rot, parent, chain, pre_rot, pre_trans, post_trans,
+                    elem_axis, elem_index, joint_flags, marker_joint, marker_local, slide_index,
                     kind, P, K, dist, R, t, cs, sn, rot, pos, mk, proj):
     """Forward kinematics (Eq. 1, 2) and projection (Eq. 3) of every marker of posture
     ``angles`` (n_axes,) radians into every view: fills ``proj`` (n_views, n_markers, 2);
@@ -252,9 +279,9 @@ def project_posture(angles, root_pos, parent, chain, pre_rot, pre_trans, post_tr
     scratch (holding the joint centres and 3D markers afterwards)."""
     for k in range(angles.shape[0]):
         sn[k], cs[k] = sincos(angles[k])
-    _project_cs(cs, sn, root_pos, parent, chain, pre_rot, pre_trans, post_trans, elem_axis,
-                elem_index, joint_flags, marker_joint, marker_local, kind, P, K, dist, R, t,
-                rot, pos, mk, proj, _has_pinhole(kind))
+    _project_cs(angles, cs, sn, root_pos, root_rot, parent, chain, pre_rot, pre_trans,
+                post_trans, elem_axis, elem_index, joint_flags, marker_joint, marker_local,
+                slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj, _has_pinhole(kind))
 
 
 # -- Eq. 5 -------------------------------------------------------------------------------
@@ -364,8 +391,8 @@ def _paper_error(proj, points, view_off, cap):
 
 
 @njit(cache=True)
-def posture_error(angles, root_pos, parent, chain, pre_rot, pre_trans, post_trans,
-                  elem_axis, elem_index, joint_flags, marker_joint, marker_local,
+def posture_error(angles, root_pos, root_rot, parent, chain, pre_rot, pre_trans, post_trans,
+                  elem_axis, elem_index, joint_flags, marker_joint, marker_local, slide_index,
                   kind, P, K, dist, R, t, points, view_off, bidirectional, weight, cap,
                   per_view):
     """Eq. 5 (or a variant) of one posture ``angles`` (n_axes,) radians; fills ``per_view``
@@ -380,8 +407,8 @@ def posture_error(angles, root_pos, parent, chain, pre_rot, pre_trans, post_tran
     mk = np.empty((nm, 3))
     proj = np.empty((kind.shape[0], nm, 2))
     nearest = np.empty(nm, np.int64)
-    project_posture(angles, root_pos, parent, chain, pre_rot, pre_trans, post_trans,
-                    elem_axis, elem_index, joint_flags, marker_joint, marker_local,
+    project_posture(angles, root_pos, root_rot, parent, chain, pre_rot, pre_trans, post_trans,
+                    elem_axis, elem_index, joint_flags, marker_joint, marker_local, slide_index,
                     kind, P, K, dist, R, t, cs, sn, rot, pos, mk, proj)
     return projection_error(proj, points, view_off, bidirectional, weight, cap, per_view,
                             nearest)
@@ -389,17 +416,19 @@ def posture_error(angles, root_pos, parent, chain, pre_rot, pre_trans, post_tran
 
 # -- simulated annealing (Sect. 2.3, Eq. 6) ----------------------------------------------
 @njit(cache=True)
-def anneal_chain(start, free_idx, step, hist, nbins, th, max_redraws,
+def anneal_chain(start, free_idx, step, hist, nbins, th, dof_kind, lo, hi, max_redraws,
                  n_end, n_l, n_tau, tau0, l0, c_l, c_tau, eps, state,
-                 root_pos, parent, chain, pre_rot, pre_trans, post_trans, elem_axis,
-                 elem_index, joint_flags, marker_joint, marker_local, kind, P, K, dist, R, t,
+                 root_pos, root_rot, parent, chain, pre_rot, pre_trans, post_trans, elem_axis,
+                 elem_index, joint_flags, marker_joint, marker_local, slide_index, kind, P, K,
+                 dist, R, t,
                  points, view_off, bidirectional, weight, cap,
                  cur, cand, best, cs, sn, rot, pos, mk, proj, per_view, nearest):
     """One annealing run from ``start``; the best posture seen is left in ``best``.
 
     Each iteration draws ``j' = j + l·v`` with ``v_i = s(H_i)·r_i``, ``r_i ~ U[-1, 1]``
     (Eq. 6) for the free axes ``free_idx`` in order; ``r_i`` is redrawn while
-    ``H_i(j'_i) < th``, at most ``max_redraws`` times, after which axis i stays where it is
+    ``H_i(j'_i) < th`` (for entries of ``dof_kind`` DOF_RANGE: while outside
+    ``[lo_i, hi_i]``), at most ``max_redraws`` times, after which axis i stays where it is
     for this iteration. A draw ``u`` made first in each iteration decides acceptance by the
     Metropolis criterion at temperature τ: always if E does not grow, else if
     ``ΔE < -τ·log(u)``, i.e. ``u < exp(-ΔE/τ)``. τ is multiplied by ``c_tau`` every ``n_tau``
@@ -428,9 +457,9 @@ def anneal_chain(start, free_idx, step, hist, nbins, th, max_redraws,
         cand[k] = start[k]
         best[k] = start[k]
         sn[k], cs[k] = sincos(start[k])
-    _project_cs(cs, sn, root_pos, parent, chain, pre_rot, pre_trans, post_trans, elem_axis,
-                elem_index, joint_flags, marker_joint, marker_local, kind, P, K, dist, R, t,
-                rot, pos, mk, proj, any_pinhole)
+    _project_cs(cand, cs, sn, root_pos, root_rot, parent, chain, pre_rot, pre_trans,
+                post_trans, elem_axis, elem_index, joint_flags, marker_joint, marker_local,
+                slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj, any_pinhole)
     e_cur = projection_error(proj, points, view_off, bidirectional, weight, cap, per_view,
                              nearest)
     e_best = e_cur
@@ -455,13 +484,18 @@ def anneal_chain(start, free_idx, step, hist, nbins, th, max_redraws,
             while not ok and tries <= max_redraws:
                 rs, u = next_uniform(rs)
                 x = cur[i] + scale * (2.0 * u - 1.0)
-                ok = hist_at(hist, nbins, i, x) >= th
+                if dof_kind[i] == DOF_HISTOGRAM:
+                    ok = hist_at(hist, nbins, i, x) >= th
+                else:
+                    ok = lo[i] <= x and x <= hi[i]
                 tries += 1
             x = x if ok else cur[i]
             cand[i] = x
             sn[i], cs[i] = sincos(x)
-        _project_cs(cs, sn, root_pos, parent, chain, pre_rot, pre_trans, post_trans,
-                    elem_axis, elem_index, joint_flags, marker_joint, marker_local, kind, P, K,
+        _project_cs(cand, cs, sn, root_pos, root_rot, parent, chain, pre_rot, pre_trans,
+                    post_trans,
+                    elem_axis, elem_index, joint_flags, marker_joint, marker_local, slide_index,
+                    kind, P, K,
                     dist, R, t, rot, pos, mk, proj, any_pinhole)
         if bidirectional:
             e = projection_error(proj, points, view_off, bidirectional, weight, cap,
@@ -490,10 +524,11 @@ def anneal_chain(start, free_idx, step, hist, nbins, th, max_redraws,
 
 
 @njit(cache=True, parallel=True)
-def fit_frames(seg_off, frame_ids, det_points, det_off, root_pos, start, start_previous,
+def fit_frames(seg_off, frame_ids, det_points, det_off, root_pos, root_rot, start,
+               start_previous,
                parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index,
-               joint_flags, marker_joint, marker_local, kind, P, K, dist, R, t,
-               free_idx, step, hist, nbins, th, max_redraws,
+               joint_flags, marker_joint, marker_local, slide_index, kind, P, K, dist, R, t,
+               free_idx, step, hist, nbins, th, dof_kind, max_redraws,
                n_end, n_l, n_tau, tau0, l0, c_l, c_tau, eps, seed, reanalysis_threshold,
                max_runs, bidirectional, weight, cap, lo, hi, refine_steps, refine_gate,
                out_angles, out_error, out_view_error, out_runs, out_iterations, out_pairs):
@@ -513,7 +548,8 @@ def fit_frames(seg_off, frame_ids, det_points, det_off, root_pos, start, start_p
     ----------
     seg_off : (n_segments + 1,) int64; frame_ids : (n,) int64 frame numbers (seed streams).
     det_points : (n_points, 2); det_off : (n * n_views + 1,) int64, frame-major.
-    root_pos : (n, n_chains, 3); start : (n_axes,) radians.
+    root_pos : (n, n_chains, 3); root_rot : (n, n_chains, 3, 3) seed rotations of free roots
+    (identity otherwise); start : (n_state,) radians (lengths for translation entries).
     out_angles : (n, n_axes) radians, NaN for frames without any detection; out_error (n,);
     out_view_error (n, n_views); out_runs, out_iterations (n,) int64 (iterations summed
     over runs); out_pairs (n,) int64 refinement pairs of the kept run (0 without).
@@ -535,10 +571,12 @@ def fit_frames(seg_off, frame_ids, det_points, det_off, root_pos, start, start_p
         cand = np.empty(na)
         best = np.empty(na)
         keep = np.empty(na)
+        annealed = np.empty(na)
         first = start.copy()
         for f in range(seg_off[s], seg_off[s + 1]):
             vo = det_off[f * nv: f * nv + nv + 1]
             rp = root_pos[f]
+            rr = root_rot[f]
             out_runs[f] = 0
             out_iterations[f] = 0
             out_pairs[f] = 0
@@ -552,36 +590,45 @@ def fit_frames(seg_off, frame_ids, det_points, det_off, root_pos, start, start_p
                     state = stream_state(seed, frame_ids[f], run)
                     origin = first if run == 0 else start
                     e, its = anneal_chain(origin, free_idx, step, hist, nbins, th,
-                                          max_redraws, n_end, n_l, n_tau, tau0, l0, c_l,
-                                          c_tau, eps, state, rp, parent, chain, pre_rot,
-                                          pre_trans, post_trans, elem_axis, elem_index,
-                                          joint_flags, marker_joint, marker_local, kind, P,
-                                          K, dist, R, t, det_points, vo, bidirectional,
+                                          dof_kind, lo, hi, max_redraws, n_end, n_l, n_tau,
+                                          tau0, l0, c_l, c_tau, eps, state, rp, rr, parent,
+                                          chain, pre_rot, pre_trans, post_trans, elem_axis,
+                                          elem_index, joint_flags, marker_joint,
+                                          marker_local, slide_index, kind, P, K, dist, R, t,
+                                          det_points, vo, bidirectional,
                                           weight, cap, cur, cand, best, cs, sn, rot, pos,
                                           mk, proj, per_view, nearest)
                     out_iterations[f] += its
                     pairs = 0
                     if refine_steps > 0:
+                        # Refinement minimises squared pair residuals, not E: keep its
+                        # result only if E did not grow (it never makes a fit worse).
+                        annealed[:] = best
                         _, pairs = _rk.refine_posture(
-                            best, free_idx, lo, hi, refine_steps, refine_gate, rp, parent,
-                            chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index,
-                            joint_flags, marker_joint, marker_local, kind, P, K, dist, R, t,
-                            det_points, vo)
-                        project_posture(best, rp, parent, chain, pre_rot, pre_trans,
+                            best, free_idx, lo, hi, dof_kind, refine_steps, refine_gate, rp,
+                            rr, parent, chain, pre_rot, pre_trans, post_trans, elem_axis,
+                            elem_index, joint_flags, marker_joint, marker_local, slide_index,
+                            kind, P, K, dist, R, t, det_points, vo)
+                        project_posture(best, rp, rr, parent, chain, pre_rot, pre_trans,
                                         post_trans, elem_axis, elem_index, joint_flags,
-                                        marker_joint, marker_local, kind, P, K, dist, R, t, cs,
-                                        sn, rot, pos, mk, proj)
-                        e = projection_error(proj, det_points, vo, bidirectional, weight,
-                                             cap, per_view, nearest)
+                                        marker_joint, marker_local, slide_index, kind, P, K,
+                                        dist, R, t, cs, sn, rot, pos, mk, proj)
+                        e_refined = projection_error(proj, det_points, vo, bidirectional,
+                                                     weight, cap, per_view, nearest)
+                        if e_refined <= e:
+                            e = e_refined
+                        else:
+                            best[:] = annealed
+                            pairs = 0
                     if e < e_keep:
                         e_keep = e
                         keep[:] = best
                         out_pairs[f] = pairs
                     run += 1
-                project_posture(keep, rp, parent, chain, pre_rot, pre_trans, post_trans,
+                project_posture(keep, rp, rr, parent, chain, pre_rot, pre_trans, post_trans,
                                 elem_axis, elem_index, joint_flags, marker_joint,
-                                marker_local, kind, P, K, dist, R, t, cs, sn, rot, pos, mk,
-                                proj)
+                                marker_local, slide_index, kind, P, K, dist, R, t, cs, sn,
+                                rot, pos, mk, proj)
                 out_error[f] = projection_error(proj, det_points, vo, bidirectional, weight,
                                                 cap, per_view, nearest)
                 out_view_error[f, :] = per_view
@@ -631,7 +678,8 @@ def track_root(det_points, det_off, x0, gate, ridge, kind, P, K, dist, R, t, out
     ``ridge`` times the squared distance to the previous position (so directions no view
     sees, e.g. depth in a single orthographic view, stay put). Gauss-Newton with numerical
     Jacobians: exact in one step for orthographic views, a few steps for pinhole ones. A
-    frame where no view sees a detection keeps the previous position.
+    frame where no view sees a detection keeps the previous position, and the gate doubles
+    for every such frame until the marker is seen again (re-acquisition after a gap).
 
     Parameters
     ----------
@@ -654,13 +702,14 @@ def track_root(det_points, det_off, x0, gate, ridge, kind, P, K, dist, R, t, out
     jv = np.empty((2, 3))
     n_lost = 0
     h = 1e-6 * (1.0 + np.abs(x0).max())
+    search = gate
     for f in range(nf):
         n_seen = 0
         for v in range(nv):
             pu, pv = project_point(kind, P, K, dist, R, t, v, prev[0], prev[1], prev[2])
             lo = det_off[f * nv + v]
             hi = det_off[f * nv + v + 1]
-            best = gate * gate
+            best = search * search
             arg = -1
             for c in range(lo, hi):
                 dx = det_points[c, 0] - pu
@@ -676,7 +725,9 @@ def track_root(det_points, det_off, x0, gate, ridge, kind, P, K, dist, R, t, out
                 n_seen += 1
         if n_seen == 0:
             n_lost += 1
+            search *= 2.0  # re-acquisition: the marker may have moved on during the gap
         else:
+            search = gate
             for k in range(3):
                 x[k] = prev[k]
             for _ in range(8):

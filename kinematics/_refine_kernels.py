@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from kinematics._anneal_kernels import project_posture, solve_spd
+from kinematics._anneal_kernels import DOF_HISTOGRAM, project_posture, solve_spd
 
 #: Forward-difference step of the Jacobian, radians.
 FD_STEP = 1e-7
@@ -78,9 +78,10 @@ def pair_cost(proj, points, pair):
 
 
 @njit(cache=True)
-def refine_posture(angles, free_idx, lo, hi, n_steps, gate, root_pos, parent, chain, pre_rot,
+def refine_posture(angles, free_idx, lo, hi, dof_kind, n_steps, gate, root_pos, root_rot,
+                   parent, chain, pre_rot,
                    pre_trans, post_trans, elem_axis, elem_index, joint_flags, marker_joint,
-                   marker_local, kind, P, K, dist, R, t, points, view_off):
+                   marker_local, slide_index, kind, P, K, dist, R, t, points, view_off):
     """Levenberg-Marquardt refinement of ``angles`` (n_axes,) radians, in place.
 
     Minimises ``sum |p_i^v(angles) - d_pair(i, v)|^2`` over marker/detection pairs within
@@ -113,9 +114,9 @@ def refine_posture(angles, free_idx, lo, hi, n_steps, gate, root_pos, parent, ch
     trial = angles.copy()
     a = np.empty((nf, nf))
     g = np.empty(nf)
-    project_posture(angles, root_pos, parent, chain, pre_rot, pre_trans, post_trans, elem_axis,
-                    elem_index, joint_flags, marker_joint, marker_local, kind, P, K, dist, R,
-                    t, cs, sn, rot, pos, mk, base)
+    project_posture(angles, root_pos, root_rot, parent, chain, pre_rot, pre_trans, post_trans,
+                    elem_axis, elem_index, joint_flags, marker_joint, marker_local, slide_index,
+                    kind, P, K, dist, R, t, cs, sn, rot, pos, mk, base)
     n_pairs = assign_pairs(base, points, view_off, gate, pair)
     cost = pair_cost(base, points, pair)
     lam = 1e-3
@@ -129,9 +130,10 @@ def refine_posture(angles, free_idx, lo, hi, n_steps, gate, root_pos, parent, ch
             i = free_idx[q]
             x = angles[i]
             angles[i] = x + FD_STEP
-            project_posture(angles, root_pos, parent, chain, pre_rot, pre_trans, post_trans,
-                            elem_axis, elem_index, joint_flags, marker_joint, marker_local,
-                            kind, P, K, dist, R, t, cs, sn, rot, pos, mk, proj)
+            project_posture(angles, root_pos, root_rot, parent, chain, pre_rot, pre_trans,
+                            post_trans, elem_axis, elem_index, joint_flags, marker_joint,
+                            marker_local, slide_index, kind, P, K, dist, R, t, cs, sn, rot, pos,
+                            mk, proj)
             angles[i] = x
             for k in range(nv * nm):
                 on = pair[k] >= 0
@@ -157,10 +159,13 @@ def refine_posture(angles, free_idx, lo, hi, n_steps, gate, root_pos, parent, ch
             solve_spd(a, g, nf)
             for q in range(nf):
                 i = free_idx[q]
-                trial[i] = _wrap_clip(angles[i] + g[q], lo[i], hi[i])
-            project_posture(trial, root_pos, parent, chain, pre_rot, pre_trans, post_trans,
-                            elem_axis, elem_index, joint_flags, marker_joint, marker_local,
-                            kind, P, K, dist, R, t, cs, sn, rot, pos, mk, proj)
+                x = angles[i] + g[q]
+                trial[i] = (_wrap_clip(x, lo[i], hi[i]) if dof_kind[i] == DOF_HISTOGRAM
+                            else min(max(x, lo[i]), hi[i]))
+            project_posture(trial, root_pos, root_rot, parent, chain, pre_rot, pre_trans,
+                            post_trans, elem_axis, elem_index, joint_flags, marker_joint,
+                            marker_local, slide_index, kind, P, K, dist, R, t, cs, sn, rot, pos,
+                            mk, proj)
             c_trial = pair_cost(proj, points, pair)
             improved = c_trial < cost
             lam = max(lam / 3.0, 1e-9) if improved else lam * 4.0
@@ -179,9 +184,10 @@ def refine_posture(angles, free_idx, lo, hi, n_steps, gate, root_pos, parent, ch
 
 
 @njit(cache=True, parallel=True)
-def refine_frames(angles, det_points, det_off, root_pos, free_idx, lo, hi, n_steps, gate,
+def refine_frames(angles, det_points, det_off, root_pos, root_rot, free_idx, lo, hi, dof_kind,
+                  n_steps, gate,
                   parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index,
-                  joint_flags, marker_joint, marker_local, kind, P, K, dist, R, t,
+                  joint_flags, marker_joint, marker_local, slide_index, kind, P, K, dist, R, t,
                   out_sse, out_pairs):
     """:func:`refine_posture` for many frames in parallel, in place: ``angles`` (n, n_axes)
     radians, detections as in ``fit_frames``, ``root_pos`` (n, n_chains, 3). Rows holding
@@ -193,6 +199,7 @@ def refine_frames(angles, det_points, det_off, root_pos, free_idx, lo, hi, n_ste
         if np.isfinite(angles[f, 0]):
             vo = det_off[f * nv: f * nv + nv + 1]
             out_sse[f], out_pairs[f] = refine_posture(
-                angles[f], free_idx, lo, hi, n_steps, gate, root_pos[f], parent, chain,
+                angles[f], free_idx, lo, hi, dof_kind, n_steps, gate, root_pos[f], root_rot[f],
+                parent, chain,
                 pre_rot, pre_trans, post_trans, elem_axis, elem_index, joint_flags,
-                marker_joint, marker_local, kind, P, K, dist, R, t, det_points, vo)
+                marker_joint, marker_local, slide_index, kind, P, K, dist, R, t, det_points, vo)

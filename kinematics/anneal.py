@@ -39,27 +39,26 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
-from typing import NamedTuple
 
 import numba
 import numpy as np
 
 from kinematics import _anneal_kernels as _ak
-from kinematics.cameras import CameraArrays, pack_cameras
+from kinematics import placement
 from kinematics.error_function import projection_error
 from kinematics.errors import KinematicsError
 from kinematics.fk import forward_kinematics_reference
-from kinematics.histograms import Histogram
-from kinematics.model import Body, validate_body
-from kinematics.packing import pack_body
-from kinematics.rotations import rot_x, rot_y, rot_z
+from kinematics.model import Body
+from kinematics.problem import (  # noqa: F401 (re-exported: the packing lived here)
+    FitProblem,
+    FoldedBody,
+    fold_body,
+    histogram_tables,
+)
 from kinematics.settings import START_MODES, AnnealParams, ErrorOptions  # noqa: F401 (re-exported)
 
 STATUSES = ("ok", "reanalysed", "failed", "no-detections")
 
-#: The world axis each rotation of Eq. 1 turns about (x=0, y=1, z=2), in AXIS_ORDER.
-_WORLD_AXIS = {"x": 0, "y": 1, "z": 2}
-_ELEMENTARY = {"x": rot_x, "y": rot_y, "z": rot_z}
 
 
 # -- results ------------------------------------------------------------------------------
@@ -114,103 +113,6 @@ class FrameResult:
     def ok(self) -> bool:
         """True for ``ok`` and ``reanalysed`` frames (E within the threshold)."""
         return self.status in ("ok", "reanalysed")
-
-
-# -- packing --------------------------------------------------------------------------------
-class FoldedBody(NamedTuple):
-    """A body in the kernels' folded layout (see :mod:`kinematics._anneal_kernels`).
-
-    Shapes: ``nj`` joints, ``nm`` markers. Joint ``j`` keeps ``A'_j = A'_parent · pre_rot[j]
-    · Π_e E(elem_axis[j, e], angle[elem_index[j, e]])`` and ``p_j = p_parent + A'_parent ·
-    pre_trans[j] + A'_j · post_trans[j]``; markers sit at ``p_j + A'_j · marker_local``.
-    """
-
-    parent: np.ndarray  # (nj,) int64, -1 for roots
-    chain: np.ndarray  # (nj,) int64
-    pre_rot: np.ndarray  # (nj, 3, 3) G_j = Q_parent · R^s · L_j
-    pre_trans: np.ndarray  # (nj, 3) g_j = Q_parent · t^s
-    post_trans: np.ndarray  # (nj, 3) h_j = Q_j · T_j
-    elem_axis: np.ndarray  # (nj, 3) int64 world axis (0 x, 1 y, 2 z) or -1
-    elem_index: np.ndarray  # (nj, 3) int64 posture index of each elementary rotation
-    joint_flags: np.ndarray  # (nj,) int64, G_IDENTITY | H_ZERO bits
-    marker_joint: np.ndarray  # (nm,) int64
-    marker_local: np.ndarray  # (nm, 3) Q_j · (t^s + R^s m)
-
-
-def fold_body(body: Body, angles_deg=None) -> FoldedBody:
-    """Fold the constant parts of Eq. 1 into per-joint constants, once per fit.
-
-    A joint's rotation ``Ry·Rx·Rz`` is split at its first and last free axis: the locked
-    rotations before (L) go into the joint's constant ``G_j = Q_parent · R^s · L``; those after
-    (S), with R^d, form ``Q_j = S · R^d``, which is folded into the joint's translation, its
-    markers and its children. The rotations from the first to the last free axis stay
-    (locked ones between them with their constant angle). Locked angles come from the body
-    (or ``angles_deg``, shape (n_axes,), when given).
-    """
-    arrays = pack_body(body)
-    refs = body.axis_refs()
-    locked = body.locked_mask()
-    values = np.deg2rad(body.mean_posture_deg() if angles_deg is None else angles_deg)
-    nj = arrays.parent.size
-    big_l, big_q = np.empty((nj, 3, 3)), np.empty((nj, 3, 3))
-    elem_axis = np.full((nj, 3), -1, np.int64)
-    elem_index = np.zeros((nj, 3), np.int64)
-    for j in range(nj):
-        idx = arrays.axis_index[j]
-        free = [e for e in range(3) if not locked[idx[e]]]
-        first, last = (free[0], free[-1]) if free else (3, 2)
-        prefix, suffix = np.eye(3), np.eye(3)
-        for e in range(3):
-            rot = refs[idx[e]].axis.rot
-            if e < first:
-                prefix = prefix @ _ELEMENTARY[rot](values[idx[e]])
-            elif e > last:
-                suffix = suffix @ _ELEMENTARY[rot](values[idx[e]])
-            else:
-                elem_axis[j, e - first] = _WORLD_AXIS[rot]
-                elem_index[j, e - first] = idx[e]
-        big_l[j] = prefix
-        big_q[j] = suffix @ arrays.post_rot[j]
-    pre_rot = np.empty((nj, 3, 3))
-    pre_trans = np.zeros((nj, 3))
-    post_trans = np.empty((nj, 3))
-    flags = np.zeros(nj, np.int64)
-    for j in range(nj):
-        p = arrays.parent[j]
-        if p < 0:
-            pre_rot[j] = big_l[j]
-        else:
-            pre_rot[j] = big_q[p] @ arrays.pre_rot[j] @ big_l[j]
-            pre_trans[j] = big_q[p] @ arrays.pre_trans[j]
-        post_trans[j] = big_q[j] @ arrays.post_trans[j]
-        if np.array_equal(pre_rot[j], np.eye(3)):
-            flags[j] |= _ak.G_IDENTITY
-        if not post_trans[j].any():
-            flags[j] |= _ak.H_ZERO
-    local = np.einsum("mij,mj->mi", big_q[arrays.marker_joint], arrays.marker_local)
-    return FoldedBody(arrays.parent, arrays.chain, np.ascontiguousarray(pre_rot), pre_trans,
-                      post_trans, elem_axis, elem_index, flags, arrays.marker_joint,
-                      np.ascontiguousarray(local.reshape(-1, 3)))
-
-
-def histogram_tables(histograms: Sequence[Histogram]) -> tuple[np.ndarray, np.ndarray,
-                                                                np.ndarray]:
-    """Histogram lookup tables for the kernels.
-
-    Returns
-    -------
-    hist : ndarray, shape (n_axes, max_bins)
-        Bin values, zero-padded.
-    nbins : ndarray of int64, shape (n_axes,)
-    step_rad : ndarray, shape (n_axes,)
-        s(H_i) in radians: the step scale of Eq. 6.
-    """
-    nbins = np.array([h.n_bins for h in histograms], dtype=np.int64)
-    hist = np.zeros((len(histograms), int(nbins.max(initial=1))))
-    for i, h in enumerate(histograms):
-        hist[i, : h.n_bins] = h.values
-    step = np.deg2rad([h.std_deg() for h in histograms])
-    return hist, nbins, np.asarray(step, dtype=float)
 
 
 # -- detections -----------------------------------------------------------------------------
@@ -303,6 +205,11 @@ class Fitter:
     params : AnnealParams, optional
         Table 1 defaults.
 
+    Attributes
+    ----------
+    problem : FitProblem
+        The packed problem every backend uses (:mod:`kinematics.problem`).
+
     Raises
     ------
     KinematicsError
@@ -310,38 +217,16 @@ class Fitter:
     """
 
     def __init__(self, body: Body, cameras, params: AnnealParams | None = None) -> None:
-        validate_body(body)
         self.params = params if params is not None else AnnealParams()
         if not isinstance(self.params, AnnealParams):
             raise KinematicsError("params must be an AnnealParams", field="params")
-        if isinstance(cameras, Mapping):
-            self.view_names = [str(k) for k in cameras]
-            self.cameras = list(cameras.values())
-        else:
-            self.cameras = list(cameras)
-            self.view_names = [getattr(c, "name", f"view{k}") for k, c in
-                               enumerate(self.cameras)]
-        if not self.cameras:
-            raise KinematicsError("no cameras: the fit needs at least one view",
-                                  field="cameras")
-        if not body.marker_names:
-            raise KinematicsError(f"body '{body.name}' has no markers: nothing to fit",
-                                  field="markers")
+        self.problem = FitProblem.build(body, cameras)
         self.body = body
-        self._cams: CameraArrays = pack_cameras(self.cameras)
+        self.cameras = list(self.problem.cameras)
+        self.view_names = list(self.problem.view_names)
         self._locked = body.locked_mask()
-        self._free = np.flatnonzero(~self._locked).astype(np.int64)
-        if self._free.size == 0:
-            raise KinematicsError(f"body '{body.name}' has no free axis: nothing to fit",
-                                  field="axes")
-        self._mean_deg = body.mean_posture_deg()
-        self._start = np.deg2rad(self._mean_deg)
-        self._folded = fold_body(body, self._mean_deg)
-        self._hist, self._nbins, self._step = histogram_tables(body.histograms())
-        ranges = body.ranges_deg()
-        self._ranges_deg = ranges
-        self._lo = np.ascontiguousarray(np.deg2rad(ranges[:, 0]))
-        self._hi = np.ascontiguousarray(np.deg2rad(ranges[:, 1]))
+        self._mean_deg = self.problem.mean_deg
+        self._ranges_deg = body.ranges_deg()
         self._roots = body.root_positions()
         self._tracked = [k for k, c in enumerate(body.chains) if c.root.mode == "marker"]
         names = body.marker_names
@@ -361,17 +246,16 @@ class Fitter:
         """The histogram-mean start posture (Sect. 3.1), shape (n_axes,)."""
         return self._mean_deg.copy()
 
-    def _posture_rad(self, angles_deg) -> np.ndarray:
+    def _posture_deg(self, angles_deg) -> np.ndarray:
         a = np.asarray(angles_deg, dtype=float)
         if a.shape != (self.body.n_axes,):
             raise KinematicsError(f"posture needs {self.body.n_axes} angles, got shape "
                                   f"{a.shape}", field="angles_deg")
         if not np.all(np.isfinite(a)):
             raise KinematicsError("posture angles must be finite", field="angles_deg")
-        a = np.where(self._locked, self._mean_deg, a)  # locked axes never move
-        return np.ascontiguousarray(np.deg2rad(a))
+        return a
 
-    def _root_rad(self, root_positions) -> np.ndarray:
+    def _root_array(self, root_positions) -> np.ndarray:
         if root_positions is None:
             return np.ascontiguousarray(self._roots, dtype=float)
         r = np.asarray(root_positions, dtype=float)
@@ -379,6 +263,12 @@ class Fitter:
             raise KinematicsError(f"root positions need finite shape {self._roots.shape}, got "
                                   f"{r.shape}", field="root_positions")
         return np.ascontiguousarray(r)
+
+    def state(self, angles_deg, root_positions=None):
+        """Kernel state of a posture: ``(state, root_pos, root_rot)``
+        (:meth:`FitProblem.state`), after checking shapes and values."""
+        return self.problem.state(self._posture_deg(angles_deg),
+                                  self._root_array(root_positions))
 
     def _frame_ragged(self, detections_frame) -> _Ragged:
         return _as_ragged([detections_frame], self.view_names)
@@ -393,12 +283,12 @@ class Fitter:
     def project(self, angles_deg, root_positions=None) -> np.ndarray:
         """Model markers of a posture projected into every view (the annealing kernel's
         forward kinematics), shape (n_views, n_markers, 2) pixels."""
-        angles = self._posture_rad(angles_deg)
-        f, c = self._folded, self._cams
-        nj, na = f.parent.size, angles.size
+        state, pos, rot = self.state(angles_deg, root_positions)
+        f = self.problem.folded
+        nj, ns = f.parent.size, state.size
         proj = np.empty((self.n_views, f.marker_joint.size, 2))
-        _ak.project_posture(angles, self._root_rad(root_positions), *f, *c, np.empty(na),
-                            np.empty(na), np.empty((nj, 3, 3)), np.empty((nj, 3)),
+        _ak.project_posture(state, pos, rot, *f, *self.problem.cams, np.empty(ns),
+                            np.empty(ns), np.empty((nj, 3, 3)), np.empty((nj, 3)),
                             np.empty((f.marker_joint.size, 3)), proj)
         return proj
 
@@ -420,42 +310,57 @@ class Fitter:
         rag = self._frame_ragged(detections_frame)
         per_view = np.empty(self.n_views)
         opts = self.params.error
-        e = _ak.posture_error(self._posture_rad(angles_deg), self._root_rad(root_positions),
-                              *self._folded, *self._cams, rag.points, rag.offsets,
-                              opts.bidirectional, float(opts.penalty_weight), opts.cap,
-                              per_view)
+        state, pos, rot = self.state(angles_deg, root_positions)
+        e = _ak.posture_error(state, pos, rot, *self.problem.folded, *self.problem.cams,
+                              rag.points, rag.offsets, opts.bidirectional,
+                              float(opts.penalty_weight), opts.cap, per_view)
         return float(e), per_view
 
-    # -- root tracking --------------------------------------------------------------------
+    # -- root placement -------------------------------------------------------------------
     def track_roots(self, detections, frames=None) -> np.ndarray:
         """Root position of every chain for each frame, shape (n_frames, n_chains, 3).
 
         Chains with ``root.mode == "marker"`` follow their root marker (Sects. 2.1, 3.3.1):
         frame by frame, in the order of ``frames``, the marker's previous position is
         projected into every view, the nearest detection there is taken as its image (within
-        ``params.root_gate_px`` if set), and the new 3D position is the least-squares point
-        over the observing views (orthographic or pinhole), keeping unobserved directions.
-        The first frame starts from the configured root position (the manual offset of the
-        paper) with the root marker where the start posture puts it; the root then moves by
-        the tracked marker's displacement. Fixed chains keep their position.
+        ``params.root_gate_px`` if set, a gate that doubles for every frame the marker is
+        lost), and the new 3D position is the least-squares point over the observing views
+        (orthographic or pinhole), keeping unobserved directions. The first frame starts
+        from the configured root position (the manual offset of the paper) with the root
+        marker where the start posture puts it; the root then moves by the tracked marker's
+        displacement. Free roots get their per-frame seed position
+        (:mod:`kinematics.placement`); fixed chains keep their position.
         """
         rag = _as_ragged(detections, self.view_names)
         idx = self._frame_indices(frames, rag.n_frames)
-        return self._track(rag, idx)
+        return self._place(rag, idx)[0]
 
-    def _track(self, rag: _Ragged, idx: np.ndarray) -> np.ndarray:
+    def _place(self, rag: _Ragged, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Seed root positions (n, n_chains, 3) and rotations (n, n_chains, 3, 3)."""
         out = np.broadcast_to(self._roots, (len(idx), *self._roots.shape)).copy()
-        if not self._tracked or len(idx) == 0:
-            return out
+        rot = self.problem.identity_rotations(len(idx))
+        if len(idx) == 0:
+            return out, rot
         pts, off = rag.select(idx)
         gate = np.inf if self.params.root_gate_px is None else float(self.params.root_gate_px)
-        markers0 = forward_kinematics_reference(self.body, self._mean_deg).markers
+        if self._tracked:
+            markers0 = forward_kinematics_reference(self.body, self._mean_deg).markers
         for k in self._tracked:
             x0 = np.ascontiguousarray(markers0[self._root_marker[k]], dtype=float)
             track = np.empty((len(idx), 3))
-            _ak.track_root(pts, off, x0, gate, 1e-9, *self._cams, track)
+            _ak.track_root(pts, off, x0, gate, 1e-9, *self.problem.cams, track)
             out[:, k] = self._roots[k] + (track - x0)
-        return out
+        if self.problem.free_chains:
+            nv = self.n_views
+            frames = ([pts[off[f * nv + v]: off[f * nv + v + 1]] for v in range(nv)]
+                      for f in range(len(idx)))
+            tri_gate = placement.DEFAULT_GATE_PX if self.params.root_gate_px is None else gate
+            pos, seed_rot, _ = placement.place_roots(self.body, self.cameras, frames,
+                                                     self.problem.windows, tri_gate)
+            for q, c in enumerate(self.problem.free_chains):
+                out[:, c] = pos[:, q]
+                rot[:, c] = seed_rot[:, q]
+        return out, rot
 
     @staticmethod
     def _frame_indices(frames, n_frames: int) -> np.ndarray:
@@ -489,16 +394,28 @@ class Fitter:
             Start posture of the first run; default the histogram means.
         root_positions : array_like, shape (n_chains, 3), optional
             Root of each chain; default the configured positions (a single frame cannot
-            track a root marker).
+            track a root marker). Free roots are placed from this frame's detections unless
+            given here.
         """
         if isinstance(frame, bool) or not isinstance(frame, int | np.integer) or frame < 0:
             raise KinematicsError(f"frame must be an integer >= 0, got {frame!r}",
                                   field="frame")
         rag = self._frame_ragged(detections_frame)
-        start = self._start if start_deg is None else self._posture_rad(start_deg)
-        roots = self._root_rad(root_positions)[None]
+        roots = self._root_array(root_positions)[None].copy()
+        rots = self.problem.identity_rotations(1)
+        if self.problem.free_chains:
+            seed_pos, seed_rot = self._place(rag, np.zeros(1, np.int64))
+            for c in self.problem.free_chains:
+                rots[0, c] = seed_rot[0, c]
+                if root_positions is None:
+                    roots[0, c] = seed_pos[0, c]
+        start = self.problem.start
+        if start_deg is not None:
+            start = self.problem.state(self._posture_deg(start_deg), roots[0])[0]
+            for q in range(len(self.problem.free_chains)):
+                start[self.problem.root_axes[q]] = 0.0  # the seed holds the root's rotation
         return self._fit_block(rag.points, rag.offsets, np.array([int(frame)], np.int64),
-                               roots, rag.dropped, start, np.array([0, 1], np.int64))[0]
+                               roots, rots, rag.dropped, start, np.array([0, 1], np.int64))[0]
 
     def iter_fit(self, detections, frames=None, *, chunk_size: int | None = None
                  ) -> Iterator[FrameResult]:
@@ -529,7 +446,7 @@ class Fitter:
 
     def _iter(self, rag: _Ragged, idx: np.ndarray, chunk_size: int | None
               ) -> Iterator[FrameResult]:
-        roots = self._track(rag, idx)
+        roots, rots = self._place(rag, idx)
         threads = numba.get_num_threads()
         seg = self.params.segment_length if self.params.start == "previous" else 1
         if chunk_size is None:  # enough frames (or segments) to keep every thread busy
@@ -546,30 +463,32 @@ class Fitter:
             n = len(sel)
             seg_off = np.unique(np.r_[np.arange(0, n, seg), n]).astype(np.int64)
             yield from self._fit_block(pts, off, sel, np.ascontiguousarray(roots[a: a + chunk]),
-                                       rag.dropped[sel], self._start, seg_off)
+                                       np.ascontiguousarray(rots[a: a + chunk]),
+                                       rag.dropped[sel], self.problem.start, seg_off)
 
     def fit(self, detections, frames=None) -> list[FrameResult]:
         """All results of :meth:`iter_fit` as a list."""
         return list(self.iter_fit(detections, frames))
 
-    def _fit_block(self, pts, off, frame_ids, roots, dropped, start, seg_off
+    def _fit_block(self, pts, off, frame_ids, roots, rots, dropped, start, seg_off
                    ) -> list[FrameResult]:
-        p, f, c = self.params, self._folded, self._cams
-        n, na, nv = len(frame_ids), self.body.n_axes, self.n_views
-        angles = np.empty((n, na))
+        p, pr = self.params, self.problem
+        n, ns, nv = len(frame_ids), pr.n_state, self.n_views
+        state = np.empty((n, ns))
         err = np.empty(n)
         view_err = np.empty((n, nv))
         runs = np.empty(n, np.int64)
         its = np.empty(n, np.int64)
         pairs = np.empty(n, np.int64)
         e = p.error
-        _ak.fit_frames(seg_off, frame_ids, pts, off, roots, start, p.start == "previous",
-                       *f, *c, self._free, self._step, self._hist, self._nbins, p.threshold,
-                       p.max_redraws, p.n_end, p.n_l, p.n_tau, float(p.tau0), float(p.l0),
-                       float(p.c_l), float(p.c_tau), float(p.epsilon), p.seed,
+        _ak.fit_frames(seg_off, frame_ids, pts, off, roots, rots, start,
+                       p.start == "previous", *pr.folded, *pr.cams, pr.free_idx, pr.step,
+                       pr.hist, pr.nbins, p.threshold, pr.dof_kind, p.max_redraws, p.n_end,
+                       p.n_l, p.n_tau, float(p.tau0), float(p.l0), float(p.c_l),
+                       float(p.c_tau), float(p.epsilon), p.seed,
                        float(p.reanalysis_threshold), p.max_runs, e.bidirectional,
-                       float(e.penalty_weight), e.cap, self._lo, self._hi,
-                       p.refine_steps if p.refine else 0, float(p.refine_gate_px), angles,
+                       float(e.penalty_weight), e.cap, pr.lo, pr.hi,
+                       p.refine_steps if p.refine else 0, float(p.refine_gate_px), state,
                        err, view_err, runs, its, pairs)
         counts = np.diff(off).reshape(n, nv)
         out = []
@@ -581,16 +500,17 @@ class Fitter:
             else:
                 status = "ok" if runs[k] == 1 else "reanalysed"
             missing = tuple(self.view_names[v] for v in range(nv) if counts[k, v] == 0)
+            angles, fitted_roots = pr.posture(state[k], roots[k], rots[k])
             out.append(FrameResult(
                 frame=int(frame_ids[k]),
-                angles_deg=self._to_range_deg(angles[k]),
+                angles_deg=self._to_range_deg(angles),
                 error=float(err[k]),
                 error_per_view=view_err[k].copy(),
                 runs=int(runs[k]),
                 iterations=int(its[k]),
                 seed=p.seed,
                 status=status,
-                root_positions=roots[k].copy(),
+                root_positions=(fitted_roots if runs[k] else roots[k].copy()),
                 missing_views=missing,
                 dropped=int(dropped[k]),
                 refined_pairs=int(pairs[k]) if p.refine else None,

@@ -119,7 +119,9 @@ def _chain(elem: safe_xml.Element, lines: _Lines) -> Chain:
         if mode == "marker" and marker is None:
             raise KinematicsError("mode 'marker' needs the attribute 'marker'",
                                   line=root_elem.sourceline, field=where)
-        root = Root(mode, safe_xml.get_vec3(root_elem, "position", where), marker)
+        root = Root(mode, safe_xml.get_vec3(root_elem, "position", where), marker,
+                    safe_xml.get_float(root_elem, "translation_window", where),
+                    safe_xml.get_float(root_elem, "rotation_window_deg", where))
     return Chain(name, _joint(elem.find("joint"), lines), root)
 
 
@@ -201,7 +203,9 @@ def body_to_string(body: Body, include_histograms: bool = True) -> str:
         out.append(safe_xml.tag("chain", {"name": chain.name}, 1, close=False))
         out.append(safe_xml.tag("root", {
             "mode": root.mode, "position": safe_xml.format_vec(root.position),
-            "marker": root.marker}, 2))
+            "marker": root.marker,
+            "translation_window": _opt_number(root.translation_window),
+            "rotation_window_deg": _opt_number(root.rotation_window_deg)}, 2))
         _write_joint(chain.root_joint, 2, out)
         out.append("  </chain>")
     learned = [
@@ -265,3 +269,7 @@ def save_body(path: str | os.PathLike, body: Body, include_histograms: bool = Tr
         where = f"{err.field}: " if err.field else ""
         raise KinematicsError(f"cannot save body: {where}{err.message}", file=path) from None
     atomic_write_text(path, text)
+
+
+def _opt_number(value: float | None) -> str | None:
+    return None if value is None else safe_xml.format_number(value)

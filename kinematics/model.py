@@ -31,7 +31,7 @@ from kinematics.histograms import Histogram
 from kinematics.rotations import AXIS_ORDER
 
 UNITS = ("px", "mm")
-ROOT_MODES = ("fixed", "marker")
+ROOT_MODES = ("fixed", "marker", "free")
 Vec3 = tuple[float, float, float]
 
 
@@ -101,12 +101,27 @@ class Joint:
 
 @dataclass(frozen=True)
 class Root:
-    """How the chain's root is placed: ``fixed`` at ``position``, or following the detected
-    root ``marker`` (tracked by nearest neighbour from ``position`` in the first frame)."""
+    """How the chain's root is placed.
+
+    ``fixed``: at ``position``. ``marker``: following the detected root ``marker`` (tracked
+    by nearest neighbour from ``position`` in the first frame). ``free``: a freely moving
+    body; the root joint's position and orientation (its three axes) are fitted per frame,
+    seeded by registering the markers of the root joint's own segments to points
+    triangulated from the views (:mod:`kinematics.placement`). ``translation_window``
+    (length units) and ``rotation_window_deg`` bound the search around that seed; None
+    picks defaults from the body's size (:func:`kinematics.placement.root_windows`).
+    ``position`` is then only a hint used when the root cannot be registered.
+    """
 
     mode: str = "fixed"
     position: Vec3 = (0.0, 0.0, 0.0)
     marker: str | None = None
+    translation_window: float | None = None
+    rotation_window_deg: float | None = None
+
+    @property
+    def free(self) -> bool:
+        return self.mode == "free"
 
 
 @dataclass(frozen=True)
@@ -307,12 +322,28 @@ def validate_body(body: Body) -> None:
         if root.mode not in ROOT_MODES:
             raise KinematicsError(f"root mode must be one of {ROOT_MODES}", field=where)
         _check_vec(root.position, f"{where} position")
-        if root.mode == "marker":
+        if root.mode == "marker" or root.marker is not None:
             names = {m.name for _, _, m in Body(body.name, (chain,), body.units).markers()}
             if root.marker not in names:
                 raise KinematicsError(
                     f"root marker '{root.marker}' is not a marker of the chain", field=where
                 )
+        for name, value in (("translation_window", root.translation_window),
+                            ("rotation_window_deg", root.rotation_window_deg)):
+            if value is not None and not (np.isfinite(value) and value > 0):
+                raise KinematicsError(f"{name} must be a number > 0, got {value}",
+                                      field=where)
+        if root.free:
+            locked = [a.name for a in chain.root_joint.axes if a.locked]
+            if locked:
+                raise KinematicsError(
+                    f"a free root turns about all three axes of its joint "
+                    f"'{chain.root_joint.name}', but '{locked[0]}' is locked; unlock it or "
+                    "use mode 'fixed' or 'marker'", field=where)
+            if not any(s.markers for s in chain.root_joint.segments):
+                raise KinematicsError(
+                    f"a free root needs markers on the segments of its joint "
+                    f"'{chain.root_joint.name}' to place the body", field=where)
 
 
 def _check_vec(v, where: str) -> None:

@@ -32,6 +32,7 @@ class RefineResult:
     """A refined posture.
 
     angles_deg : (n_axes,) the refined posture.
+    root_positions : (n_chains, 3) the roots (free roots move with the refinement).
     sse : sum of squared pair distances at the end, pixels².
     n_pairs : marker/detection pairs used (within the gate) at the end.
     error : E (Eq. 5 or the fitter's variant) of the refined posture; error_per_view (n_views,).
@@ -42,12 +43,19 @@ class RefineResult:
     n_pairs: int
     error: float
     error_per_view: np.ndarray
+    root_positions: np.ndarray | None = None
 
 
 def _inputs(fitter: Fitter, angles_deg, detections_frame, root_positions):
-    angles = fitter._posture_rad(angles_deg)
-    rag = fitter._frame_ragged(detections_frame)
-    return angles, rag, fitter._root_rad(root_positions)
+    """Start angles (radians, locked axes at their value), ragged detections, roots."""
+    angles, roots = fitter.problem.posture(*fitter.state(angles_deg, root_positions))
+    return angles, fitter._frame_ragged(detections_frame), roots
+
+
+def _free_angles(fitter: Fitter) -> np.ndarray:
+    """Free joint-angle entries (translations of free roots excluded)."""
+    free = fitter.problem.free_idx
+    return free[free < fitter.problem.n_axes]
 
 
 def _gate_steps(fitter: Fitter, steps, gate_px) -> tuple[int, float]:
@@ -78,13 +86,16 @@ def refine(fitter: Fitter, angles_deg, detections_frame, root_positions=None, *,
         ``fitter.params`` (``refine_steps``, ``refine_gate_px``).
     """
     steps, gate = _gate_steps(fitter, steps, gate_px)
-    angles, rag, roots = _inputs(fitter, angles_deg, detections_frame, root_positions)
-    sse, n_pairs = _rk.refine_posture(angles, fitter._free, fitter._lo, fitter._hi, steps, gate,
-                                      roots, *fitter._folded, *fitter._cams, rag.points,
+    pr = fitter.problem
+    state, pos, rot = fitter.state(angles_deg, root_positions)
+    rag = fitter._frame_ragged(detections_frame)
+    sse, n_pairs = _rk.refine_posture(state, pr.free_idx, pr.lo, pr.hi, pr.dof_kind, steps,
+                                      gate, pos, rot, *pr.folded, *pr.cams, rag.points,
                                       rag.offsets)
+    angles, roots = pr.posture(state, pos, rot)
     out = fitter._to_range_deg(angles)
-    error, per_view = fitter.error(out, detections_frame, root_positions)
-    return RefineResult(out, float(sse), int(n_pairs), error, per_view)
+    error, per_view = fitter.error(out, detections_frame, roots)
+    return RefineResult(out, float(sse), int(n_pairs), error, per_view, roots)
 
 
 def refine_many(fitter: Fitter, angles_deg, detections, root_positions=None, *,
@@ -108,30 +119,38 @@ def refine_many(fitter: Fitter, angles_deg, detections, root_positions=None, *,
         raise KinematicsError(f"angles need shape ({n}, {fitter.body.n_axes}), got "
                               f"{start.shape}", field="angles_deg")
     rows = np.isfinite(start).all(axis=1)
-    angles = np.full(start.shape, np.nan)
-    angles[rows] = [fitter._posture_rad(a) for a in start[rows]]
+    pr = fitter.problem
+    base = fitter._roots
     if root_positions is None:
-        roots = np.ascontiguousarray(np.broadcast_to(fitter._roots, (n, *fitter._roots.shape)))
+        roots = np.ascontiguousarray(np.broadcast_to(base, (n, *base.shape)))
     else:
         roots = np.ascontiguousarray(np.asarray(root_positions, dtype=float))
-        if roots.shape != (n, *fitter._roots.shape) or not np.isfinite(roots).all():
-            raise KinematicsError(f"root positions need finite shape {(n, *fitter._roots.shape)}"
+        if roots.shape != (n, *base.shape) or not np.isfinite(roots).all():
+            raise KinematicsError(f"root positions need finite shape {(n, *base.shape)}"
                                   f", got {roots.shape}", field="root_positions")
+    state = np.full((n, pr.n_state), np.nan)
+    pos = roots.copy()
+    rot = pr.identity_rotations(n)
+    for k in np.flatnonzero(rows):
+        state[k], pos[k], rot[k] = fitter.state(start[k], roots[k])
     sse = np.empty(n)
     pairs = np.empty(n, np.int64)
-    _rk.refine_frames(angles, rag.points, rag.offsets, roots, fitter._free, fitter._lo,
-                      fitter._hi, steps, gate, *fitter._folded, *fitter._cams, sse, pairs)
+    _rk.refine_frames(state, rag.points, rag.offsets, pos, rot, pr.free_idx, pr.lo, pr.hi,
+                      pr.dof_kind, steps, gate, *pr.folded, *pr.cams, sse, pairs)
     out = []
+    nv = rag.n_views
     for k in range(n):
         if not rows[k]:
             out.append(RefineResult(start[k].copy(), np.nan, 0, np.nan,
-                                    np.full(fitter.n_views, np.nan)))
+                                    np.full(fitter.n_views, np.nan), roots[k].copy()))
             continue
-        a = fitter._to_range_deg(angles[k])
-        frame = [rag.points[rag.offsets[k * rag.n_views + v]: rag.offsets[k * rag.n_views + v + 1]]
-                 for v in range(rag.n_views)]
-        error, per_view = fitter.error(a, frame, roots[k])
-        out.append(RefineResult(a, float(sse[k]), int(pairs[k]), error, per_view))
+        angles, fitted_roots = pr.posture(state[k], pos[k], rot[k])
+        a = fitter._to_range_deg(angles)
+        frame = [rag.points[rag.offsets[k * nv + v]: rag.offsets[k * nv + v + 1]]
+                 for v in range(nv)]
+        error, per_view = fitter.error(a, frame, fitted_roots)
+        out.append(RefineResult(a, float(sse[k]), int(pairs[k]), error, per_view,
+                                fitted_roots))
     return out
 
 
@@ -147,8 +166,9 @@ def refine_reference(fitter: Fitter, angles_deg, detections_frame, root_position
     proj0 = fitter.project(np.rad2deg(angles), roots)
     pair = np.empty(nv * nm, np.int64)
     n_pairs = _rk.assign_pairs(proj0, rag.points, rag.offsets, gate, pair)
-    free = fitter._free
-    lo, hi = fitter._lo[free], fitter._hi[free]
+    free = _free_angles(fitter)
+    ranges = np.deg2rad(fitter.body.ranges_deg())
+    lo, hi = ranges[free, 0], ranges[free, 1]
     x0 = angles[free].copy()
     # Express the start within the bounds (ranges wrap by whole turns).
     x0 = x0 + 2 * np.pi * np.round((0.5 * (lo + hi) - x0) / (2 * np.pi))
@@ -187,7 +207,7 @@ def projection_jacobian(fitter: Fitter, angles_deg, root_positions=None,
     """
     angles = np.asarray(angles_deg, dtype=float)
     cols = []
-    for i in fitter._free:
+    for i in _free_angles(fitter):
         up, dn = angles.copy(), angles.copy()
         up[i] += step_deg
         dn[i] -= step_deg

@@ -435,10 +435,11 @@ def test_annealing_loop_allocates_nothing(locust):
         np.empty((nj, 3, 3)), np.empty((nj, 3)), np.empty((nm, 3)), np.empty((2, nm, 2)),
         np.empty(2), np.empty(nm, np.int64)]
     fresh = numba.njit(ak.anneal_chain.py_func)
-    _, its = fresh(fitter._start, fitter._free, fitter._step, fitter._hist, fitter._nbins,
-                   1e-300, 16, 500, 100, 100, 200.0, 1.0, 0.75, 0.75, 0.0,
-                   ak.stream_state(0, 0, 0), np.zeros((1, 3)), *fitter._folded, *fitter._cams,
-                   pts, off, False, 1.0, np.inf, *scratch)
+    pr = fitter.problem
+    _, its = fresh(pr.start, pr.free_idx, pr.step, pr.hist, pr.nbins, 1e-300, pr.dof_kind,
+                   pr.lo, pr.hi, 16, 500, 100, 100, 200.0, 1.0, 0.75, 0.75, 0.0,
+                   ak.stream_state(0, 0, 0), np.zeros((1, 3)), pr.identity_rotations(),
+                   *pr.folded, *pr.cams, pts, off, False, 1.0, np.inf, *scratch)
     assert its == 500
     ir = fresh.inspect_llvm(fresh.signatures[0])
     assert not re.search(r"NRT_MemInfo_alloc|NRT_Allocate", ir)
