@@ -296,8 +296,8 @@ class FitProblem:
     def identity_rotations(self, n: int | None = None) -> np.ndarray:
         """Root seed rotations for fixed and marker roots: identity, (n_chains, 3, 3) or
         (n, n_chains, 3, 3)."""
-        eye = np.broadcast_to(np.eye(3), (self.n_chains, 3, 3))
-        return np.ascontiguousarray(eye if n is None else np.broadcast_to(eye, (n, *eye.shape)))
+        shape = (self.n_chains, 1, 1) if n is None else (n, self.n_chains, 1, 1)
+        return np.tile(np.eye(3), shape)
 
     def state(self, angles_deg, root_positions) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Kernel state of a public posture.

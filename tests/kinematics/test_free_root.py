@@ -1,0 +1,236 @@
+"""Freely moving bodies: root mode ``free``, seeding by triangulation and registration,
+state <-> posture conversions, and the fitted pose against a planted one."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from kinematics.anneal import AnnealParams, Fitter
+from kinematics.cameras import OrthographicCamera, PinholeCamera
+from kinematics.chain_xml import body_to_string as body_to_xml
+from kinematics.chain_xml import loads_body as parse_body
+from kinematics.errors import KinematicsError
+from kinematics.fk import forward_kinematics_reference
+from kinematics.model import Axis, Body, Chain, Joint, Marker, Root, Segment
+from kinematics.placement import (
+    RootModel,
+    kabsch,
+    register_root,
+    root_windows,
+    triangulate_candidates,
+)
+from kinematics.problem import FitProblem, euler_yxz_from_matrix
+from kinematics.refine import refine
+from kinematics.rotations import euler_yxz
+
+
+def mouse_like(mode: str = "free", **root) -> Body:
+    """A pelvis (free root, 4 markers) with a hip (3 axes) -> femur -> knee hinge -> tibia."""
+    tibia = Segment("tibia", 12.0, markers=(Marker("ankle"),))
+    knee = Joint("knee", (Axis.fixed("ry", "y"), Axis.fixed("rx", "x"),
+                          Axis.free("flex", "z", -150, -10)), segments=(tibia,))
+    femur = Segment("femur", 20.0, markers=(Marker("kneeM"),), joints=(knee,))
+    hip = Joint("hip", (Axis.free("yaw", "y", -60, 60), Axis.free("roll", "x", -60, 60),
+                        Axis.free("pitch", "z", -120, 0)), segments=(femur,))
+    pelvis = Segment("pelvis", 0.0, markers=(
+        Marker("hipL", (0.0, 0.0, -8.0)), Marker("hipR", (0.0, 0.0, 8.0)),
+        Marker("back", (-10.0, 6.0, 0.0)), Marker("tail", (-22.0, 2.0, 0.0))), joints=(hip,))
+    root_joint = Joint("body", (Axis.free("yaw", "y", -180, 180), Axis.free("pitch", "x", -90, 90),
+                                Axis.free("roll", "z", -180, 180)), segments=(pelvis,))
+    return Body("mouse", (Chain("hindlimb", root_joint, Root(mode, **root)),), units="mm")
+
+
+def three_pinholes() -> list:
+    k = [[1400.0, 0, 640.0], [0, 1400.0, 512.0], [0, 0, 1]]
+    cams = []
+    for name, yaw in (("left", -0.6), ("front", 0.0), ("right", 0.7)):
+        r = euler_yxz(yaw, 0.25, 0.0).T  # looking at the origin from 350 mm
+        centre = euler_yxz(yaw, 0.25, 0.0) @ np.array([0.0, 0.0, -350.0])
+        cams.append(PinholeCamera(name, k, [0.02, -0.01, 0, 0, 0], R=r, t=-r @ centre))
+    return cams
+
+
+def planted_frames(body, cams, n=12, seed=3, noise=0.1):
+    rng = np.random.default_rng(seed)
+    lo, hi = body.ranges_deg().T
+    angles, roots, frames = [], [], []
+    for f in range(n):
+        a = rng.uniform(lo, hi)
+        a[:3] = (30.0 * np.sin(0.3 * f), 10.0 * np.cos(0.2 * f), 15.0 + 5 * np.sin(0.5 * f))
+        root = np.array([[5.0 * f - 20.0, 3.0 * np.sin(f), 2.0]])
+        markers = forward_kinematics_reference(body, a, root).markers
+        frames.append([c.project(markers) + rng.normal(0, noise, (len(markers), 2))
+                       for c in cams])
+        angles.append(a)
+        roots.append(root)
+    return np.array(angles), np.array(roots), frames
+
+
+def test_free_root_in_chain_xml_round_trips():
+    body = mouse_like(translation_window=3.0, rotation_window_deg=25.0)
+    again = parse_body(body_to_xml(body))
+    assert again.chains[0].root == body.chains[0].root
+    assert 'mode="free"' in body_to_xml(body)
+
+
+@pytest.mark.parametrize("xml_root, message", [
+    ('<root mode="free" translation_window="-1"/>', "translation_window"),
+    ('<root mode="free" rotation_window_deg="0"/>', "rotation_window_deg"),
+])
+def test_bad_windows_are_named(xml_root, message):
+    text = body_to_xml(mouse_like()).replace('<root mode="free" position="0 0 0"/>', xml_root)
+    with pytest.raises(KinematicsError, match=message):
+        parse_body(text)
+
+
+def test_free_root_needs_unlocked_axes_and_root_markers():
+    body = mouse_like()
+    j = body.chains[0].root_joint
+    locked = Joint(j.name, (j.axes[0], Axis.fixed("pitch", "x"), j.axes[2]),
+                   segments=j.segments)
+    with pytest.raises(KinematicsError, match="locked"):
+        Body("m", (Chain("c", locked, Root("free")),), "mm").validate()
+    bare = Joint(j.name, j.axes, segments=(Segment("pelvis", 0.0, joints=j.segments[0].joints),))
+    with pytest.raises(KinematicsError, match="markers on the segments"):
+        Body("m", (Chain("c", bare, Root("free")),), "mm").validate()
+
+
+def test_euler_round_trip():
+    rng = np.random.default_rng(0)
+    for _ in range(50):
+        a = rng.uniform([-np.pi, -1.5, -np.pi], [np.pi, 1.5, np.pi])
+        np.testing.assert_allclose(euler_yxz(*euler_yxz_from_matrix(euler_yxz(*a))),
+                                   euler_yxz(*a), atol=1e-12)
+
+
+def test_state_and_posture_are_inverse():
+    body = mouse_like()
+    pr = FitProblem.build(body, three_pinholes())
+    assert pr.n_state == body.n_axes + 3
+    a = np.where(body.locked_mask(), 0.0, body.mean_posture_deg() + 7.0)
+    state, pos, rot = pr.state(a, [[1.0, 2.0, 3.0]])
+    np.testing.assert_array_equal(state[pr.root_axes[0]], 0.0)
+    back, roots = pr.posture(state, pos, rot)
+    np.testing.assert_allclose(np.rad2deg(back), a, atol=1e-9)
+    np.testing.assert_allclose(roots, [[1.0, 2.0, 3.0]])
+
+
+def test_kernel_projection_of_a_free_root_equals_reference():
+    body = mouse_like()
+    cams = three_pinholes()
+    fitter = Fitter(body, cams)
+    angles, roots, _ = planted_frames(body, cams, n=5)
+    for a, r in zip(angles, roots, strict=True):
+        want = np.stack([c.project(forward_kinematics_reference(body, a, r).markers)
+                         for c in cams])
+        np.testing.assert_allclose(fitter.project(a, r), want, atol=1e-8)
+
+
+def test_triangulation_finds_every_marker():
+    body = mouse_like()
+    cams = three_pinholes()
+    angles, roots, frames = planted_frames(body, cams, n=1, noise=0.0)
+    truth = forward_kinematics_reference(body, angles[0], roots[0]).markers
+    pts, support = triangulate_candidates(cams, frames[0], 2.0)
+    d = np.linalg.norm(truth[:, None] - pts[None], axis=2).min(axis=1)
+    assert d.max() < 1e-6
+    assert support.max() == 3
+
+
+def test_triangulation_with_orthographic_views():
+    cams = [OrthographicCamera.from_axes("side", 2.0, ("x", "-y"), (300, 300)),
+            OrthographicCamera.from_axes("top", 2.0, ("x", "z"), (300, 300))]
+    pts3 = np.array([[1.0, 2.0, 3.0], [-5.0, 4.0, 10.0]])
+    views = [c.project(pts3) for c in cams]
+    got, _ = triangulate_candidates(cams, views, 1.0)
+    d = np.linalg.norm(pts3[:, None] - got[None], axis=2).min(axis=1)
+    assert d.max() < 1e-9
+
+
+def test_registration_with_and_without_prediction():
+    body = mouse_like()
+    model = RootModel(body, 0, 5.0)
+    assert model.rigid
+    r_true = euler_yxz(0.4, -0.2, 0.3)
+    t_true = np.array([10.0, -4.0, 7.0])
+    world = model.local @ r_true.T + t_true
+    rng = np.random.default_rng(1)
+    clutter = rng.uniform(-40, 40, (15, 3))
+    cands = np.vstack([clutter[:7], world, clutter[7:]])
+    r, t, n = register_root(model, cands)  # acquisition: a search over triples
+    np.testing.assert_allclose(r, r_true, atol=1e-9)
+    np.testing.assert_allclose(t, t_true, atol=1e-9)
+    assert n == 4
+    _, t2, _ = register_root(model, cands, (euler_yxz(0.35, -0.2, 0.3), t_true + 1.0))
+    np.testing.assert_allclose(t2, t_true, atol=1e-9)
+    # a wrong prediction (after a jump) is recovered by the search
+    _, t3, _ = register_root(model, cands, (np.eye(3), t_true + 60.0))
+    np.testing.assert_allclose(t3, t_true, atol=1e-9)
+    assert register_root(model, clutter) is None or register_root(model, clutter)[2] >= 3
+
+
+def test_kabsch_exact():
+    rng = np.random.default_rng(2)
+    m = rng.normal(size=(5, 3))
+    r = euler_yxz(1.0, 0.3, -0.7)
+    got_r, _, rms = kabsch(m, m @ r.T + [1, 2, 3])
+    np.testing.assert_allclose(got_r, r, atol=1e-12)
+    assert rms < 1e-12
+
+
+def test_default_windows():
+    w = root_windows(mouse_like())
+    assert w.shape == (1, 2)
+    assert w[0, 1] == 20.0 and 0 < w[0, 0] < 8.0
+    assert root_windows(mouse_like(translation_window=2.5))[0, 0] == 2.5
+
+
+def joint_errors(body, results, angles, roots):
+    errs = []
+    for r, a, rt in zip(results, angles, roots, strict=True):
+        fit = forward_kinematics_reference(body, r.angles_deg, r.root_positions)
+        true = forward_kinematics_reference(body, a, rt)
+        errs.append(np.linalg.norm(fit.markers - true.markers, axis=1).max())
+    return np.array(errs)
+
+
+def test_free_body_is_placed_and_fitted():
+    """No true root is given: every frame is placed by triangulation and registration."""
+    body = mouse_like()
+    cams = three_pinholes()
+    angles, roots, frames = planted_frames(body, cams, n=10)
+    params = AnnealParams(refine=True, reanalysis_threshold=2.0).with_schedule(6000)
+    results = Fitter(body, cams, params).fit(frames)
+    err = joint_errors(body, results, angles, roots)
+    assert np.median(err) < 0.2, err
+    assert err.max() < 1.0, err
+    for r, rt in zip(results, roots, strict=True):
+        np.testing.assert_allclose(r.root_positions, rt, atol=0.5)
+
+
+def test_free_body_single_frame_and_refine():
+    body = mouse_like()
+    cams = three_pinholes()
+    angles, roots, frames = planted_frames(body, cams, n=1)
+    fitter = Fitter(body, cams, AnnealParams(refine=True).with_schedule(6000))
+    res = fitter.fit_frame(frames[0])
+    assert joint_errors(body, [res], angles, roots)[0] < 0.5
+    # refinement from a slightly wrong pose moves the root too, and never raises E
+    start = res.angles_deg + 1.0
+    before = fitter.error(start, frames[0], res.root_positions + 0.3)[0]
+    ref = refine(fitter, start, frames[0], res.root_positions + 0.3)
+    assert ref.error <= before
+    assert np.abs(ref.root_positions - roots[0]).max() < 0.2
+
+
+def test_free_root_seed_carried_over_a_frame_without_detections():
+    body = mouse_like()
+    cams = three_pinholes()
+    _, _, frames = planted_frames(body, cams, n=4)
+    frames[2] = [np.empty((0, 2)) for _ in cams]
+    fitter = Fitter(body, cams, AnnealParams(refine=True).with_schedule(4000))
+    placed = fitter.track_roots(frames)
+    np.testing.assert_allclose(placed[2], placed[1])
+    res = fitter.fit(frames)
+    assert res[2].status == "no-detections"
