@@ -64,7 +64,7 @@ _S31 = np.uint64(31)
 _TWO_M53 = 1.0 / 9007199254740992.0  # 2**-53
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def mix64(z):
     """splitmix64's finaliser: a bijective 64-bit hash (z is uint64)."""
     z = (z ^ (z >> _S30)) * _MIX1
@@ -72,7 +72,7 @@ def mix64(z):
     return z ^ (z >> _S31)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def stream_state(seed, frame, run):
     """Start state (uint64) of the random stream of (seed, frame, run), all integers >= 0."""
     s = mix64(np.uint64(seed) + _GOLDEN)
@@ -80,14 +80,14 @@ def stream_state(seed, frame, run):
     return mix64(s ^ (np.uint64(run) * _RUN_KEY + _GOLDEN))
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def next_uniform(state):
     """Advance the stream; returns ``(state, u)`` with ``u`` uniform in [0, 1) (53 bits)."""
     state = state + _GOLDEN
     return state, np.float64(mix64(state) >> _S11) * _TWO_M53
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def uniforms(state, out):
     """Fill ``out`` with the stream's next draws (for tests); returns the new state."""
     st = np.uint64(state)  # a Python int may arrive as int64, and int64 + uint64 is float
@@ -108,7 +108,7 @@ _C1, _C2, _C3 = 4.16666666666666019037e-02, -1.38888888888741095749e-03, 2.48015
 _C4, _C5, _C6 = -2.75573143513906633035e-07, 2.08757232129817482790e-09, -1.13596475577881948265e-11
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def sincos(x):
     """``(sin x, cos x)`` for radians x."""
     k = np.rint(x * _TWO_OVER_PI)
@@ -127,7 +127,7 @@ def sincos(x):
 
 
 # -- histogram lookup ---------------------------------------------------------------------
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def hist_at(hist, nbins, i, x):
     """H_i(x) for x in radians: the value of the bin holding x (wraps), as
     :meth:`kinematics.histograms.Histogram.at`; no floating modulo in the common case."""
@@ -142,7 +142,7 @@ def hist_at(hist, nbins, i, x):
 
 
 # -- forward kinematics and projection (Eq. 1-3), folded layout --------------------------
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def _project_cs(values, cs, sn, root_pos, root_rot, parent, chain, pre_rot, pre_trans,
                 post_trans, elem_axis, elem_index, joint_flags, marker_joint, marker_local,
                 slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj, any_pinhole):
@@ -250,7 +250,7 @@ def _project_cs(values, cs, sn, root_pos, root_rot, parent, chain, pre_rot, pre_
         _project_pinhole(kind, P, K, dist, R, t, mk, proj)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _project_pinhole(kind, P, K, dist, R, t, mk, proj):
     """Project the 3D markers ``mk`` (nm, 3) into the pinhole views of ``proj``."""
     for v in range(kind.shape[0]):
@@ -261,7 +261,7 @@ def _project_pinhole(kind, P, K, dist, R, t, mk, proj):
                 proj[v, m, 1] = w
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def _has_pinhole(kind):
     out = False
     for v in range(kind.shape[0]):
@@ -269,7 +269,7 @@ def _has_pinhole(kind):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def project_posture(angles, root_pos, root_rot, parent, chain, pre_rot, pre_trans, post_trans,
                     elem_axis, elem_index, joint_flags, marker_joint, marker_local, slide_index,
                     kind, P, K, dist, R, t, cs, sn, rot, pos, mk, proj):
@@ -285,14 +285,16 @@ def project_posture(angles, root_pos, root_rot, parent, chain, pre_rot, pre_tran
 
 
 # -- Eq. 5 -------------------------------------------------------------------------------
-@njit(cache=True)
-def projection_error(proj, points, view_off, bidirectional, weight, cap, per_view, nearest):
+@njit(cache=True, nogil=True)
+def projection_error(proj, points, view_off, bidirectional, weight, cap, penalty_cap, per_view,
+                     nearest):
     """Eq. 5 and its variants for given marker projections; returns E (pixels).
 
     ``E = sum_v sum_i min(min_c |p_i^v - d_c^v|, cap)`` over views with at least one
     detection (a view without detections contributes nothing). With ``bidirectional``, each
     detection that is no marker's nearest detection adds ``weight * min(min_i |p_i^v -
-    d_c^v|, cap)`` (the heuristic of Sect. 4). ``cap = inf`` is the paper's Eq. 5. Ties go
+    d_c^v|, penalty_cap)`` (the heuristic of Sect. 4; bounded, a ghost costs at most
+    ``weight * penalty_cap``). ``cap = inf`` is the paper's Eq. 5. Ties go
     to the lower detection index. A marker without a finite projection costs ``cap``, or
     :data:`NAN_MARKER_COST` without a cap.
 
@@ -337,13 +339,13 @@ def projection_error(proj, points, view_off, bidirectional, weight, cap, per_vie
                         best = min(best, dx * dx + dy * dy)
                     if not matched:
                         d = np.sqrt(best) if best < np.inf else missing
-                        ev += weight * min(d, cap)
+                        ev += weight * min(d, penalty_cap)
         per_view[v] = ev
         total += ev
     return total
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def _paper_error(proj, points, view_off, cap):
     """:func:`projection_error` without the bidirectional term and per-view output: the
     annealing loop's fast path. The minimum over detections runs in four independent
@@ -390,10 +392,11 @@ def _paper_error(proj, points, view_off, cap):
     return total
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def posture_error(angles, root_pos, root_rot, parent, chain, pre_rot, pre_trans, post_trans,
                   elem_axis, elem_index, joint_flags, marker_joint, marker_local, slide_index,
                   kind, P, K, dist, R, t, points, view_off, bidirectional, weight, cap,
+                  penalty_cap,
                   per_view):
     """Eq. 5 (or a variant) of one posture ``angles`` (n_axes,) radians; fills ``per_view``
     (n_views,). Allocates its scratch: for single evaluations, not for loops."""
@@ -410,18 +413,19 @@ def posture_error(angles, root_pos, root_rot, parent, chain, pre_rot, pre_trans,
     project_posture(angles, root_pos, root_rot, parent, chain, pre_rot, pre_trans, post_trans,
                     elem_axis, elem_index, joint_flags, marker_joint, marker_local, slide_index,
                     kind, P, K, dist, R, t, cs, sn, rot, pos, mk, proj)
-    return projection_error(proj, points, view_off, bidirectional, weight, cap, per_view,
+    return projection_error(proj, points, view_off, bidirectional, weight, cap, penalty_cap,
+                            per_view,
                             nearest)
 
 
 # -- simulated annealing (Sect. 2.3, Eq. 6) ----------------------------------------------
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def anneal_chain(start, free_idx, step, hist, nbins, th, dof_kind, lo, hi, max_redraws,
                  n_end, n_l, n_tau, tau0, l0, c_l, c_tau, eps, state,
                  root_pos, root_rot, parent, chain, pre_rot, pre_trans, post_trans, elem_axis,
                  elem_index, joint_flags, marker_joint, marker_local, slide_index, kind, P, K,
                  dist, R, t,
-                 points, view_off, bidirectional, weight, cap,
+                 points, view_off, bidirectional, weight, cap, penalty_cap,
                  cur, cand, best, cs, sn, rot, pos, mk, proj, per_view, nearest):
     """One annealing run from ``start``; the best posture seen is left in ``best``.
 
@@ -460,7 +464,8 @@ def anneal_chain(start, free_idx, step, hist, nbins, th, dof_kind, lo, hi, max_r
     _project_cs(cand, cs, sn, root_pos, root_rot, parent, chain, pre_rot, pre_trans,
                 post_trans, elem_axis, elem_index, joint_flags, marker_joint, marker_local,
                 slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj, any_pinhole)
-    e_cur = projection_error(proj, points, view_off, bidirectional, weight, cap, per_view,
+    e_cur = projection_error(proj, points, view_off, bidirectional, weight, cap, penalty_cap,
+                             per_view,
                              nearest)
     e_best = e_cur
     tau = tau0
@@ -498,7 +503,7 @@ def anneal_chain(start, free_idx, step, hist, nbins, th, dof_kind, lo, hi, max_r
                     kind, P, K,
                     dist, R, t, rot, pos, mk, proj, any_pinhole)
         if bidirectional:
-            e = projection_error(proj, points, view_off, bidirectional, weight, cap,
+            e = projection_error(proj, points, view_off, bidirectional, weight, cap, penalty_cap,
                                  per_view, nearest)
         else:
             e = _paper_error(proj, points, view_off, cap)
@@ -523,14 +528,15 @@ def anneal_chain(start, free_idx, step, hist, nbins, th, dof_kind, lo, hi, max_r
     return e_best, it
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True, parallel=True)
 def fit_frames(seg_off, frame_ids, det_points, det_off, root_pos, root_rot, start,
                start_previous,
                parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index,
                joint_flags, marker_joint, marker_local, slide_index, kind, P, K, dist, R, t,
                free_idx, step, hist, nbins, th, dof_kind, max_redraws,
                n_end, n_l, n_tau, tau0, l0, c_l, c_tau, eps, seed, reanalysis_threshold,
-               max_runs, bidirectional, weight, cap, lo, hi, refine_steps, refine_gate,
+               max_runs, bidirectional, weight, cap, penalty_cap, lo, hi, refine_steps,
+               refine_gate,
                out_angles, out_error, out_view_error, out_runs, out_iterations, out_pairs):
     """Fit many frames in parallel (``prange`` over segments of consecutive frames).
 
@@ -596,7 +602,8 @@ def fit_frames(seg_off, frame_ids, det_points, det_off, root_pos, root_rot, star
                                           elem_index, joint_flags, marker_joint,
                                           marker_local, slide_index, kind, P, K, dist, R, t,
                                           det_points, vo, bidirectional,
-                                          weight, cap, cur, cand, best, cs, sn, rot, pos,
+                                          weight, cap, penalty_cap, cur, cand, best, cs, sn,
+                                          rot, pos,
                                           mk, proj, per_view, nearest)
                     out_iterations[f] += its
                     pairs = 0
@@ -614,7 +621,7 @@ def fit_frames(seg_off, frame_ids, det_points, det_off, root_pos, root_rot, star
                                         marker_joint, marker_local, slide_index, kind, P, K,
                                         dist, R, t, cs, sn, rot, pos, mk, proj)
                         e_refined = projection_error(proj, det_points, vo, bidirectional,
-                                                     weight, cap, per_view, nearest)
+                                                     weight, cap, penalty_cap, per_view, nearest)
                         if e_refined <= e:
                             e = e_refined
                         else:
@@ -630,7 +637,7 @@ def fit_frames(seg_off, frame_ids, det_points, det_off, root_pos, root_rot, star
                                 marker_local, slide_index, kind, P, K, dist, R, t, cs, sn,
                                 rot, pos, mk, proj)
                 out_error[f] = projection_error(proj, det_points, vo, bidirectional, weight,
-                                                cap, per_view, nearest)
+                                                cap, penalty_cap, per_view, nearest)
                 out_view_error[f, :] = per_view
                 out_angles[f, :] = keep
                 out_runs[f] = run
@@ -638,7 +645,7 @@ def fit_frames(seg_off, frame_ids, det_points, det_off, root_pos, root_rot, star
                     first[:] = keep
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def solve_spd(a, b, n):
     """Solve ``a[:n, :n] · x = b[:n]`` for symmetric positive semi-definite ``a`` in place
     (Cholesky without pivoting; ``a`` is overwritten by its factor, ``b`` by x). A
@@ -668,7 +675,7 @@ def solve_spd(a, b, n):
 
 
 # -- root marker tracking (Sect. 2.1, 3.3.1) ---------------------------------------------
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def track_root(det_points, det_off, x0, gate, ridge, kind, P, K, dist, R, t, out):
     """Follow one root marker through frames by nearest neighbour in every view.
 

@@ -22,7 +22,7 @@ ORTHOGRAPHIC = 0
 PINHOLE = 1
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def project_point(kind, P, K, dist, R, t, c, x, y, z):
     """Project one world point through camera ``c``; returns ``(u, v)`` in pixels.
 
@@ -51,7 +51,7 @@ def project_point(kind, P, K, dist, R, t, c, x, y, z):
     return K[c, 0, 0] * xd + K[c, 0, 2], K[c, 1, 1] * yd + K[c, 1, 2]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def project_points_kernel(kind, P, K, dist, R, t, c, pts, out):
     """Project ``pts`` (m, 3) through camera ``c`` into ``out`` (m, 2), in place."""
     for i in range(pts.shape[0]):

@@ -8,7 +8,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def euler_yxz_into(ay, ax, az, out):
     """out = Ry(ay) · Rx(ax) · Rz(az) (Eq. 1)."""
     ca, sa = np.cos(ay), np.sin(ay)
@@ -25,14 +25,14 @@ def euler_yxz_into(ay, ax, az, out):
     out[2, 2] = ca * cb
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def matmul3_into(a, b, out):
     for i in range(3):
         for k in range(3):
             out[i, k] = a[i, 0] * b[0, k] + a[i, 1] * b[1, k] + a[i, 2] * b[2, k]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def joint_frames(angles, root_pos, parent, chain, pre_rot, pre_trans, post_rot, post_trans,
                  axis_index, rot_out, pos_out, tmp_a, tmp_b):
     """Fill rot_out (nj, 3, 3) and pos_out (nj, 3) with every joint frame (Eq. 1).
@@ -59,7 +59,7 @@ def joint_frames(angles, root_pos, parent, chain, pre_rot, pre_trans, post_rot, 
             pos_out[j, i] += rot_out[j, i, 0] * t0 + rot_out[j, i, 1] * t1 + rot_out[j, i, 2] * t2
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def _mul3(a, b, c, out):
     """out = a · b · c for 3×3 matrices, without scratch storage."""
     for i in range(3):
@@ -70,7 +70,7 @@ def _mul3(a, b, c, out):
             out[i, k] = r0 * c[0, k] + r1 * c[1, k] + r2 * c[2, k]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def local_points(rot, pos, owner, local, out):
     """out[k] = pos[owner[k]] + rot[owner[k]] · local[k] (markers, segment ends)."""
     for k in range(owner.shape[0]):
@@ -80,7 +80,7 @@ def local_points(rot, pos, owner, local, out):
                                      + rot[j, i, 2] * local[k, 2])
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def fk_batch(angles, root_pos, parent, chain, pre_rot, pre_trans, post_rot, post_trans,
              axis_index, segment_joint, segment_end, marker_joint, marker_local,
              joints_out, segments_out, markers_out):

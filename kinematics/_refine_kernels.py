@@ -27,7 +27,7 @@ MAX_DAMPING_TRIES = 8
 CONVERGED = 1e-9
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def _wrap_clip(x, lo, hi):
     """Project angle x (radians) into [lo, hi], using the 2π-equivalent nearest the range;
     ranges of a full turn are not clipped."""
@@ -38,7 +38,7 @@ def _wrap_clip(x, lo, hi):
     return min(max(x, lo), hi)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def assign_pairs(proj, points, view_off, gate, pair):
     """``pair[v * nm + i]`` = index of marker i's nearest detection in view v if within
     ``gate`` pixels, else -1; returns the number of pairs."""
@@ -63,7 +63,7 @@ def assign_pairs(proj, points, view_off, gate, pair):
     return n
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def pair_cost(proj, points, pair):
     """Sum of squared residuals over the pairs of :func:`assign_pairs`."""
     nm = proj.shape[1]
@@ -77,7 +77,7 @@ def pair_cost(proj, points, pair):
     return s
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def refine_posture(angles, free_idx, lo, hi, dof_kind, n_steps, gate, root_pos, root_rot,
                    parent, chain, pre_rot,
                    pre_trans, post_trans, elem_axis, elem_index, joint_flags, marker_joint,
@@ -183,7 +183,7 @@ def refine_posture(angles, free_idx, lo, hi, dof_kind, n_steps, gate, root_pos, 
     return cost, n_pairs
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True, parallel=True)
 def refine_frames(angles, det_points, det_off, root_pos, root_rot, free_idx, lo, hi, dof_kind,
                   n_steps, gate,
                   parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index,

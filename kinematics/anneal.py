@@ -94,6 +94,9 @@ class FrameResult:
         Detected points dropped because a coordinate was NaN or infinite.
     refined_pairs : int or None
         Marker/detection pairs used by refinement, None when refinement was off.
+    marker_residuals : ndarray, shape (n_views, n_markers), or None
+        Distance in pixels from each fitted model marker to its nearest detection in each
+        view (NaN where the view has no detection): which marker is off.
     """
 
     frame: int
@@ -108,6 +111,7 @@ class FrameResult:
     missing_views: tuple[str, ...] = ()
     dropped: int = 0
     refined_pairs: int | None = None
+    marker_residuals: np.ndarray | None = None
 
     @property
     def ok(self) -> bool:
@@ -283,13 +287,15 @@ class Fitter:
     def project(self, angles_deg, root_positions=None) -> np.ndarray:
         """Model markers of a posture projected into every view (the annealing kernel's
         forward kinematics), shape (n_views, n_markers, 2) pixels."""
-        state, pos, rot = self.state(angles_deg, root_positions)
+        return self._project_state(*self.state(angles_deg, root_positions))
+
+    def _project_state(self, state, root_pos, root_rot) -> np.ndarray:
         f = self.problem.folded
-        nj, ns = f.parent.size, state.size
-        proj = np.empty((self.n_views, f.marker_joint.size, 2))
-        _ak.project_posture(state, pos, rot, *f, *self.problem.cams, np.empty(ns),
+        nj, nm, ns = f.parent.size, f.marker_joint.size, state.size
+        proj = np.empty((self.n_views, nm, 2))
+        _ak.project_posture(state, root_pos, root_rot, *f, *self.problem.cams, np.empty(ns),
                             np.empty(ns), np.empty((nj, 3, 3)), np.empty((nj, 3)),
-                            np.empty((f.marker_joint.size, 3)), proj)
+                            np.empty((nm, 3)), proj)
         return proj
 
     def error(self, angles_deg, detections_frame, root_positions=None) -> tuple[float,
@@ -313,7 +319,8 @@ class Fitter:
         state, pos, rot = self.state(angles_deg, root_positions)
         e = _ak.posture_error(state, pos, rot, *self.problem.folded, *self.problem.cams,
                               rag.points, rag.offsets, opts.bidirectional,
-                              float(opts.penalty_weight), opts.cap, per_view)
+                              float(opts.penalty_weight), opts.cap, opts.penalty_cap,
+                              per_view)
         return float(e), per_view
 
     # -- root placement -------------------------------------------------------------------
@@ -487,7 +494,7 @@ class Fitter:
                        p.n_l, p.n_tau, float(p.tau0), float(p.l0), float(p.c_l),
                        float(p.c_tau), float(p.epsilon), p.seed,
                        float(p.reanalysis_threshold), p.max_runs, e.bidirectional,
-                       float(e.penalty_weight), e.cap, pr.lo, pr.hi,
+                       float(e.penalty_weight), e.cap, e.penalty_cap, pr.lo, pr.hi,
                        p.refine_steps if p.refine else 0, float(p.refine_gate_px), state,
                        err, view_err, runs, its, pairs)
         counts = np.diff(off).reshape(n, nv)
@@ -501,6 +508,10 @@ class Fitter:
                 status = "ok" if runs[k] == 1 else "reanalysed"
             missing = tuple(self.view_names[v] for v in range(nv) if counts[k, v] == 0)
             angles, fitted_roots = pr.posture(state[k], roots[k], rots[k])
+            residuals = np.full((nv, pr.folded.marker_joint.size), np.nan)
+            if runs[k]:
+                residuals = self._residuals(state[k], roots[k], rots[k],
+                                            pts, off[k * nv: k * nv + nv + 1])
             out.append(FrameResult(
                 frame=int(frame_ids[k]),
                 angles_deg=self._to_range_deg(angles),
@@ -514,7 +525,18 @@ class Fitter:
                 missing_views=missing,
                 dropped=int(dropped[k]),
                 refined_pairs=int(pairs[k]) if p.refine else None,
+                marker_residuals=residuals,
             ))
+        return out
+
+    def _residuals(self, state, root_pos, root_rot, pts, view_off) -> np.ndarray:
+        """(n_views, n_markers) distance of each model marker to its nearest detection."""
+        proj = self._project_state(state, root_pos, root_rot)
+        out = np.full(proj.shape[:2], np.nan)
+        for v in range(self.n_views):
+            d = pts[view_off[v]: view_off[v + 1]]
+            if len(d):
+                out[v] = np.linalg.norm(proj[v][:, None] - d[None], axis=2).min(axis=1)
         return out
 
 

@@ -18,6 +18,11 @@ Variants (:class:`ErrorOptions`):
   model marker (capped as well). It penalises postures that fuse two markers onto one
   detection and leave another unexplained (Fig. 9), but it also pulls the model toward ghost
   markers, so use it with few ghosts or together with a cap.
+* ``mode="bounded"`` — the bidirectional heuristic with every unclaimed detection costing at
+  most ``penalty_cap_px`` (default 3 px) whatever ``cap_px`` is: a detection the model cannot
+  explain (a ghost) adds a small constant instead of pulling the model toward it, so the term
+  still separates fused-marker postures (two markers on one detection leave a real marker
+  unclaimed, at a distance the cap clips only when it is large) without exploding on clutter.
 
 Conventions shared with the kernels: a view without any detection contributes nothing; ties
 in the nearest detection go to the lower index; a marker whose projection is not finite
@@ -83,7 +88,8 @@ def projection_error(
             claimed = np.zeros(len(d), dtype=bool)
             claimed[nearest[nearest >= 0]] = True
             to_model = dist[finite].min(axis=0) if finite.any() else np.full(len(d), missing)
-            per_view[v] += opts.penalty_weight * np.minimum(to_model[~claimed], cap).sum()
+            unclaimed = np.minimum(to_model[~claimed], opts.penalty_cap)
+            per_view[v] += opts.penalty_weight * unclaimed.sum()
     return float(per_view.sum()), per_view
 
 

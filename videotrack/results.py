@@ -3,7 +3,12 @@
 The CSV has one row per analysed image (frame, or field when de-interlaced)::
 
     frame, video_frame, field, time, <joint>.<axis> ... (degrees), error, error.<view> ...,
-    runs, iterations, status, <chain>.root.x/y/z ..., <marker>.x/y/z ..., <joint>.x/y/z ...
+    runs, iterations, status, <chain>.root.x/y/z ..., <marker>.x/y/z ..., <joint>.x/y/z ...,
+    <marker>.res.<view> ...
+
+The ``.res.`` columns are per-marker residuals: how far, in pixels, each fitted model marker
+is from the detection it matched (its nearest) in each view; empty where the view had no
+detection. They show which marker of a frame is off (a swapped or missing marker).
 
 ``status`` is ``ok``, ``reanalysed``, ``failed``, ``no-detections`` or ``corrected`` (set by
 hand in the GUI). Empty cells are NaN. The sidecar ``<results>.json`` records the seed, every
@@ -60,6 +65,7 @@ class Results:
     roots: np.ndarray  # (n, c, 3)
     markers: np.ndarray  # (n, m, 3)
     joints: np.ndarray  # (n, j, 3)
+    residuals: np.ndarray | None = None  # (n, m, v) pixels, or None (older files)
 
     def __len__(self) -> int:
         return self.frames.size
@@ -75,6 +81,8 @@ class Results:
         cols += ["runs", "iterations", "status"]
         cols += [f"{c}.root.{a}" for c in self.chain_names for a in "xyz"]
         cols += [f"{p}.{a}" for p in (*self.marker_names, *self.joint_names) for a in "xyz"]
+        if self.residuals is not None:
+            cols += [f"{m}.res.{v}" for m in self.marker_names for v in self.view_names]
         return cols
 
 
@@ -96,6 +104,11 @@ def results_from_fit(body: Body, fit_results: Sequence, view_names: Sequence[str
     if good.any():
         pose = forward_kinematics(pack_body(body), angles[good], roots[good])
         markers[good], joints[good] = pose.markers, pose.joints
+    residuals = None
+    if n and all(getattr(r, "marker_residuals", None) is not None for r in fit_results):
+        # (n, v, m) from the fitter -> (n, m, v): one marker's views side by side
+        residuals = np.array([r.marker_residuals for r in fit_results], dtype=float).reshape(
+            n, len(view_names), len(body.marker_names)).transpose(0, 2, 1)
     if detections is not None:
         video_frames = np.asarray(detections.video_frames)[frames]
         fields = np.asarray(detections.parities)[frames]
@@ -114,7 +127,7 @@ def results_from_fit(body: Body, fit_results: Sequence, view_names: Sequence[str
         runs=np.array([r.runs for r in fit_results], dtype=np.int64),
         iterations=np.array([r.iterations for r in fit_results], dtype=np.int64),
         status=tuple(r.status for r in fit_results), roots=roots, markers=markers,
-        joints=joints,
+        joints=joints, residuals=residuals,
     )
 
 
@@ -129,6 +142,8 @@ def format_results(results: Results) -> str:
                    *results.error_per_view[i], results.runs[i], results.iterations[i]]
         points = [*results.roots[i].ravel(), *results.markers[i].ravel(),
                   *results.joints[i].ravel()]
+        if results.residuals is not None:
+            points += [*results.residuals[i].ravel()]
         writer.writerow([*(format_cell(float(v)) for v in numbers), results.status[i],
                          *(format_cell(float(v)) for v in points)])
     return buf.getvalue()
@@ -188,7 +203,9 @@ def read_results(path: str | os.PathLike) -> Results:
                               line=1) from None
     axis_labels = tuple(header[4:i_err])
     views = tuple(h[len("error."):] for h in header[i_err + 1:i_runs])
-    point_cols = header[i_status + 1:]
+    res_cols = [c for c, h in enumerate(header) if ".res." in h]
+    i_res = res_cols[0] if res_cols else len(header)
+    point_cols = header[i_status + 1:i_res]
     chains = tuple(h[:-len(".root.x")] for h in point_cols[::3] if h.endswith(".root.x"))
     names = [h[:-2] for h in point_cols[3 * len(chains)::3]]
     side = read_sidecar(path)
@@ -212,7 +229,14 @@ def read_results(path: str | os.PathLike) -> Results:
                     raise VideoTrackError(f"'{cell}' is not a number", file=path, line=r + 2,
                                           field=header[c]) from None
     n = data.shape[0]
-    points = data[:, i_status + 1:].reshape(n, -1, 3)
+    points = data[:, i_status + 1:i_res].reshape(n, -1, 3)
+    residuals = None
+    if res_cols:
+        res_views = tuple(dict.fromkeys(h.rsplit(".res.", 1)[1] for h in header[i_res:]))
+        if res_views != views or len(header) - i_res != n_markers * len(views):
+            raise VideoTrackError("residual columns do not match the markers and views",
+                                  file=path, line=1)
+        residuals = data[:, i_res:].reshape(n, n_markers, len(views))
     nc = len(chains)
     return Results(
         axis_labels=axis_labels, view_names=views, chain_names=chains,
@@ -223,7 +247,7 @@ def read_results(path: str | os.PathLike) -> Results:
         error_per_view=data[:, i_err + 1:i_runs], runs=data[:, i_runs].astype(np.int64),
         iterations=data[:, i_runs + 1].astype(np.int64), status=tuple(status),
         roots=points[:, :nc], markers=points[:, nc:nc + n_markers],
-        joints=points[:, nc + n_markers:],
+        joints=points[:, nc + n_markers:], residuals=residuals,
     )
 
 
@@ -237,7 +261,9 @@ def frame_results(table: Results, seed: int) -> dict:
             frame=int(table.frames[i]), angles_deg=np.array(table.angles_deg[i]),
             error=float(table.error[i]), error_per_view=np.array(table.error_per_view[i]),
             runs=int(table.runs[i]), iterations=int(table.iterations[i]), seed=int(seed),
-            status=table.status[i], root_positions=np.array(table.roots[i]))
+            status=table.status[i], root_positions=np.array(table.roots[i]),
+            marker_residuals=(None if table.residuals is None
+                              else np.array(table.residuals[i]).T))
         for i in range(len(table))
     }
 

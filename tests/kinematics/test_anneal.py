@@ -322,6 +322,20 @@ def test_root_tracking_with_a_gate_skips_a_view_that_lost_the_marker(stick_insec
     np.testing.assert_allclose(tracked[4:], roots[4:], atol=1e-6)
 
 
+def test_root_marker_is_reacquired_after_a_gap(stick_insect):
+    """The marker is lost for three frames while the animal moves on; the gate widens for
+    every frame it is lost, so it is found again instead of being lost for good."""
+    cams = stick_cameras()
+    n = 9
+    truth = smooth_random_motion(stick_insect, n, 1, seed=12)
+    roots = moving_roots(n) * 4.0  # 3 mm (30 px) per frame
+    dets = planted(stick_insect, cams, truth, seed=12, roots=roots, noise=0.0)
+    for f in (3, 4, 5):  # the root marker M0 is hidden in both views
+        dets[f] = [d[1:] for d in dets[f]]
+    tracked = Fitter(stick_insect, cams, AnnealParams(root_gate_px=40.0)).track_roots(dets)
+    np.testing.assert_allclose(tracked[7:], roots[7:], atol=1e-6)
+
+
 def test_root_tracking_with_pinhole_cameras(stick_insect):
     from kinematics.cameras import PinholeCamera
 
@@ -439,7 +453,7 @@ def test_annealing_loop_allocates_nothing(locust):
     _, its = fresh(pr.start, pr.free_idx, pr.step, pr.hist, pr.nbins, 1e-300, pr.dof_kind,
                    pr.lo, pr.hi, 16, 500, 100, 100, 200.0, 1.0, 0.75, 0.75, 0.0,
                    ak.stream_state(0, 0, 0), np.zeros((1, 3)), pr.identity_rotations(),
-                   *pr.folded, *pr.cams, pts, off, False, 1.0, np.inf, *scratch)
+                   *pr.folded, *pr.cams, pts, off, False, 1.0, np.inf, np.inf, *scratch)
     assert its == 500
     ir = fresh.inspect_llvm(fresh.signatures[0])
     assert not re.search(r"NRT_MemInfo_alloc|NRT_Allocate", ir)

@@ -22,6 +22,8 @@ VARIANTS = [
     ErrorOptions(cap_px=3.0),
     ErrorOptions("bidirectional"),
     ErrorOptions("bidirectional", penalty_weight=0.5, cap_px=4.0),
+    ErrorOptions("bounded"),
+    ErrorOptions("bounded", penalty_weight=2.0, cap_px=6.0, penalty_cap_px=1.5),
 ]
 
 
@@ -33,7 +35,8 @@ def kernel_error(proj, detections, opts: ErrorOptions):
     per_view = np.empty(len(detections))
     nearest = np.empty(proj.shape[1], np.int64)
     e = ak.projection_error(np.ascontiguousarray(proj), pts, off, opts.bidirectional,
-                            float(opts.penalty_weight), opts.cap, per_view, nearest)
+                            float(opts.penalty_weight), opts.cap, opts.penalty_cap, per_view,
+                            nearest)
     fast = ak._paper_error(np.ascontiguousarray(proj), pts, off, opts.cap)
     return e, per_view, fast
 
@@ -62,7 +65,7 @@ def test_two_views_sum_and_empty_view_contributes_nothing():
     np.testing.assert_allclose(per_view, [2.0, 0.0])
 
 
-@pytest.mark.parametrize("opts", VARIANTS, ids=["paper", "cap", "bidir", "bidir-cap"])
+@pytest.mark.parametrize("opts", VARIANTS, ids=["paper", "cap", "bidir", "bidir-cap", "bounded", "bounded-cap"])
 def test_kernel_equals_twin_random(opts):
     rng = np.random.default_rng(7)
     for _ in range(300):
@@ -152,7 +155,7 @@ def test_fold_keeps_locked_rotations_out_of_the_loop(locust):
     assert folded.joint_flags[2] & ak.G_IDENTITY
 
 
-@pytest.mark.parametrize("opts", VARIANTS, ids=["paper", "cap", "bidir", "bidir-cap"])
+@pytest.mark.parametrize("opts", VARIANTS, ids=["paper", "cap", "bidir", "bidir-cap", "bounded", "bounded-cap"])
 @pytest.mark.parametrize("which", ["stick", "odd"])
 def test_posture_error_kernel_equals_twin(which, opts, stick_insect):
     body = stick_insect if which == "stick" else odd_body()
@@ -173,3 +176,25 @@ def test_posture_error_kernel_equals_twin(which, opts, stick_insect):
         got, got_views = fitter.error(angles, dets)
         assert got == pytest.approx(want, rel=1e-10, abs=1e-8)
         np.testing.assert_allclose(got_views, want_views, rtol=1e-10, atol=1e-8)
+
+
+def test_bounded_bidirectional_caps_each_ghost():
+    """A ghost far from the model costs its whole distance in 'bidirectional' (no cap) but
+    at most penalty_weight * penalty_cap_px in 'bounded'."""
+    proj = np.array([[[0.0, 0.0], [10.0, 0.0]]])
+    dets = [np.array([[0.0, 0.0], [10.0, 0.0], [500.0, 0.0]])]
+    e_paper = projection_error(proj, dets, ErrorOptions())[0]
+    e_bidir = projection_error(proj, dets, ErrorOptions("bidirectional"))[0]
+    e_bounded = projection_error(proj, dets, ErrorOptions("bounded", penalty_weight=2.0,
+                                                          penalty_cap_px=3.0))[0]
+    assert e_paper == 0.0
+    assert e_bidir == pytest.approx(490.0)
+    assert e_bounded == pytest.approx(6.0)
+    got = kernel_error(proj, dets, ErrorOptions("bounded", penalty_weight=2.0,
+                                                penalty_cap_px=3.0))[0]
+    assert got == pytest.approx(6.0)
+
+
+def test_bad_penalty_cap_is_named():
+    with pytest.raises(KinematicsError, match="penalty_cap_px"):
+        ErrorOptions("bounded", penalty_cap_px=0.0)
