@@ -141,7 +141,8 @@ def main() -> int:
     def kernel_all():
         a = starts.copy()
         pr = one.problem
-        rk.refine_frames(a, rag.points, rag.offsets, roots, rots, pr.free_idx, pr.lo, pr.hi,
+        rk.refine_frames(a, 0, rag.points, np.ones(len(rag.points)), rag.offsets,
+                         np.zeros((len(a), 4, 4)), roots, rots, pr.free_idx, pr.lo, pr.hi,
                          pr.dof_kind, 10, 5.0, *pr.folded, *pr.cams, sse, pairs)
 
     kernel_all()

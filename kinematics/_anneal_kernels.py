@@ -392,14 +392,80 @@ def _paper_error(proj, points, view_off, cap):
     return total
 
 
+#: Objectives (``objective``): which error E a posture is scored by.
+OBJ_NEAREST = 0  # unlabelled points per view: Eq. 5 and its variants
+OBJ_LABELLED = 1  # labelled 2D keypoints: marker i of view v against its own keypoint
+OBJ_POINTS3D = 2  # labelled 3D points: marker i against its own 3D point
+
+
+@njit(cache=True, nogil=True)
+def labelled_error(proj, points, conf, view_off, cap, per_view):
+    """Labelled reprojection error: ``E = sum_v sum_i w_i^v min(|p_i^v - k_i^v|, cap)``.
+
+    View ``v`` owns rows ``view_off[v]:view_off[v + 1]``, which are the model markers in
+    order (``n_markers`` rows) or none; a keypoint that is not finite or has weight
+    ``conf <= 0`` is missing and costs nothing; a marker whose projection is not finite costs
+    ``cap`` (:data:`NAN_MARKER_COST` without a cap), times its weight.
+    """
+    missing = cap if cap < np.inf else NAN_MARKER_COST
+    total = 0.0
+    for v in range(proj.shape[0]):
+        a = view_off[v]
+        ev = 0.0
+        if view_off[v + 1] - a == proj.shape[1]:
+            for i in range(proj.shape[1]):
+                w = conf[a + i]
+                kx = points[a + i, 0]
+                ky = points[a + i, 1]
+                if w > 0.0 and np.isfinite(kx) and np.isfinite(ky):
+                    dx = proj[v, i, 0] - kx
+                    dy = proj[v, i, 1] - ky
+                    d = np.sqrt(dx * dx + dy * dy)
+                    ev += w * min(d if np.isfinite(d) else missing, cap)
+        per_view[v] = ev
+        total += ev
+    return total
+
+
+@njit(cache=True, nogil=True)
+def points3d_error(mk, obs, cap):
+    """3D point error: ``E = sum_i w_i min(|X_i - Y_i|, cap)`` over the markers whose point
+    ``obs[i] = (x, y, z, w)`` is finite with ``w > 0``; in the body's length units."""
+    total = 0.0
+    for i in range(mk.shape[0]):
+        w = obs[i, 3]
+        if w > 0.0 and np.isfinite(obs[i, 0]) and np.isfinite(obs[i, 1]) and np.isfinite(
+                obs[i, 2]):
+            dx = mk[i, 0] - obs[i, 0]
+            dy = mk[i, 1] - obs[i, 1]
+            dz = mk[i, 2] - obs[i, 2]
+            total += w * min(np.sqrt(dx * dx + dy * dy + dz * dz), cap)
+    return total
+
+
+@njit(cache=True, nogil=True, inline="always")
+def evaluate(objective, proj, mk, points, conf, view_off, obs3, bidirectional, weight, cap,
+             penalty_cap, per_view, nearest):
+    """E of projected (``proj``) and 3D (``mk``) markers under ``objective``; fills
+    ``per_view`` (zeros for 3D points, which have no views)."""
+    if objective == OBJ_NEAREST:
+        return projection_error(proj, points, view_off, bidirectional, weight, cap,
+                                penalty_cap, per_view, nearest)
+    if objective == OBJ_LABELLED:
+        return labelled_error(proj, points, conf, view_off, cap, per_view)
+    per_view[:] = 0.0
+    return points3d_error(mk, obs3, cap)
+
+
+
 @njit(cache=True, nogil=True)
 def posture_error(angles, root_pos, root_rot, parent, chain, pre_rot, pre_trans, post_trans,
                   elem_axis, elem_index, joint_flags, marker_joint, marker_local, slide_index,
-                  kind, P, K, dist, R, t, points, view_off, bidirectional, weight, cap,
-                  penalty_cap,
-                  per_view):
-    """Eq. 5 (or a variant) of one posture ``angles`` (n_axes,) radians; fills ``per_view``
-    (n_views,). Allocates its scratch: for single evaluations, not for loops."""
+                  kind, P, K, dist, R, t, objective, points, conf, view_off, obs3,
+                  bidirectional, weight, cap, penalty_cap, per_view):
+    """E (Eq. 5, a variant or another objective, :func:`evaluate`) of one posture ``angles``
+    (n_state,); fills ``per_view`` (n_views,). Allocates its scratch: for single evaluations,
+    not for loops."""
     na = angles.shape[0]
     nj = parent.shape[0]
     nm = marker_joint.shape[0]
@@ -413,9 +479,8 @@ def posture_error(angles, root_pos, root_rot, parent, chain, pre_rot, pre_trans,
     project_posture(angles, root_pos, root_rot, parent, chain, pre_rot, pre_trans, post_trans,
                     elem_axis, elem_index, joint_flags, marker_joint, marker_local, slide_index,
                     kind, P, K, dist, R, t, cs, sn, rot, pos, mk, proj)
-    return projection_error(proj, points, view_off, bidirectional, weight, cap, penalty_cap,
-                            per_view,
-                            nearest)
+    return evaluate(objective, proj, mk, points, conf, view_off, obs3, bidirectional, weight,
+                    cap, penalty_cap, per_view, nearest)
 
 
 # -- simulated annealing (Sect. 2.3, Eq. 6) ----------------------------------------------
@@ -425,7 +490,8 @@ def anneal_chain(start, free_idx, step, hist, nbins, th, dof_kind, lo, hi, max_r
                  root_pos, root_rot, parent, chain, pre_rot, pre_trans, post_trans, elem_axis,
                  elem_index, joint_flags, marker_joint, marker_local, slide_index, kind, P, K,
                  dist, R, t,
-                 points, view_off, bidirectional, weight, cap, penalty_cap,
+                 objective, points, conf, view_off, obs3, bidirectional, weight, cap,
+                 penalty_cap,
                  cur, cand, best, cs, sn, rot, pos, mk, proj, per_view, nearest):
     """One annealing run from ``start``; the best posture seen is left in ``best``.
 
@@ -464,8 +530,8 @@ def anneal_chain(start, free_idx, step, hist, nbins, th, dof_kind, lo, hi, max_r
     _project_cs(cand, cs, sn, root_pos, root_rot, parent, chain, pre_rot, pre_trans,
                 post_trans, elem_axis, elem_index, joint_flags, marker_joint, marker_local,
                 slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj, any_pinhole)
-    e_cur = projection_error(proj, points, view_off, bidirectional, weight, cap, penalty_cap,
-                             per_view,
+    e_cur = evaluate(objective, proj, mk, points, conf, view_off, obs3, bidirectional, weight,
+                     cap, penalty_cap, per_view,
                              nearest)
     e_best = e_cur
     tau = tau0
@@ -502,11 +568,11 @@ def anneal_chain(start, free_idx, step, hist, nbins, th, dof_kind, lo, hi, max_r
                     elem_axis, elem_index, joint_flags, marker_joint, marker_local, slide_index,
                     kind, P, K,
                     dist, R, t, rot, pos, mk, proj, any_pinhole)
-        if bidirectional:
-            e = projection_error(proj, points, view_off, bidirectional, weight, cap, penalty_cap,
-                                 per_view, nearest)
-        else:
+        if objective == OBJ_NEAREST and not bidirectional:
             e = _paper_error(proj, points, view_off, cap)
+        else:
+            e = evaluate(objective, proj, mk, points, conf, view_off, obs3, bidirectional,
+                         weight, cap, penalty_cap, per_view, nearest)
         if e <= e_cur or e < e_accept:
             e_cur = e
             for q in range(n_free):
@@ -529,7 +595,8 @@ def anneal_chain(start, free_idx, step, hist, nbins, th, dof_kind, lo, hi, max_r
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def fit_frames(seg_off, frame_ids, det_points, det_off, root_pos, root_rot, start,
+def fit_frames(seg_off, frame_ids, objective, det_points, det_conf, det_off, obs3, root_pos,
+               root_rot, start,
                start_previous,
                parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index,
                joint_flags, marker_joint, marker_local, slide_index, kind, P, K, dist, R, t,
@@ -553,7 +620,9 @@ def fit_frames(seg_off, frame_ids, det_points, det_off, root_pos, root_rot, star
     Parameters
     ----------
     seg_off : (n_segments + 1,) int64; frame_ids : (n,) int64 frame numbers (seed streams).
-    det_points : (n_points, 2); det_off : (n * n_views + 1,) int64, frame-major.
+    objective : OBJ_NEAREST, OBJ_LABELLED or OBJ_POINTS3D (:func:`evaluate`).
+    det_points : (n_points, 2); det_conf : (n_points,) weights of labelled keypoints;
+    det_off : (n * n_views + 1,) int64, frame-major; obs3 : (n, n_markers or 0, 4) 3D points.
     root_pos : (n, n_chains, 3); root_rot : (n, n_chains, 3, 3) seed rotations of free roots
     (identity otherwise); start : (n_state,) radians (lengths for translation entries).
     out_angles : (n, n_axes) radians, NaN for frames without any detection; out_error (n,);
@@ -589,7 +658,12 @@ def fit_frames(seg_off, frame_ids, det_points, det_off, root_pos, root_rot, star
             out_error[f] = np.nan
             out_angles[f, :] = np.nan
             out_view_error[f, :] = np.nan
-            if vo[nv] > vo[0]:  # else no detections at all: nothing to fit
+            has = vo[nv] > vo[0]
+            if objective == OBJ_POINTS3D:
+                has = False
+                for i in range(obs3.shape[1]):
+                    has = has or obs3[f, i, 3] > 0.0
+            if has:  # else no observation at all: nothing to fit
                 e_keep = np.inf
                 run = 0
                 while run < max_runs and not e_keep <= reanalysis_threshold:
@@ -601,7 +675,8 @@ def fit_frames(seg_off, frame_ids, det_points, det_off, root_pos, root_rot, star
                                           chain, pre_rot, pre_trans, post_trans, elem_axis,
                                           elem_index, joint_flags, marker_joint,
                                           marker_local, slide_index, kind, P, K, dist, R, t,
-                                          det_points, vo, bidirectional,
+                                          objective, det_points, det_conf, vo, obs3[f],
+                                          bidirectional,
                                           weight, cap, penalty_cap, cur, cand, best, cs, sn,
                                           rot, pos,
                                           mk, proj, per_view, nearest)
@@ -615,13 +690,15 @@ def fit_frames(seg_off, frame_ids, det_points, det_off, root_pos, root_rot, star
                             best, free_idx, lo, hi, dof_kind, refine_steps, refine_gate, rp,
                             rr, parent, chain, pre_rot, pre_trans, post_trans, elem_axis,
                             elem_index, joint_flags, marker_joint, marker_local, slide_index,
-                            kind, P, K, dist, R, t, det_points, vo)
+                            kind, P, K, dist, R, t, objective, det_points, det_conf, vo,
+                            obs3[f])
                         project_posture(best, rp, rr, parent, chain, pre_rot, pre_trans,
                                         post_trans, elem_axis, elem_index, joint_flags,
                                         marker_joint, marker_local, slide_index, kind, P, K,
                                         dist, R, t, cs, sn, rot, pos, mk, proj)
-                        e_refined = projection_error(proj, det_points, vo, bidirectional,
-                                                     weight, cap, penalty_cap, per_view, nearest)
+                        e_refined = evaluate(objective, proj, mk, det_points, det_conf, vo,
+                                             obs3[f], bidirectional, weight, cap,
+                                             penalty_cap, per_view, nearest)
                         if e_refined <= e:
                             e = e_refined
                         else:
@@ -636,8 +713,9 @@ def fit_frames(seg_off, frame_ids, det_points, det_off, root_pos, root_rot, star
                                 elem_axis, elem_index, joint_flags, marker_joint,
                                 marker_local, slide_index, kind, P, K, dist, R, t, cs, sn,
                                 rot, pos, mk, proj)
-                out_error[f] = projection_error(proj, det_points, vo, bidirectional, weight,
-                                                cap, penalty_cap, per_view, nearest)
+                out_error[f] = evaluate(objective, proj, mk, det_points, det_conf, vo, obs3[f],
+                                        bidirectional, weight, cap, penalty_cap, per_view,
+                                        nearest)
                 out_view_error[f, :] = per_view
                 out_angles[f, :] = keep
                 out_runs[f] = run

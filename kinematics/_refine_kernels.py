@@ -17,7 +17,13 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from kinematics._anneal_kernels import DOF_HISTOGRAM, project_posture, solve_spd
+from kinematics._anneal_kernels import (
+    DOF_HISTOGRAM,
+    OBJ_LABELLED,
+    OBJ_POINTS3D,
+    project_posture,
+    solve_spd,
+)
 
 #: Forward-difference step of the Jacobian, radians.
 FD_STEP = 1e-7
@@ -39,24 +45,47 @@ def _wrap_clip(x, lo, hi):
 
 
 @njit(cache=True, nogil=True)
-def assign_pairs(proj, points, view_off, gate, pair):
-    """``pair[v * nm + i]`` = index of marker i's nearest detection in view v if within
-    ``gate`` pixels, else -1; returns the number of pairs."""
+def assign_pairs(objective, proj, mk, points, conf, view_off, obs3, gate, pair):
+    """Pairs of model markers and observations within ``gate``; returns their number.
+
+    Unlabelled points (``OBJ_NEAREST``): ``pair[v * nm + i]`` = index of marker i's nearest
+    detection in view v. Labelled keypoints: the row of marker i's own keypoint in view v (if
+    present, with confidence > 0). 3D points: ``pair[i] = i`` where marker i's point is
+    present. -1 marks no pair (farther than ``gate``: pixels, or length units for 3D).
+    """
     nv = proj.shape[0]
-    nm = proj.shape[1]
+    nm = mk.shape[0]
     n = 0
     g2 = gate * gate
+    pair[:] = -1
+    if objective == OBJ_POINTS3D:
+        for i in range(nm):
+            d2 = 0.0
+            for k in range(3):
+                d2 += (mk[i, k] - obs3[i, k]) ** 2
+            if obs3[i, 3] > 0.0 and d2 <= g2:  # NaN compares false: missing points drop out
+                pair[i] = i
+                n += 1
+        return n
     for v in range(nv):
+        a = view_off[v]
+        b = view_off[v + 1]
         for i in range(nm):
             best = np.inf
             arg = -1
-            for c in range(view_off[v], view_off[v + 1]):
-                dx = proj[v, i, 0] - points[c, 0]
-                dy = proj[v, i, 1] - points[c, 1]
-                d2 = dx * dx + dy * dy
-                if d2 < best:
-                    best = d2
-                    arg = c
+            if objective == OBJ_LABELLED:
+                if b - a == nm and conf[a + i] > 0.0:
+                    best = (proj[v, i, 0] - points[a + i, 0]) ** 2 + (
+                        proj[v, i, 1] - points[a + i, 1]) ** 2
+                    arg = a + i
+            else:
+                for c in range(a, b):
+                    dx = proj[v, i, 0] - points[c, 0]
+                    dy = proj[v, i, 1] - points[c, 1]
+                    d2 = dx * dx + dy * dy
+                    if d2 < best:
+                        best = d2
+                        arg = c
             ok = arg >= 0 and best <= g2
             pair[v * nm + i] = arg if ok else -1
             n += 1 if ok else 0
@@ -64,47 +93,63 @@ def assign_pairs(proj, points, view_off, gate, pair):
 
 
 @njit(cache=True, nogil=True)
-def pair_cost(proj, points, pair):
-    """Sum of squared residuals over the pairs of :func:`assign_pairs`."""
-    nm = proj.shape[1]
+def fill_residuals(objective, proj, mk, points, conf, obs3, pair, res):
+    """Residuals of the pairs of :func:`assign_pairs` into ``res`` (zero where unpaired;
+    weighted by the square root of the confidence); returns their sum of squares."""
+    res[:] = 0.0
     s = 0.0
-    for k in range(pair.shape[0]):
+    if objective == OBJ_POINTS3D:
+        for i in range(mk.shape[0]):
+            if pair[i] >= 0:
+                w = np.sqrt(obs3[i, 3])
+                for k in range(3):
+                    r = w * (mk[i, k] - obs3[i, k])
+                    res[3 * i + k] = r
+                    s += r * r
+        return s
+    nm = proj.shape[1]
+    for k in range(proj.shape[0] * nm):
         c = pair[k]
         if c >= 0:
-            dx = proj[k // nm, k % nm, 0] - points[c, 0]
-            dy = proj[k // nm, k % nm, 1] - points[c, 1]
-            s += dx * dx + dy * dy
+            w = np.sqrt(conf[c]) if objective == OBJ_LABELLED else 1.0
+            rx = w * (proj[k // nm, k % nm, 0] - points[c, 0])
+            ry = w * (proj[k // nm, k % nm, 1] - points[c, 1])
+            res[2 * k] = rx
+            res[2 * k + 1] = ry
+            s += rx * rx + ry * ry
     return s
 
 
 @njit(cache=True, nogil=True)
 def refine_posture(angles, free_idx, lo, hi, dof_kind, n_steps, gate, root_pos, root_rot,
-                   parent, chain, pre_rot,
-                   pre_trans, post_trans, elem_axis, elem_index, joint_flags, marker_joint,
-                   marker_local, slide_index, kind, P, K, dist, R, t, points, view_off):
-    """Levenberg-Marquardt refinement of ``angles`` (n_axes,) radians, in place.
+                   parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index,
+                   joint_flags, marker_joint, marker_local, slide_index, kind, P, K, dist, R,
+                   t, objective, points, conf, view_off, obs3):
+    """Levenberg-Marquardt refinement of the state ``angles`` (n_state,), in place.
 
-    Minimises ``sum |p_i^v(angles) - d_pair(i, v)|^2`` over marker/detection pairs within
-    ``gate`` pixels, for at most ``n_steps`` accepted steps; free axes ``free_idx`` move
-    within ``[lo, hi]`` (radians, clipped), the others never.
+    Minimises the sum of squared pair residuals (:func:`assign_pairs`: marker/detection
+    pairs within ``gate`` pixels for unlabelled points, marker/own keypoint for labelled
+    ones, marker/own 3D point for 3D points) for at most ``n_steps`` accepted steps; free
+    entries ``free_idx`` move within ``[lo, hi]`` (angles wrapped then clipped, other
+    entries clipped), the others never.
 
     Returns
     -------
     sse : float
-        Final sum of squared pair residuals (pixels²).
+        Final sum of squared pair residuals (pixels², or squared length units for 3D).
     n_pairs : int
-        Pairs used at the end (0: angles unchanged).
+        Pairs used at the end (0: state unchanged).
     """
     nv = kind.shape[0]
     nm = marker_joint.shape[0]
     nj = parent.shape[0]
     na = angles.shape[0]
     nf = free_idx.shape[0]
-    nr = 2 * nv * nm
-    pair = np.empty(nv * nm, np.int64)
+    nr = max(2 * nv * nm, 3 * nm)
+    pair = np.empty(max(nv * nm, nm), np.int64)
     jac = np.zeros((nr, nf))
     res = np.zeros(nr)
-    base = np.empty((nv, nm, 2))
+    res1 = np.zeros(nr)
     proj = np.empty((nv, nm, 2))
     cs = np.empty(na)
     sn = np.empty(na)
@@ -116,16 +161,12 @@ def refine_posture(angles, free_idx, lo, hi, dof_kind, n_steps, gate, root_pos, 
     g = np.empty(nf)
     project_posture(angles, root_pos, root_rot, parent, chain, pre_rot, pre_trans, post_trans,
                     elem_axis, elem_index, joint_flags, marker_joint, marker_local, slide_index,
-                    kind, P, K, dist, R, t, cs, sn, rot, pos, mk, base)
-    n_pairs = assign_pairs(base, points, view_off, gate, pair)
-    cost = pair_cost(base, points, pair)
+                    kind, P, K, dist, R, t, cs, sn, rot, pos, mk, proj)
+    n_pairs = assign_pairs(objective, proj, mk, points, conf, view_off, obs3, gate, pair)
+    cost = fill_residuals(objective, proj, mk, points, conf, obs3, pair, res)
     lam = 1e-3
     step = 0
     while step < n_steps and n_pairs > 0 and cost > 0.0:
-        for k in range(nv * nm):
-            c = pair[k]
-            res[2 * k] = base[k // nm, k % nm, 0] - points[c, 0] if c >= 0 else 0.0
-            res[2 * k + 1] = base[k // nm, k % nm, 1] - points[c, 1] if c >= 0 else 0.0
         for q in range(nf):
             i = free_idx[q]
             x = angles[i]
@@ -135,15 +176,13 @@ def refine_posture(angles, free_idx, lo, hi, dof_kind, n_steps, gate, root_pos, 
                             marker_local, slide_index, kind, P, K, dist, R, t, cs, sn, rot, pos,
                             mk, proj)
             angles[i] = x
-            for k in range(nv * nm):
-                on = pair[k] >= 0
-                v = k // nm
-                m = k % nm
-                jac[2 * k, q] = (proj[v, m, 0] - base[v, m, 0]) / FD_STEP if on else 0.0
-                jac[2 * k + 1, q] = (proj[v, m, 1] - base[v, m, 1]) / FD_STEP if on else 0.0
+            fill_residuals(objective, proj, mk, points, conf, obs3, pair, res1)
+            for k in range(nr):
+                jac[k, q] = (res1[k] - res[k]) / FD_STEP
         # Damped Gauss-Newton steps with growing damping until one lowers the cost.
         improved = False
         tries = 0
+        c_trial = cost
         while not improved and tries < MAX_DAMPING_TRIES:
             for r in range(nf):
                 s = 0.0
@@ -166,7 +205,7 @@ def refine_posture(angles, free_idx, lo, hi, dof_kind, n_steps, gate, root_pos, 
                             post_trans, elem_axis, elem_index, joint_flags, marker_joint,
                             marker_local, slide_index, kind, P, K, dist, R, t, cs, sn, rot, pos,
                             mk, proj)
-            c_trial = pair_cost(proj, points, pair)
+            c_trial = fill_residuals(objective, proj, mk, points, conf, obs3, pair, res1)
             improved = c_trial < cost
             lam = max(lam / 3.0, 1e-9) if improved else lam * 4.0
             tries += 1
@@ -174,9 +213,9 @@ def refine_posture(angles, free_idx, lo, hi, dof_kind, n_steps, gate, root_pos, 
             converged = cost - c_trial <= CONVERGED * cost
             for q in range(nf):
                 angles[free_idx[q]] = trial[free_idx[q]]
-            base[:] = proj
-            n_pairs = assign_pairs(base, points, view_off, gate, pair)
-            cost = pair_cost(base, points, pair)
+            n_pairs = assign_pairs(objective, proj, mk, points, conf, view_off, obs3, gate,
+                                   pair)
+            cost = fill_residuals(objective, proj, mk, points, conf, obs3, pair, res)
             step = n_steps if converged else step + 1
         else:
             step = n_steps  # converged: no damped step lowers the cost
@@ -184,14 +223,14 @@ def refine_posture(angles, free_idx, lo, hi, dof_kind, n_steps, gate, root_pos, 
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def refine_frames(angles, det_points, det_off, root_pos, root_rot, free_idx, lo, hi, dof_kind,
-                  n_steps, gate,
-                  parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index,
-                  joint_flags, marker_joint, marker_local, slide_index, kind, P, K, dist, R, t,
-                  out_sse, out_pairs):
-    """:func:`refine_posture` for many frames in parallel, in place: ``angles`` (n, n_axes)
-    radians, detections as in ``fit_frames``, ``root_pos`` (n, n_chains, 3). Rows holding
-    NaN are skipped. Writes ``out_sse`` (n,) and ``out_pairs`` (n,) int64."""
+def refine_frames(angles, objective, det_points, det_conf, det_off, obs3, root_pos, root_rot,
+                  free_idx, lo, hi, dof_kind, n_steps, gate, parent, chain, pre_rot, pre_trans,
+                  post_trans, elem_axis, elem_index, joint_flags, marker_joint, marker_local,
+                  slide_index, kind, P, K, dist, R, t, out_sse, out_pairs):
+    """:func:`refine_posture` for many frames in parallel, in place: ``angles`` (n, n_state),
+    observations as in ``fit_frames``, ``root_pos`` (n, n_chains, 3), ``root_rot`` (n,
+    n_chains, 3, 3). Rows holding NaN are skipped. Writes ``out_sse`` (n,) and ``out_pairs``
+    (n,) int64."""
     nv = kind.shape[0]
     for f in prange(angles.shape[0]):
         out_sse[f] = np.nan
@@ -200,6 +239,6 @@ def refine_frames(angles, det_points, det_off, root_pos, root_rot, free_idx, lo,
             vo = det_off[f * nv: f * nv + nv + 1]
             out_sse[f], out_pairs[f] = refine_posture(
                 angles[f], free_idx, lo, hi, dof_kind, n_steps, gate, root_pos[f], root_rot[f],
-                parent, chain,
-                pre_rot, pre_trans, post_trans, elem_axis, elem_index, joint_flags,
-                marker_joint, marker_local, slide_index, kind, P, K, dist, R, t, det_points, vo)
+                parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index,
+                joint_flags, marker_joint, marker_local, slide_index, kind, P, K, dist, R, t,
+                objective, det_points, det_conf, vo, obs3[f])

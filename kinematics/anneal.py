@@ -49,6 +49,7 @@ from kinematics.error_function import projection_error
 from kinematics.errors import KinematicsError
 from kinematics.fk import forward_kinematics_reference
 from kinematics.model import Body
+from kinematics.observations import Observations
 from kinematics.problem import (  # noqa: F401 (re-exported: the packing lived here)
     FitProblem,
     FoldedBody,
@@ -277,6 +278,28 @@ class Fitter:
     def _frame_ragged(self, detections_frame) -> _Ragged:
         return _as_ragged([detections_frame], self.view_names)
 
+    def observations(self, data) -> Observations:
+        """``data`` as :class:`~kinematics.observations.Observations`: an Observations object
+        (checked against the cameras), or unlabelled detections in any form
+        :meth:`iter_fit` takes."""
+        if isinstance(data, Observations):
+            if data.kind == "points3d":
+                return data
+            obs = data
+        else:
+            obs = None
+        if not self.cameras:
+            raise KinematicsError("no cameras: 2D observations need one camera per view",
+                                  field="cameras")
+        if obs is not None:
+            if list(obs.view_names) != self.view_names:
+                raise KinematicsError(f"observations are for views {list(obs.view_names)} but "
+                                      f"the cameras are {self.view_names}",
+                                      field="observations")
+            return obs
+        rag = _as_ragged(data, self.view_names)
+        return Observations.unlabelled(rag.points, rag.offsets, self.view_names, rag.dropped)
+
     def _to_range_deg(self, angles_rad: np.ndarray) -> np.ndarray:
         """Degrees, each angle moved by whole turns to lie nearest its range centre."""
         deg = np.rad2deg(angles_rad)
@@ -317,8 +340,10 @@ class Fitter:
         per_view = np.empty(self.n_views)
         opts = self.params.error
         state, pos, rot = self.state(angles_deg, root_positions)
+        nm = self.problem.folded.marker_joint.size
         e = _ak.posture_error(state, pos, rot, *self.problem.folded, *self.problem.cams,
-                              rag.points, rag.offsets, opts.bidirectional,
+                              _ak.OBJ_NEAREST, rag.points, np.ones(len(rag.points)),
+                              rag.offsets, np.zeros((nm, 4)), opts.bidirectional,
                               float(opts.penalty_weight), opts.cap, opts.penalty_cap,
                               per_view)
         return float(e), per_view
@@ -338,36 +363,62 @@ class Fitter:
         displacement. Free roots get their per-frame seed position
         (:mod:`kinematics.placement`); fixed chains keep their position.
         """
-        rag = _as_ragged(detections, self.view_names)
-        idx = self._frame_indices(frames, rag.n_frames)
-        return self._place(rag, idx)[0]
+        obs = self.observations(detections)
+        idx = self._frame_indices(frames, obs.n_frames)
+        return self._place(obs, idx)[0]
 
-    def _place(self, rag: _Ragged, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _place(self, obs: Observations, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Seed root positions (n, n_chains, 3) and rotations (n, n_chains, 3, 3)."""
         out = np.broadcast_to(self._roots, (len(idx), *self._roots.shape)).copy()
         rot = self.problem.identity_rotations(len(idx))
-        if len(idx) == 0:
+        if len(idx) == 0 or not (self._tracked or self.problem.free_chains):
             return out, rot
-        pts, off = rag.select(idx)
+        pts, _, off, _ = obs.select(idx)
+        labelled = self._labelled_3d(obs, idx) if obs.labelled else None
         gate = np.inf if self.params.root_gate_px is None else float(self.params.root_gate_px)
         if self._tracked:
             markers0 = forward_kinematics_reference(self.body, self._mean_deg).markers
         for k in self._tracked:
             x0 = np.ascontiguousarray(markers0[self._root_marker[k]], dtype=float)
-            track = np.empty((len(idx), 3))
-            _ak.track_root(pts, off, x0, gate, 1e-9, *self.problem.cams, track)
+            if labelled is None:
+                track = np.empty((len(idx), 3))
+                _ak.track_root(pts, off, x0, gate, 1e-9, *self.problem.cams, track)
+            else:  # a labelled root marker needs no tracking; gaps keep the last position
+                track = _carry_forward(labelled[:, self._root_marker[k]], x0)
             out[:, k] = self._roots[k] + (track - x0)
         if self.problem.free_chains:
-            nv = self.n_views
-            frames = ([pts[off[f * nv + v]: off[f * nv + v + 1]] for v in range(nv)]
-                      for f in range(len(idx)))
-            tri_gate = placement.DEFAULT_GATE_PX if self.params.root_gate_px is None else gate
-            pos, seed_rot, _ = placement.place_roots(self.body, self.cameras, frames,
-                                                     self.problem.windows, tri_gate)
+            if labelled is None:
+                nv = self.n_views
+                frames = ([pts[off[f * nv + v]: off[f * nv + v + 1]] for v in range(nv)]
+                          for f in range(len(idx)))
+                tri_gate = placement.DEFAULT_GATE_PX if self.params.root_gate_px is None \
+                    else gate
+                pos, seed_rot, _ = placement.place_roots(self.body, self.cameras, frames,
+                                                         self.problem.windows, tri_gate)
+            else:
+                pos, seed_rot, _ = placement.place_roots_from_points(
+                    self.body, labelled, self.problem.windows)
             for q, c in enumerate(self.problem.free_chains):
                 out[:, c] = pos[:, q]
                 rot[:, c] = seed_rot[:, q]
         return out, rot
+
+    def _labelled_3d(self, obs: Observations, idx: np.ndarray) -> np.ndarray:
+        """3D positions of the labelled markers, (n, n_markers, 3), NaN where unknown:
+        the 3D points themselves, or keypoints triangulated over their views."""
+        if obs.kind == "points3d":
+            p = obs.points3d[idx, :, :3].copy()
+            p[obs.points3d[idx, :, 3] <= 0] = np.nan
+            return p
+        nm = len(self.body.marker_names)
+        out = np.empty((len(idx), nm, 3))
+        nv = obs.n_views
+        for k, f in enumerate(idx):
+            rows = [slice(obs.offsets[f * nv + v], obs.offsets[f * nv + v + 1])
+                    for v in range(nv)]
+            out[k] = placement.triangulate_labelled(
+                self.cameras, [obs.points[r] for r in rows], [obs.conf[r] for r in rows], nm)
+        return out
 
     @staticmethod
     def _frame_indices(frames, n_frames: int) -> np.ndarray:
@@ -407,11 +458,15 @@ class Fitter:
         if isinstance(frame, bool) or not isinstance(frame, int | np.integer) or frame < 0:
             raise KinematicsError(f"frame must be an integer >= 0, got {frame!r}",
                                   field="frame")
-        rag = self._frame_ragged(detections_frame)
+        obs = self.observations(detections_frame if isinstance(detections_frame, Observations)
+                                else [detections_frame])
+        if obs.n_frames != 1:
+            raise KinematicsError(f"fit_frame takes one frame, got {obs.n_frames}",
+                                  field="observations")
         roots = self._root_array(root_positions)[None].copy()
         rots = self.problem.identity_rotations(1)
         if self.problem.free_chains:
-            seed_pos, seed_rot = self._place(rag, np.zeros(1, np.int64))
+            seed_pos, seed_rot = self._place(obs, np.zeros(1, np.int64))
             for c in self.problem.free_chains:
                 rots[0, c] = seed_rot[0, c]
                 if root_positions is None:
@@ -421,8 +476,8 @@ class Fitter:
             start = self.problem.state(self._posture_deg(start_deg), roots[0])[0]
             for q in range(len(self.problem.free_chains)):
                 start[self.problem.root_axes[q]] = 0.0  # the seed holds the root's rotation
-        return self._fit_block(rag.points, rag.offsets, np.array([int(frame)], np.int64),
-                               roots, rots, rag.dropped, start, np.array([0, 1], np.int64))[0]
+        return self._fit_block(obs, np.zeros(1, np.int64), np.array([int(frame)], np.int64),
+                               roots, rots, start, np.array([0, 1], np.int64))[0]
 
     def iter_fit(self, detections, frames=None, *, chunk_size: int | None = None
                  ) -> Iterator[FrameResult]:
@@ -447,13 +502,13 @@ class Fitter:
         KinematicsError
             Detections whose views do not match the cameras, bad frame numbers.
         """
-        rag = _as_ragged(detections, self.view_names)
-        idx = self._frame_indices(frames, rag.n_frames)
-        return self._iter(rag, idx, chunk_size)
+        obs = self.observations(detections)
+        idx = self._frame_indices(frames, obs.n_frames)
+        return self._iter(obs, idx, chunk_size)
 
-    def _iter(self, rag: _Ragged, idx: np.ndarray, chunk_size: int | None
+    def _iter(self, obs: Observations, idx: np.ndarray, chunk_size: int | None
               ) -> Iterator[FrameResult]:
-        roots, rots = self._place(rag, idx)
+        roots, rots = self._place(obs, idx)
         threads = numba.get_num_threads()
         seg = self.params.segment_length if self.params.start == "previous" else 1
         if chunk_size is None:  # enough frames (or segments) to keep every thread busy
@@ -466,20 +521,22 @@ class Fitter:
         chunk = -(-chunk // seg) * seg
         for a in range(0, len(idx), chunk):
             sel = idx[a: a + chunk]
-            pts, off = rag.select(sel)
             n = len(sel)
             seg_off = np.unique(np.r_[np.arange(0, n, seg), n]).astype(np.int64)
-            yield from self._fit_block(pts, off, sel, np.ascontiguousarray(roots[a: a + chunk]),
+            yield from self._fit_block(obs, sel, sel, np.ascontiguousarray(roots[a: a + chunk]),
                                        np.ascontiguousarray(rots[a: a + chunk]),
-                                       rag.dropped[sel], self.problem.start, seg_off)
+                                       self.problem.start, seg_off)
 
     def fit(self, detections, frames=None) -> list[FrameResult]:
         """All results of :meth:`iter_fit` as a list."""
         return list(self.iter_fit(detections, frames))
 
-    def _fit_block(self, pts, off, frame_ids, roots, rots, dropped, start, seg_off
+    def _fit_block(self, obs: Observations, sel, frame_ids, roots, rots, start, seg_off
                    ) -> list[FrameResult]:
+        """Fit frames ``sel`` of ``obs`` (``frame_ids`` key their random streams)."""
         p, pr = self.params, self.problem
+        pts, conf, off, obs3 = obs.select(sel)
+        dropped = obs.dropped[sel]
         n, ns, nv = len(frame_ids), pr.n_state, self.n_views
         state = np.empty((n, ns))
         err = np.empty(n)
@@ -488,7 +545,8 @@ class Fitter:
         its = np.empty(n, np.int64)
         pairs = np.empty(n, np.int64)
         e = p.error
-        _ak.fit_frames(seg_off, frame_ids, pts, off, roots, rots, start,
+        _ak.fit_frames(seg_off, frame_ids, obs.objective, pts, conf, off, obs3, roots, rots,
+                       start,
                        p.start == "previous", *pr.folded, *pr.cams, pr.free_idx, pr.step,
                        pr.hist, pr.nbins, p.threshold, pr.dof_kind, p.max_redraws, p.n_end,
                        p.n_l, p.n_tau, float(p.tau0), float(p.l0), float(p.c_l),
@@ -497,7 +555,7 @@ class Fitter:
                        float(e.penalty_weight), e.cap, e.penalty_cap, pr.lo, pr.hi,
                        p.refine_steps if p.refine else 0, float(p.refine_gate_px), state,
                        err, view_err, runs, its, pairs)
-        counts = np.diff(off).reshape(n, nv)
+        counts = obs.view_counts(sel)
         out = []
         for k in range(n):
             if runs[k] == 0:
@@ -510,8 +568,8 @@ class Fitter:
             angles, fitted_roots = pr.posture(state[k], roots[k], rots[k])
             residuals = np.full((nv, pr.folded.marker_joint.size), np.nan)
             if runs[k]:
-                residuals = self._residuals(state[k], roots[k], rots[k],
-                                            pts, off[k * nv: k * nv + nv + 1])
+                residuals = self._residuals(obs, state[k], roots[k], rots[k], pts,
+                                            off[k * nv: k * nv + nv + 1])
             out.append(FrameResult(
                 frame=int(frame_ids[k]),
                 angles_deg=self._to_range_deg(angles),
@@ -529,15 +587,32 @@ class Fitter:
             ))
         return out
 
-    def _residuals(self, state, root_pos, root_rot, pts, view_off) -> np.ndarray:
-        """(n_views, n_markers) distance of each model marker to its nearest detection."""
+    def _residuals(self, obs: Observations, state, root_pos, root_rot, pts, view_off
+                   ) -> np.ndarray:
+        """(n_views, n_markers) distance of each model marker to its nearest detection (to
+        its own keypoint for labelled keypoints; NaN where there is none)."""
         proj = self._project_state(state, root_pos, root_rot)
         out = np.full(proj.shape[:2], np.nan)
         for v in range(self.n_views):
             d = pts[view_off[v]: view_off[v + 1]]
-            if len(d):
+            if len(d) and obs.labelled:
+                out[v] = np.linalg.norm(proj[v] - d, axis=1)
+            elif len(d):
                 out[v] = np.linalg.norm(proj[v][:, None] - d[None], axis=2).min(axis=1)
         return out
+
+
+def _carry_forward(points: np.ndarray, first: np.ndarray) -> np.ndarray:
+    """(n, 3) points with each NaN row replaced by the last finite one (``first`` before
+    any)."""
+    out = np.array(points, dtype=float, copy=True)
+    last = np.asarray(first, dtype=float)
+    for k in range(len(out)):
+        if np.isfinite(out[k]).all():
+            last = out[k]
+        else:
+            out[k] = last
+    return out
 
 
 # -- functional wrappers ----------------------------------------------------------------------

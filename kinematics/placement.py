@@ -326,13 +326,78 @@ def place_roots(body: Body, cameras, frames_views, windows: np.ndarray,
                 rot[f, q], pos[f, q] = seed[0], seed[1]
                 placed[f, q] = True
                 prediction[q] = (seed[0], seed[1])
-    for q in range(nq):
+    _fill_gaps(body, free, pos, rot, placed)
+    return pos, rot, placed
+
+
+def triangulate_labelled(cameras, views: list[np.ndarray], conf: list[np.ndarray],
+                         n_markers: int) -> np.ndarray:
+    """3D position of every labelled marker of one frame by linear least squares over the
+    views where its keypoint is present, shape (n_markers, 3), NaN where fewer than two
+    views (one for orthographic pairs is not enough either) see it.
+
+    ``views[v]`` is (n_markers, 2) keypoints in body-marker order, or empty; ``conf[v]`` the
+    matching weights (a keypoint with weight 0 or NaN coordinates is missing).
+    """
+    a_rows = [[] for _ in range(n_markers)]
+    b_rows = [[] for _ in range(n_markers)]
+    for cam, uv, w in zip(cameras, views, conf, strict=True):
+        if len(uv) != n_markers:
+            continue
+        ok = np.isfinite(uv).all(axis=1) & (w > 0)
+        if not ok.any():
+            continue
+        a, b = _linear_rows(cam, uv[ok])
+        for k, i in enumerate(np.flatnonzero(ok)):
+            a_rows[i].append(a[k])
+            b_rows[i].append(b[k])
+    out = np.full((n_markers, 3), np.nan)
+    for i in range(n_markers):
+        if len(a_rows[i]) >= 2:
+            out[i] = _solve(np.concatenate(a_rows[i])[None], np.concatenate(b_rows[i])[None])[0]
+    return out
+
+
+def place_roots_from_points(body: Body, points3d: np.ndarray, windows: np.ndarray
+                            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`place_roots` for labelled markers whose 3D positions are known per frame
+    (triangulated keypoints or 3D points), shape (n, n_markers, 3), NaN where missing: the
+    root markers are registered by their names (Kabsch over >= 3 present ones; with fewer,
+    or a constellation that is not rigid, only the anchor marker's position is used and the
+    rotation is kept). Gaps are filled as in :func:`place_roots`."""
+    free = [k for k, c in enumerate(body.chains) if c.root.free]
+    names = body.marker_names
+    n, nq = len(points3d), len(free)
+    pos = np.zeros((n, nq, 3))
+    rot = np.tile(np.eye(3), (n, nq, 1, 1))
+    placed = np.zeros((n, nq), bool)
+    for q, c in enumerate(free):
+        model = RootModel(body, c, float(windows[q, 0]))
+        cols = [names.index(m) for m in model.names]
+        r_prev = np.eye(3)
+        for f in range(n):
+            pts = points3d[f, cols]
+            ok = np.isfinite(pts).all(axis=1)
+            if model.rigid and ok.sum() >= 3 and _spread(model.local[ok]) > 1e-6:
+                r, t, _ = kabsch(model.local[ok], pts[ok])
+            elif ok[model.anchor]:
+                r = r_prev
+                t = pts[model.anchor] - r @ model.local[model.anchor]
+            else:
+                continue
+            rot[f, q], pos[f, q], placed[f, q], r_prev = r, t, True, r
+    _fill_gaps(body, free, pos, rot, placed)
+    return pos, rot, placed
+
+
+def _fill_gaps(body: Body, free: list[int], pos, rot, placed) -> None:
+    """Carry each seed forward over gaps, and the first one back to the start."""
+    n = len(pos)
+    for q in range(len(free)):
         got = np.flatnonzero(placed[:, q])
         if got.size == 0:
             pos[:, q] = body.chains[free[q]].root.position
             continue
-        # carry each seed forward over gaps, and the first one back to the start
         src = np.maximum.accumulate(np.where(placed[:, q], np.arange(n), -1))
         src[src < 0] = got[0]
         pos[:, q], rot[:, q] = pos[src, q], rot[src, q]
-    return pos, rot, placed

@@ -229,9 +229,6 @@ class FitProblem:
         else:
             cams = tuple(cameras)
             names = tuple(getattr(c, "name", f"view{k}") for k, c in enumerate(cams))
-        if not cams:
-            raise KinematicsError("no cameras: the fit needs at least one view",
-                                  field="cameras")
         if not body.marker_names:
             raise KinematicsError(f"body '{body.name}' has no markers: nothing to fit",
                                   field="markers")

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
+from kinematics import _anneal_kernels as _ak
 from kinematics import _refine_kernels as _rk
 from kinematics.anneal import Fitter, _as_ragged
 from kinematics.errors import KinematicsError
@@ -89,9 +90,11 @@ def refine(fitter: Fitter, angles_deg, detections_frame, root_positions=None, *,
     pr = fitter.problem
     state, pos, rot = fitter.state(angles_deg, root_positions)
     rag = fitter._frame_ragged(detections_frame)
+    nm = pr.folded.marker_joint.size
     sse, n_pairs = _rk.refine_posture(state, pr.free_idx, pr.lo, pr.hi, pr.dof_kind, steps,
-                                      gate, pos, rot, *pr.folded, *pr.cams, rag.points,
-                                      rag.offsets)
+                                      gate, pos, rot, *pr.folded, *pr.cams, _ak.OBJ_NEAREST,
+                                      rag.points, np.ones(len(rag.points)), rag.offsets,
+                                      np.zeros((nm, 4)))
     angles, roots = pr.posture(state, pos, rot)
     out = fitter._to_range_deg(angles)
     error, per_view = fitter.error(out, detections_frame, roots)
@@ -135,7 +138,9 @@ def refine_many(fitter: Fitter, angles_deg, detections, root_positions=None, *,
         state[k], pos[k], rot[k] = fitter.state(start[k], roots[k])
     sse = np.empty(n)
     pairs = np.empty(n, np.int64)
-    _rk.refine_frames(state, rag.points, rag.offsets, pos, rot, pr.free_idx, pr.lo, pr.hi,
+    nm = pr.folded.marker_joint.size
+    _rk.refine_frames(state, _ak.OBJ_NEAREST, rag.points, np.ones(len(rag.points)),
+                      rag.offsets, np.zeros((n, nm, 4)), pos, rot, pr.free_idx, pr.lo, pr.hi,
                       pr.dof_kind, steps, gate, *pr.folded, *pr.cams, sse, pairs)
     out = []
     nv = rag.n_views
@@ -165,7 +170,9 @@ def refine_reference(fitter: Fitter, angles_deg, detections_frame, root_position
     nv, nm = fitter.n_views, len(fitter.body.marker_names)
     proj0 = fitter.project(np.rad2deg(angles), roots)
     pair = np.empty(nv * nm, np.int64)
-    n_pairs = _rk.assign_pairs(proj0, rag.points, rag.offsets, gate, pair)
+    n_pairs = _rk.assign_pairs(_ak.OBJ_NEAREST, proj0, np.zeros((nm, 3)), rag.points,
+                               np.ones(len(rag.points)), rag.offsets, np.zeros((nm, 4)), gate,
+                               pair)
     free = _free_angles(fitter)
     ranges = np.deg2rad(fitter.body.ranges_deg())
     lo, hi = ranges[free, 0], ranges[free, 1]

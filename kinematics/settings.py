@@ -1,8 +1,28 @@
 """The settings of a fit as frozen records: :class:`AnnealParams` (the paper's Table 1 and
 what the fitter adds) and :class:`ErrorOptions` (which error function, Eq. 5 or a variant).
 
-One source per setting: the project file's ``[anneal]`` section is derived from these records
-(their fields, defaults and docs), so every field here is settable in a project file.
+One source per setting: every field is declared with :func:`setting`, which holds its
+user-facing metadata (doc, bounds, choices) in the field's ``metadata``. The project file's
+``[anneal]`` section (:mod:`videotrack.config`), its reference in docs/config.md and the GUI's
+form are derived from these fields, so a field added here is settable in a project file
+without further edits. ``__post_init__`` validation stays here and is what every caller gets.
+
+Metadata keys (all optional but ``doc``):
+
+``doc``
+    One or two sentences for the config reference and tool tips.
+``min``, ``max``
+    Inclusive bounds a project file may give (finite: the GUI's spin boxes need them). The
+    record's own validation may be stricter (e.g. ``> 0``); it is checked when the record is
+    built.
+``choices``
+    The allowed values of a string field.
+``none``
+    For a field that may be None: the value a project file writes for None (TOML has no
+    null), e.g. ``0.0``. The doc says what None means.
+``flatten``
+    For a field that is itself a record (``AnnealParams.error``): its fields become keys of
+    the same section; the mapping renames some of them (``{"mode": "error"}``).
 """
 
 from __future__ import annotations
@@ -15,33 +35,40 @@ import numpy as np
 
 from kinematics.errors import KinematicsError
 
+
+def setting(default, doc: str, *, min=None, max=None, choices=None, none=None):
+    """A dataclass field with a default and its user-facing metadata (see the module doc)."""
+    meta = {"doc": doc, "min": min, "max": max, "choices": choices, "none": none}
+    return field(default=default, metadata={k: v for k, v in meta.items() if v is not None})
+
+
 START_MODES = ("mean", "previous")
 
 #: Cost of a marker with no finite projection when no cap is set (same as the kernels).
 NAN_MARKER_COST = 1.0e6
 
-ERROR_MODES = ("paper", "bidirectional")
+ERROR_MODES = ("paper", "bidirectional", "bounded")
 
 
 @dataclass(frozen=True)
 class ErrorOptions:
-    """Which error function the fit minimises.
+    """Which error function the fit minimises (the fields' metadata say what each means)."""
 
-    Parameters
-    ----------
-    mode : {"paper", "bidirectional"}
-        ``"paper"`` is Eq. 5; ``"bidirectional"`` adds the Sect. 4 penalty for detections
-        that no model marker claims.
-    penalty_weight : float
-        Weight of that penalty (bidirectional only), >= 0.
-    cap_px : float or None
-        Largest cost of one marker (and of one unclaimed detection) in pixels; None for no
-        cap (the paper).
-    """
-
-    mode: str = "paper"
-    penalty_weight: float = 1.0
-    cap_px: float | None = None
+    mode: str = setting(
+        "paper", "Error function: the paper's Eq. 5 ('paper'), the variant of Sect. 4 "
+        "('bidirectional') that also penalises detections no model marker claims, or that "
+        "variant with each unclaimed detection costing at most penalty_cap_px ('bounded', "
+        "safe with ghost markers).", choices=ERROR_MODES)
+    penalty_weight: float = setting(
+        1.0, "Weight of the bidirectional penalty for detections no marker claims.",
+        min=0.0, max=1e6)
+    cap_px: float | None = setting(
+        None, "Largest cost of one marker (and of one unclaimed detection) in pixels, so an "
+        "occlusion costs at most this; None, written 0 in a project file: no cap (the paper).",
+        min=0.0, max=1e9, none=0.0)
+    penalty_cap_px: float = setting(
+        3.0, "Largest cost of one unclaimed detection in pixels with error 'bounded' (a ghost "
+        "marker costs at most penalty_weight times this).", min=1e-6, max=1e9)
 
     def __post_init__(self) -> None:
         if self.mode not in ERROR_MODES:
@@ -53,10 +80,20 @@ class ErrorOptions:
         if self.cap_px is not None and not (np.isfinite(self.cap_px) and self.cap_px > 0):
             raise KinematicsError(f"must be a finite number > 0 or None, got {self.cap_px!r}",
                                   field="error.cap_px")
+        if not (np.isfinite(self.penalty_cap_px) and self.penalty_cap_px > 0):
+            raise KinematicsError(f"must be a finite number > 0, got {self.penalty_cap_px!r}",
+                                  field="error.penalty_cap_px")
 
     @property
     def bidirectional(self) -> bool:
-        return self.mode == "bidirectional"
+        """Whether unclaimed detections add a penalty (modes bidirectional and bounded)."""
+        return self.mode in ("bidirectional", "bounded")
+
+    @property
+    def penalty_cap(self) -> float:
+        """Largest cost of one unclaimed detection as the kernels take it: the marker cap
+        for 'bidirectional' (as the paper's heuristic), ``penalty_cap_px`` for 'bounded'."""
+        return float(self.penalty_cap_px) if self.mode == "bounded" else self.cap
 
     @property
     def cap(self) -> float:
@@ -64,7 +101,8 @@ class ErrorOptions:
         return np.inf if self.cap_px is None else float(self.cap_px)
 
     def to_dict(self) -> dict:
-        return {"mode": self.mode, "penalty_weight": self.penalty_weight, "cap_px": self.cap_px}
+        return {"mode": self.mode, "penalty_weight": self.penalty_weight, "cap_px": self.cap_px,
+                "penalty_cap_px": self.penalty_cap_px}
 
 
 
@@ -73,73 +111,59 @@ class ErrorOptions:
 class AnnealParams:
     """Parameters of the fit; the defaults are the paper's Table 1 and its note.
 
-    Parameters
-    ----------
-    n_end : int
-        N_end, iterations per run (35 000).
-    n_l, n_tau : int
-        N_l and N_τ: the step length l is multiplied by ``c_l`` every ``n_l`` iterations
-        (3500), the temperature τ by ``c_tau`` every ``n_tau`` (1500).
-    tau0 : float
-        τ0, start temperature in pixels of E (200).
-    l0 : float
-        l, start step length in units of s(H) (1).
-    c_l, c_tau : float
-        Cooling factors in (0, 1] (0.75).
-    epsilon : float
-        ε: a run stops once E < ε pixels (1).
-    plausibility_threshold : float or None
-        T_h: a step component v_i is redrawn while ``H_i(j_i + l·v_i) < T_h``. None (default)
-        means "any non-zero bin is plausible" (redraw only where the histogram is empty: the
-        paper's initial histograms are uniform over the range, so this keeps every axis in
-        its range). A number compares with the bin probability itself, e.g. ``0.2 / n_bins``
-        to avoid bins visited five times less often than average.
-    max_redraws : int
-        Redraws of one component before the axis stays still for that iteration (16).
-    reanalysis_threshold : float
-        A frame whose final E exceeds this (pixels) is fitted again (10, Table 1 note).
-    max_runs : int
-        Runs per frame at most, the first included (5).
-    start : {"mean", "previous"}
-        Start posture of a frame's first run (see the module doc for the trade-off).
-    segment_length : int
-        Frames per independent segment with ``start="previous"``.
-    refine : bool
-        Polish every fitted posture by Levenberg-Marquardt (:mod:`kinematics.refine`); off
-        by default so the defaults reproduce the paper.
-    refine_steps : int
-        Accepted LM steps at most.
-    refine_gate_px : float
-        Marker/detection pairs farther apart than this are ignored by refinement.
-    root_gate_px : float or None
-        Root-marker tracking ignores a view whose nearest detection is farther than this from
-        the predicted root marker; None: no gate (the paper's nearest neighbour).
-    error : ErrorOptions
-        Error function: Eq. 5 (default) or a variant.
-    seed : int
-        Seed of the random streams, >= 0; recorded in every result.
+    The fields' metadata (:func:`setting`) say what each means; docs/fitting.md says how to
+    tune them.
     """
 
-    n_end: int = 35000
-    n_l: int = 3500
-    n_tau: int = 1500
-    tau0: float = 200.0
-    l0: float = 1.0
-    c_l: float = 0.75
-    c_tau: float = 0.75
-    epsilon: float = 1.0
-    plausibility_threshold: float | None = None
-    max_redraws: int = 16
-    reanalysis_threshold: float = 10.0
-    max_runs: int = 5
-    start: str = "mean"
-    segment_length: int = 32
-    refine: bool = False
-    refine_steps: int = 10
-    refine_gate_px: float = 5.0
-    root_gate_px: float | None = None
-    error: ErrorOptions = field(default_factory=ErrorOptions)
-    seed: int = 0
+    n_end: int = setting(35000, "N_end: iterations of one annealing run (Table 1).",
+                         min=1, max=10**8)
+    n_l: int = setting(3500, "N_l: the step length is multiplied by c_l every N_l iterations.",
+                       min=1, max=10**8)
+    n_tau: int = setting(1500, "N_τ: the temperature is multiplied by c_tau every N_τ "
+                         "iterations.", min=1, max=10**8)
+    tau0: float = setting(200.0, "τ0: start temperature, in pixels of E; > 0.",
+                          min=0.0, max=1e9)
+    l0: float = setting(1.0, "l: start step length, in units of s(H); > 0.", min=0.0, max=1e3)
+    c_l: float = setting(0.75, "c_l: step-length cooling factor, in (0, 1].", min=1e-6,
+                         max=1.0)
+    c_tau: float = setting(0.75, "c_τ: temperature cooling factor, in (0, 1].", min=1e-6,
+                           max=1.0)
+    epsilon: float = setting(1.0, "ε: a run stops once E < ε pixels (0: always run N_end).",
+                             min=0.0, max=1e9)
+    plausibility_threshold: float | None = setting(
+        None, "T_h: a step component is redrawn while its histogram bin's probability is "
+        "below this. None, written 0 in a project file, means 'any non-zero bin' (redraw only "
+        "where the histogram is empty, which keeps every axis in the range of the paper's "
+        "uniform initial histograms); e.g. 0.2 / n_bins avoids bins visited five times less "
+        "often than average.", min=0.0, max=1.0, none=0.0)
+    max_redraws: int = setting(16, "Redraws of one step component before that axis stays still "
+                               "for the iteration.", min=0, max=10**6)
+    reanalysis_threshold: float = setting(
+        10.0, "A frame whose final E exceeds this (pixels) is fitted again (Table 1 note); "
+        "> 0.", min=0.0, max=1e9)
+    max_runs: int = setting(5, "Runs per frame at most, the first included.", min=1, max=1000)
+    start: str = setting("mean", "Start posture of a frame's first run: the histogram means "
+                         "(frames independent) or the previous frame's result.",
+                         choices=START_MODES)
+    segment_length: int = setting(32, "Frames per independent segment with start = "
+                                  "'previous' (each segment starts from the means).",
+                                  min=1, max=10**8)
+    refine: bool = setting(False, "Polish every fitted posture by Levenberg-Marquardt (see "
+                           "docs/fitting.md); off by default so the defaults reproduce the "
+                           "paper.")
+    refine_steps: int = setting(10, "Accepted Levenberg-Marquardt steps at most (refine).",
+                                min=0, max=10**6)
+    refine_gate_px: float = setting(5.0, "Refinement ignores marker/detection pairs farther "
+                                    "apart than this (pixels); > 0.", min=0.0, max=1e9)
+    root_gate_px: float | None = setting(
+        None, "Root-marker tracking ignores a view whose nearest detection is farther than "
+        "this (pixels) from the predicted root marker; None, written 0 in a project file: no "
+        "gate (the paper's nearest neighbour).", min=0.0, max=1e9, none=0.0)
+    error: ErrorOptions = field(default_factory=ErrorOptions, metadata={
+        "doc": "The error function: Eq. 5 (default) or a variant.",
+        "flatten": {"mode": "error"}})
+    seed: int = setting(0, "Seed of the random streams; written into every result.",
+                        min=0, max=2**62)
 
     def __post_init__(self) -> None:
         self.validate()

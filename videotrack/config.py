@@ -6,9 +6,12 @@ the single source of truth: :func:`load_config` validates against them, the reco
 a config (e.g. :class:`~videotrack.markers.MarkerSettings`) validate through them, and
 :func:`describe_section` turns them into a Markdown reference.
 
-A later module adds its section with ``register_section(Section("anneal", [...]))`` at import
-and reads ``config["anneal"]``; the module must be imported before :func:`load_config` (the
-commands that read a section import its module).
+A later module adds its section with ``register_section(Section("name", [...]))`` at import
+and reads ``config["name"]``; the module must be imported before :func:`load_config` (the
+commands that read a section import its module). A section can also be derived from a frozen
+settings record whose fields carry their metadata (:func:`record_section`, used for
+``[anneal]`` from :class:`kinematics.settings.AnnealParams`); :func:`record_from_table` builds
+the record back from the checked section.
 
 Inheritance (projects, :mod:`videotrack.project`): each file is first checked on its own by
 :func:`parse_layer` (unknown keys, types and values are reported against the file that has
@@ -29,15 +32,20 @@ Errors name the file and the dotted key: ``run.toml: filters.steps[2].value: mus
 from __future__ import annotations
 
 import copy
+import dataclasses
 import json
 import os
 import re
 import tomllib
+import types
+import typing
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
+from kinematics.errors import LocatedError
+from kinematics.settings import AnnealParams
 from videotrack.errors import VideoTrackError
 
 #: Marks a key without a default: it must be given.
@@ -354,6 +362,103 @@ def _toml(value) -> str:
     return json.dumps(value) if isinstance(value, bool | str | list) else repr(value)
 
 
+# -- sections derived from settings records -----------------------------------------------------
+
+_RECORD_TYPES = {int: "int", float: "float", bool: "bool", str: "str"}
+
+
+class RecordKey(NamedTuple):
+    """A key derived from a field of a settings record: the :class:`Key`, the field names
+    from the record down to the field (``("error", "mode")``), and the value that stands for
+    None (``none`` metadata; None when the field cannot be None)."""
+
+    key: Key
+    path: tuple[str, ...]
+    none: Any = None
+
+
+def record_keys(record: type, default=None) -> list[RecordKey]:
+    """The keys of a section derived from the fields of a frozen dataclass ``record``.
+
+    Each field becomes a key of the same name with its type (int, float, bool or str; an
+    ``X | None`` field is written as its ``none`` metadata value in the file), its default (from
+    ``default``, an instance, or ``record()``) and its metadata ``doc``, ``min``, ``max`` and
+    ``choices``. A field that is itself a record contributes its own fields as keys when its
+    metadata has ``flatten`` (a mapping renaming some of them). See :mod:`kinematics.settings`.
+    """
+    default = record() if default is None else default
+    hints = typing.get_type_hints(record)
+    out: list[RecordKey] = []
+    for f in dataclasses.fields(record):
+        meta, type_, value = f.metadata, hints[f.name], getattr(default, f.name)
+        where = f"{record.__name__}.{f.name}"
+        if dataclasses.is_dataclass(type_):
+            if "flatten" not in meta:
+                raise TypeError(f"{where}: a nested record needs metadata 'flatten'")
+            rename = meta["flatten"]
+            out += [RecordKey(dataclasses.replace(k.key, name=rename.get(k.key.name,
+                                                                          k.key.name)),
+                              (f.name, *k.path), k.none) for k in record_keys(type_, value)]
+            continue
+        none = None
+        args = typing.get_args(type_)
+        if typing.get_origin(type_) in (types.UnionType, typing.Union) and type(None) in args:
+            if "none" not in meta:
+                raise TypeError(f"{where} may be None: give it metadata 'none', the value a "
+                                "project file writes for None")
+            none = meta["none"]
+            (type_,) = (a for a in args if a is not type(None))
+            value = none if value is None else value
+        if type_ not in _RECORD_TYPES:
+            raise TypeError(f"{where}: type {type_!r} has no project-file form")
+        key = Key(f.name, _RECORD_TYPES[type_], value, meta.get("doc", ""),
+                  choices=tuple(meta["choices"]) if "choices" in meta else None,
+                  min=meta.get("min"), max=meta.get("max"))
+        out.append(RecordKey(key, (f.name,), none))
+    names = [k.key.name for k in out]
+    if len(set(names)) != len(names):
+        raise TypeError(f"{record.__name__}: two fields give the same key in {names}")
+    return out
+
+
+def record_section(name: str, record: type, doc: str = "") -> Section:
+    """A :class:`Section` with one key per field of ``record`` (:func:`record_keys`)."""
+    return Section(name, tuple(k.key for k in record_keys(record)), doc)
+
+
+def record_from_table(record: type, table: Mapping, *, file=None, where: str = ""):
+    """The ``record`` of a checked section (:func:`record_section`): each key's value goes
+    to its field (a ``none`` value becomes None); keys not in ``table`` keep the record's
+    default. The record's own validation errors are re-raised as :class:`VideoTrackError`
+    naming the file and ``where.key``."""
+    kwargs: dict = {}
+    by_field = {}
+    for k in record_keys(record):
+        by_field[".".join(k.path)] = k.key.name
+        if k.key.name not in table:
+            continue
+        value = table[k.key.name]
+        if k.none is not None and value == k.none:
+            value = None
+        target = kwargs
+        for part in k.path[:-1]:
+            target = target.setdefault(part, {})
+        target[k.path[-1]] = value
+    try:
+        return _build_record(record, kwargs)
+    except LocatedError as err:
+        name = by_field.get(err.field, err.field)
+        raise VideoTrackError(err.message, file=file,
+                              field=".".join(p for p in (where, name) if p) or None) from None
+
+
+def _build_record(record: type, kwargs: Mapping):
+    hints = typing.get_type_hints(record)
+    return record(**{name: _build_record(hints[name], value)
+                     if dataclasses.is_dataclass(hints[name]) else value
+                     for name, value in kwargs.items()})
+
+
 # -- value checking -----------------------------------------------------------------------------
 
 
@@ -633,15 +738,7 @@ OUTPUT = register_section(Section("output", (
 ), doc="Where results go."))
 
 
-# -- model and fitting (the fitter's parameters live in kinematics.anneal.AnnealParams; the
-# defaults below are read from it so they are written once) ---------------------------------
-def _anneal_defaults():
-    from kinematics.anneal import AnnealParams
-
-    return AnnealParams()
-
-
-_A = _anneal_defaults()
+# -- model and fitting ----------------------------------------------------------------------
 
 CHAIN = register_section(Section("chain", (
     Key("path", "path", "", "Chain XML file (joints, axes, segments, markers)."),
@@ -653,40 +750,11 @@ CAMERAS = register_section(Section("cameras", (
     Key("path", "path", "", "Camera TOML file; every view's camera must be in it."),
 ), doc="Where the cameras of the views are described."))
 
-ANNEAL = register_section(Section("anneal", (
-    Key("n_end", "int", _A.n_end, "N_end: iterations of one annealing run (Table 1).",
-        min=1, max=10**8),
-    Key("n_l", "int", _A.n_l, "N_l: the step length is multiplied by c_l every N_l "
-        "iterations.", min=1, max=10**8),
-    Key("n_tau", "int", _A.n_tau, "N_τ: the temperature is multiplied by c_tau every N_τ "
-        "iterations.", min=1, max=10**8),
-    Key("tau0", "float", _A.tau0, "τ0: start temperature, in pixels of E.", min=0.0, max=1e9),
-    Key("l0", "float", _A.l0, "l: start step length, in units of s(H).", min=0.0, max=1e3),
-    Key("c_l", "float", _A.c_l, "c_l: step-length cooling factor, in (0, 1].", min=1e-6,
-        max=1.0),
-    Key("c_tau", "float", _A.c_tau, "c_τ: temperature cooling factor, in (0, 1].", min=1e-6,
-        max=1.0),
-    Key("epsilon", "float", _A.epsilon, "ε: a run stops once E < ε pixels.", min=0.0,
-        max=1e9),
-    Key("plausibility_threshold", "float", 0.0, "T_h: redraw a step where the histogram bin "
-        "probability is below this; 0 means 'any non-zero bin'.", min=0.0, max=1.0),
-    Key("reanalysis_threshold", "float", _A.reanalysis_threshold, "A frame whose E exceeds "
-        "this (pixels) is analysed again.", min=0.0, max=1e9),
-    Key("max_runs", "int", _A.max_runs, "Runs per frame at most, the first included.", min=1,
-        max=1000),
-    Key("start", "str", _A.start, "Start posture of each frame: histogram means (frames "
-        "independent) or the previous frame's result.", choices=("mean", "previous")),
-    Key("refine", "bool", _A.refine, "Polish each fit by Levenberg-Marquardt (see "
-        "docs/fitting.md)."),
-    Key("error", "str", _A.error.mode, "Error function: the paper's Eq. 5 or the "
-        "bidirectional variant of Sect. 4.", choices=("paper", "bidirectional")),
-    Key("penalty_weight", "float", _A.error.penalty_weight, "Weight of the bidirectional "
-        "penalty for detections no marker claims.", min=0.0, max=1e6),
-    Key("cap_px", "float", 0.0, "Largest cost of one marker in pixels (occlusions cost at "
-        "most this); 0 for no cap.", min=0.0, max=1e9),
-    Key("seed", "int", _A.seed, "Seed of the random streams; written into every result.",
-        min=0, max=2**62),
-), doc="Simulated annealing (Eq. 6) and the error function (Eq. 5); defaults are Table 1."))
+# Every field of AnnealParams (and of its ErrorOptions, flattened: ``error`` is the mode) is a
+# key, with the type, default, bounds and doc declared in kinematics/settings.py.
+ANNEAL = register_section(record_section(
+    "anneal", AnnealParams, "Simulated annealing (Eq. 6) and the error function (Eq. 5); "
+    "defaults are Table 1."))
 
 FIT = register_section(Section("fit", (
     Key("results", "path", "", "Results CSV; empty: '<detections>.results.csv' beside the "

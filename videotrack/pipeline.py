@@ -23,8 +23,8 @@ from pathlib import Path
 import numpy as np
 
 from kinematics.anneal import AnnealParams, Fitter, FrameResult
-from kinematics.error_function import ErrorOptions
 from kinematics.model import Body
+from videotrack.config import record_from_table
 from videotrack.errors import VideoTrackError
 from videotrack.results import (
     Results,
@@ -85,16 +85,8 @@ def _jsonable(value):
 
 def anneal_params(config, **overrides) -> AnnealParams:
     """:class:`AnnealParams` from the ``[anneal]`` section, with overrides (None: keep)."""
-    a = config["anneal"]
-    error = ErrorOptions(mode=a["error"], penalty_weight=a["penalty_weight"],
-                         cap_px=a["cap_px"] or None)
-    params = AnnealParams(
-        n_end=a["n_end"], n_l=a["n_l"], n_tau=a["n_tau"], tau0=a["tau0"], l0=a["l0"],
-        c_l=a["c_l"], c_tau=a["c_tau"], epsilon=a["epsilon"],
-        plausibility_threshold=a["plausibility_threshold"] or None,
-        reanalysis_threshold=a["reanalysis_threshold"], max_runs=a["max_runs"],
-        start=a["start"], refine=a["refine"], error=error, seed=a["seed"],
-    )
+    params = record_from_table(AnnealParams, config["anneal"], file=config.path,
+                               where="anneal")
     given = {k: v for k, v in overrides.items() if v is not None}
     if "n_end" in given and "n_l" not in given and "n_tau" not in given:
         # a shorter schedule keeps the paper's proportions (Sect. 3.2 sensitivity analysis)

@@ -422,7 +422,7 @@ def test_bodies_that_cannot_be_fitted(locust):
         Fitter(no_markers, cams)
     assert err.value.field == "markers"
     with pytest.raises(KinematicsError, match="no cameras"):
-        Fitter(locust, {})
+        Fitter(locust, {}).fit(planted(locust, cams, smooth_random_motion(locust, 1, 1)))
 
 
 def test_iter_fit_order_and_cancel(locust):
@@ -453,7 +453,8 @@ def test_annealing_loop_allocates_nothing(locust):
     _, its = fresh(pr.start, pr.free_idx, pr.step, pr.hist, pr.nbins, 1e-300, pr.dof_kind,
                    pr.lo, pr.hi, 16, 500, 100, 100, 200.0, 1.0, 0.75, 0.75, 0.0,
                    ak.stream_state(0, 0, 0), np.zeros((1, 3)), pr.identity_rotations(),
-                   *pr.folded, *pr.cams, pts, off, False, 1.0, np.inf, np.inf, *scratch)
+                   *pr.folded, *pr.cams, 0, pts, np.ones(len(pts)), off, np.zeros((nm, 4)),
+                   False, 1.0, np.inf, np.inf, *scratch)
     assert its == 500
     ir = fresh.inspect_llvm(fresh.signatures[0])
     assert not re.search(r"NRT_MemInfo_alloc|NRT_Allocate", ir)

@@ -25,6 +25,7 @@ VARIANTS = [
     ErrorOptions("bounded"),
     ErrorOptions("bounded", penalty_weight=2.0, cap_px=6.0, penalty_cap_px=1.5),
 ]
+VARIANT_IDS = ["paper", "cap", "bidir", "bidir-cap", "bounded", "bounded-cap"]
 
 
 def kernel_error(proj, detections, opts: ErrorOptions):
@@ -65,7 +66,7 @@ def test_two_views_sum_and_empty_view_contributes_nothing():
     np.testing.assert_allclose(per_view, [2.0, 0.0])
 
 
-@pytest.mark.parametrize("opts", VARIANTS, ids=["paper", "cap", "bidir", "bidir-cap", "bounded", "bounded-cap"])
+@pytest.mark.parametrize("opts", VARIANTS, ids=VARIANT_IDS)
 def test_kernel_equals_twin_random(opts):
     rng = np.random.default_rng(7)
     for _ in range(300):
@@ -155,7 +156,7 @@ def test_fold_keeps_locked_rotations_out_of_the_loop(locust):
     assert folded.joint_flags[2] & ak.G_IDENTITY
 
 
-@pytest.mark.parametrize("opts", VARIANTS, ids=["paper", "cap", "bidir", "bidir-cap", "bounded", "bounded-cap"])
+@pytest.mark.parametrize("opts", VARIANTS, ids=VARIANT_IDS)
 @pytest.mark.parametrize("which", ["stick", "odd"])
 def test_posture_error_kernel_equals_twin(which, opts, stick_insect):
     body = stick_insect if which == "stick" else odd_body()

@@ -1,10 +1,14 @@
 """Project config: schema validation, defaults, paths, errors that name file and key."""
 
+import dataclasses
 from pathlib import Path
 
 import pytest
 
+from kinematics.errors import KinematicsError
+from kinematics.settings import AnnealParams, ErrorOptions, setting
 from videotrack.config import (
+    ANNEAL,
     FILTER_STEPS,
     MARKERS,
     SECTIONS,
@@ -13,10 +17,13 @@ from videotrack.config import (
     describe_section,
     load_config,
     parse_config,
+    record_from_table,
+    record_section,
     register_section,
 )
 from videotrack.detect import default_output, settings_from_config, video_paths
 from videotrack.errors import VideoTrackError
+from videotrack.pipeline import anneal_params, load_model
 
 MINIMAL = """\
 [video]
@@ -133,3 +140,137 @@ def test_describe_is_generated_from_the_schema():
     for kind, section in FILTER_STEPS.sections.items():
         assert f'`type = "{kind}"`' in steps
         assert all(f"`{k.name}`" in steps for k in section.keys)
+
+
+# -- [anneal]: derived from kinematics.settings (AnnealParams, ErrorOptions) -------------------
+
+def _anneal_config(tmp_path, body: str):
+    return parse_config(MINIMAL + "[anneal]\n" + body, tmp_path / "p.toml")
+
+
+def test_every_anneal_field_is_a_key(tmp_path):
+    names = [k.name for k in ANNEAL.keys]
+    flat = {"mode": "error"}  # ErrorOptions' fields are flattened; its mode is `error`
+    expected = [f.name for f in dataclasses.fields(AnnealParams) if f.name != "error"]
+    expected += [flat.get(f.name, f.name) for f in dataclasses.fields(ErrorOptions)]
+    assert sorted(names) == sorted(expected) and len(names) == len(set(names))
+    defaults = AnnealParams()
+    for key in ANNEAL.keys:
+        assert key.doc, key.name  # every key is documented (the field's metadata)
+        if key.choices is None and key.type != "bool":
+            assert key.min is not None and key.max is not None, key.name  # GUI spin boxes
+        if key.type in ("int", "float"):
+            assert key.min <= key.default <= key.max, key.name
+    # None-able fields are written 0 in a project file, and their docs say so
+    for name in ("plausibility_threshold", "root_gate_px", "cap_px"):
+        key = ANNEAL.key(name)
+        assert key.default == 0.0 and "written 0 in a project file" in key.doc, name
+    assert anneal_params(parse_config(MINIMAL, tmp_path / "p.toml")) == defaults
+
+
+def test_new_anneal_keys_reach_the_params(tmp_path):
+    cfg = _anneal_config(tmp_path, "root_gate_px = 12\nrefine_gate_px = 3.5\n"
+                         "refine_steps = 4\nsegment_length = 8\nmax_redraws = 2\n")
+    p = anneal_params(cfg)
+    assert (p.root_gate_px, p.refine_gate_px, p.refine_steps, p.segment_length,
+            p.max_redraws) == (12.0, 3.5, 4, 8, 2)
+    assert p.error == ErrorOptions() and p.n_end == AnnealParams().n_end
+    assert anneal_params(_anneal_config(tmp_path, "root_gate_px = 0\n")).root_gate_px is None
+    # overrides (the command line) still apply on top
+    q = anneal_params(cfg, n_end=3500, seed=9)
+    assert (q.n_end, q.n_l, q.n_tau, q.seed, q.root_gate_px) == (3500, 350, 150, 9, 12.0)
+
+
+@pytest.mark.parametrize("body, field, message", [
+    ("root_gate_px = -1", "anneal.root_gate_px", "at least 0"),
+    ("refine_steps = 1.5", "anneal.refine_steps", "an integer"),
+    ("segment_length = 0", "anneal.segment_length", "at least 1"),
+    ("error = 'median'", "anneal.error", "one of 'paper', 'bidirectional'"),
+    ("cap_px = 'none'", "anneal.cap_px", "a number"),
+    ("root_gate = 3", "anneal.root_gate", "unknown key"),
+])
+def test_bad_anneal_value_names_the_key(tmp_path, body, field, message):
+    with pytest.raises(VideoTrackError, match=message) as err:
+        _anneal_config(tmp_path, body + "\n")
+    assert err.value.field == field and "\n" not in str(err.value)
+    assert str(err.value).startswith(f"{tmp_path / 'p.toml'}: {field}: ")
+
+
+@pytest.mark.parametrize("body, field", [
+    ("refine_gate_px = 0", "anneal.refine_gate_px"),  # the record's own rule: > 0
+    ("tau0 = 0", "anneal.tau0"),
+])
+def test_record_rules_name_the_key(tmp_path, body, field):
+    cfg = _anneal_config(tmp_path, body + "\n")
+    with pytest.raises(VideoTrackError, match="> 0") as err:
+        anneal_params(cfg)
+    assert err.value.field == field and "\n" not in str(err.value)
+    assert str(err.value).startswith(f"{tmp_path / 'p.toml'}: {field}: ")
+
+
+OLD_ANNEAL = """
+[anneal]
+n_end = 20000
+n_l = 2000
+n_tau = 857
+tau0 = 150
+l0 = 0.5
+c_l = 0.7
+c_tau = 0.8
+epsilon = 0.5
+plausibility_threshold = 0
+reanalysis_threshold = 3.0
+max_runs = 3
+start = "previous"
+refine = true
+error = "bidirectional"
+penalty_weight = 2.0
+cap_px = 0
+seed = 1
+"""
+
+
+def test_old_style_project_loads_unchanged(tmp_path):
+    from videotrack.paper_setup import write_paper_project
+
+    project = write_paper_project(tmp_path / "demo", frames=2, sequences=1)
+    assert load_model(load_config(project.config)).params == AnnealParams()  # the demo's
+    with open(project.config, "a", encoding="utf-8") as f:
+        f.write(OLD_ANNEAL)  # every key a project file could hold before
+    params = load_model(load_config(project.config)).params
+    assert params == AnnealParams(
+        n_end=20000, n_l=2000, n_tau=857, tau0=150.0, l0=0.5, c_l=0.7, c_tau=0.8,
+        epsilon=0.5, plausibility_threshold=None, reanalysis_threshold=3.0, max_runs=3,
+        start="previous", refine=True, seed=1,
+        error=ErrorOptions(mode="bidirectional", penalty_weight=2.0, cap_px=None))
+    cfg = _anneal_config(tmp_path, "plausibility_threshold = 0.001\ncap_px = 25\n")
+    p = anneal_params(cfg)
+    assert p.plausibility_threshold == 0.001 and p.error.cap_px == 25.0
+
+
+def test_a_section_follows_its_record(tmp_path):
+    """A field added to a record shows up as a key with no edit of the config module."""
+
+    @dataclasses.dataclass(frozen=True)
+    class Inner:
+        mode: str = setting("a", "Mode.", choices=("a", "b"))
+        limit_px: float | None = setting(None, "Limit; 0: none.", min=0.0, max=9.0, none=0.0)
+
+    @dataclasses.dataclass(frozen=True)
+    class Outer:
+        count: int = setting(2, "Count.", min=1, max=5)
+        inner: Inner = dataclasses.field(default_factory=Inner,
+                                         metadata={"doc": "", "flatten": {"mode": "kind"}})
+
+        def __post_init__(self):
+            if self.inner.mode == "b" and self.inner.limit_px is None:
+                raise KinematicsError("mode b needs a limit", field="inner.limit_px")
+
+    section = record_section("toy", Outer)
+    assert [(k.name, k.type, k.default) for k in section.keys] == [
+        ("count", "int", 2), ("kind", "str", "a"), ("limit_px", "float", 0.0)]
+    table = section.validate({"kind": "b", "limit_px": 4})
+    assert record_from_table(Outer, table) == Outer(2, Inner("b", 4.0))
+    with pytest.raises(VideoTrackError) as err:
+        record_from_table(Outer, section.validate({"kind": "b"}), file="x.toml", where="toy")
+    assert str(err.value) == "x.toml: toy.limit_px: mode b needs a limit"

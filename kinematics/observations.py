@@ -1,0 +1,190 @@
+"""What a posture is fitted to: one :class:`Observations` type for three kinds of input.
+
+``points``
+    Unlabelled points per view (the paper's marker detections): any number per view and
+    frame, matched to model markers by the objective (Eq. 5: nearest point).
+``keypoints``
+    Labelled 2D keypoints per view (DeepLabCut, SLEAP, …): for every model marker in every
+    view an (x, y, confidence) triple, NaN (or confidence 0) when missing. Objective: the
+    labelled reprojection error, each marker against its own keypoint, weighted by the
+    confidence and capped (a robust loss against mislabelled frames).
+``points3d``
+    Labelled 3D points (Anipose, motion capture): for every model marker an (x, y, z, weight)
+    row in the body's length units, NaN when missing. Objective: the 3D distance of each
+    marker to its point, weighted and capped. No cameras are needed.
+
+Layout (the kernels'): 2D observations are ragged, frame-major: ``points`` (n, 2) pixels
+with ``conf`` (n,) weights, view ``v`` of frame ``f`` owning rows
+``offsets[f * n_views + v]:offsets[f * n_views + v + 1]``; for keypoints a view's rows are
+the body's markers in order (``n_markers`` rows) or none. 3D points are ``points3d``
+(n_frames, n_markers, 4).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from kinematics import _anneal_kernels as _ak
+from kinematics.errors import KinematicsError
+
+KINDS = ("points", "keypoints", "points3d")
+_OBJECTIVE = {"points": _ak.OBJ_NEAREST, "keypoints": _ak.OBJ_LABELLED,
+              "points3d": _ak.OBJ_POINTS3D}
+
+
+@dataclass(frozen=True, eq=False)
+class Observations:
+    """Observations of many frames in the kernels' layout (build with the class methods).
+
+    Attributes
+    ----------
+    kind : {"points", "keypoints", "points3d"}
+    view_names : tuple of str (empty for 3D points)
+    n_frames : int
+    points : ndarray (n, 2); conf : ndarray (n,); offsets : ndarray (n_frames * n_views + 1,)
+    points3d : ndarray (n_frames, n_markers, 4) (n_markers 0 for 2D kinds)
+    dropped : ndarray (n_frames,) unlabelled points dropped for a NaN coordinate
+    """
+
+    kind: str
+    view_names: tuple[str, ...]
+    n_frames: int
+    points: np.ndarray
+    conf: np.ndarray
+    offsets: np.ndarray
+    points3d: np.ndarray
+    dropped: np.ndarray
+
+    @property
+    def n_views(self) -> int:
+        return len(self.view_names)
+
+    @property
+    def objective(self) -> int:
+        """The kernels' objective code for this kind."""
+        return _OBJECTIVE[self.kind]
+
+    @property
+    def labelled(self) -> bool:
+        return self.kind != "points"
+
+    # -- construction ------------------------------------------------------------------
+    @classmethod
+    def unlabelled(cls, points, offsets, view_names: Sequence[str], dropped=None
+                   ) -> Observations:
+        """Unlabelled points from the ragged layout (finite rows only)."""
+        pts = np.ascontiguousarray(np.asarray(points, dtype=float).reshape(-1, 2))
+        off = np.ascontiguousarray(np.asarray(offsets, dtype=np.int64))
+        nv = len(view_names)
+        n = (off.size - 1) // max(nv, 1)
+        drop = np.zeros(n, np.int64) if dropped is None else np.asarray(dropped, np.int64)
+        return cls("points", tuple(view_names), n, pts, np.ones(len(pts)), off,
+                   np.zeros((n, 0, 4)), drop)
+
+    @classmethod
+    def keypoints(cls, keypoints, view_names: Sequence[str], marker_names: Sequence[str],
+                  body_markers: Sequence[str]) -> Observations:
+        """Labelled 2D keypoints.
+
+        Parameters
+        ----------
+        keypoints : array_like, shape (n_frames, n_views, n_kp, 2 or 3)
+            x, y in pixels and optionally a confidence in [0, 1] (default 1); NaN = missing.
+        view_names : the views, in the cameras' order
+        marker_names : (n_kp,) the body marker each keypoint is; markers of the body without
+            a keypoint are missing in every frame
+        body_markers : the body's marker names, in order
+        """
+        kp = np.asarray(keypoints, dtype=float)
+        nv, nm = len(view_names), len(body_markers)
+        if kp.ndim != 4 or kp.shape[1] != nv or kp.shape[2] != len(marker_names) or \
+                kp.shape[3] not in (2, 3):
+            raise KinematicsError(f"keypoints need shape (frames, {nv} views, "
+                                  f"{len(marker_names)} keypoints, 2 or 3), got {kp.shape}",
+                                  field="keypoints")
+        index = _marker_index(marker_names, body_markers)
+        n = kp.shape[0]
+        full = np.full((n, nv, nm, 3), np.nan)
+        full[..., 2] = 0.0
+        full[:, :, index, :2] = kp[..., :2]
+        full[:, :, index, 2] = kp[..., 2] if kp.shape[3] == 3 else 1.0
+        conf = full[..., 2]
+        if np.any(conf[np.isfinite(conf)] < 0):
+            raise KinematicsError("confidences must be >= 0", field="keypoints")
+        ok = np.isfinite(full[..., :2]).all(axis=3) & (np.nan_to_num(conf) > 0)
+        present = ok.any(axis=2)  # (n, nv): a view with no keypoint holds no rows
+        counts = np.where(present, nm, 0).ravel()
+        off = np.zeros(counts.size + 1, np.int64)
+        np.cumsum(counts, out=off[1:])
+        rows = full[present]  # (k, nm, 3)
+        conf_rows = np.where(ok[present], np.nan_to_num(rows[..., 2]), 0.0).ravel()
+        return cls("keypoints", tuple(view_names), n,
+                   np.ascontiguousarray(rows[..., :2].reshape(-1, 2)),
+                   np.ascontiguousarray(conf_rows), off, np.zeros((n, 0, 4)),
+                   np.zeros(n, np.int64))
+
+    @classmethod
+    def points_3d(cls, points, marker_names: Sequence[str], body_markers: Sequence[str]
+                  ) -> Observations:
+        """Labelled 3D points, shape (n_frames, n_points, 3 or 4): x, y, z in the body's
+        length units and optionally a weight (default 1); NaN = missing."""
+        p = np.asarray(points, dtype=float)
+        if p.ndim != 3 or p.shape[1] != len(marker_names) or p.shape[2] not in (3, 4):
+            raise KinematicsError(f"3D points need shape (frames, {len(marker_names)} points, "
+                                  f"3 or 4), got {p.shape}", field="points3d")
+        index = _marker_index(marker_names, body_markers)
+        n = p.shape[0]
+        full = np.full((n, len(body_markers), 4), np.nan)
+        full[:, index, :3] = p[..., :3]
+        full[:, index, 3] = p[..., 3] if p.shape[2] == 4 else 1.0
+        missing = ~np.isfinite(full[..., :3]).all(axis=2)
+        full[missing, 3] = 0.0
+        return cls("points3d", (), n, np.empty((0, 2)), np.empty(0),
+                   np.zeros(1, np.int64), np.ascontiguousarray(full),
+                   np.zeros(n, np.int64))
+
+    # -- access -------------------------------------------------------------------------
+    def select(self, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                  np.ndarray]:
+        """``points, conf, offsets, points3d`` of the given frames only, in that order."""
+        frames = np.asarray(frames, dtype=np.int64)
+        nv = self.n_views
+        p3 = np.ascontiguousarray(self.points3d[frames])
+        if nv == 0:
+            return self.points, self.conf, np.zeros(1, np.int64), p3
+        starts = self.offsets[frames * nv]
+        stops = self.offsets[frames * nv + nv]
+        rows = (np.concatenate([np.arange(a, b) for a, b in zip(starts, stops, strict=True)])
+                if len(frames) else np.empty(0, np.int64)).astype(np.int64)
+        counts = np.diff(self.offsets)[(frames[:, None] * nv + np.arange(nv)).ravel()]
+        off = np.zeros(counts.size + 1, np.int64)
+        np.cumsum(counts, out=off[1:])
+        return (np.ascontiguousarray(self.points[rows].reshape(-1, 2)),
+                np.ascontiguousarray(self.conf[rows]), off, p3)
+
+    def view_counts(self, frames: np.ndarray) -> np.ndarray:
+        """(len(frames), n_views) rows per view."""
+        nv = self.n_views
+        if nv == 0:
+            return np.zeros((len(frames), 0), np.int64)
+        return np.diff(self.offsets).reshape(self.n_frames, nv)[np.asarray(frames)]
+
+    def frame_views(self, frame: int) -> list[np.ndarray]:
+        """The 2D rows of each view of one frame (for keypoints, NaN rows included)."""
+        nv = self.n_views
+        return [self.points[self.offsets[frame * nv + v]: self.offsets[frame * nv + v + 1]]
+                for v in range(nv)]
+
+
+def _marker_index(names: Sequence[str], body_markers: Sequence[str]) -> np.ndarray:
+    where = {m: k for k, m in enumerate(body_markers)}
+    unknown = [n for n in names if n not in where]
+    if unknown:
+        raise KinematicsError(f"'{unknown[0]}' is not a marker of the body "
+                              f"(markers: {', '.join(body_markers)})", field="marker_names")
+    if len(set(names)) != len(names):
+        raise KinematicsError("a marker is named twice", field="marker_names")
+    return np.array([where[n] for n in names], np.int64)
