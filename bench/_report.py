@@ -18,10 +18,11 @@ def machine() -> str:
     return f"{name or platform.processor() or platform.machine()}, {os.cpu_count()} CPUs"
 
 
-def print_table(rows, target: str = "goal") -> None:
-    """Print (measurement, result, target) rows as a markdown table."""
+def print_table(rows, target: str = "goal", results=("result",)) -> None:
+    """Print (measurement, result, target) rows as a markdown table; with several
+    ``results`` column names, rows are (measurement, one value per result column, target)."""
     width = max(len(r[0]) for r in rows)
-    print(f"| {'measurement'.ljust(width)} | result | {target} |")
-    print(f"| {'-' * width} | --- | --- |")
-    for name, value, goal in rows:
-        print(f"| {name.ljust(width)} | {value} | {goal} |")
+    print(f"| {'measurement'.ljust(width)} | {' | '.join(results)} | {target} |")
+    print(f"| {'-' * width} |{' --- |' * len(results)} --- |")
+    for name, *values, goal in rows:
+        print(f"| {name.ljust(width)} | {' | '.join(str(v) for v in values)} | {goal} |")
