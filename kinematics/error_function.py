@@ -120,3 +120,54 @@ def posture_error(
     markers = forward_kinematics_reference(body, angles_deg, root_positions).markers
     proj = np.stack([cam.project(markers) for cam in cams])
     return projection_error(proj, detections, options)
+
+
+def labelled_error(projections, keypoints, options: ErrorOptions | None = None
+                   ) -> tuple[float, np.ndarray]:
+    """Labelled reprojection error (the objective of labelled 2D keypoints)::
+
+        E = sum_v sum_i w_i^v · min(|p_i^v - k_i^v|, cap)
+
+    Each model marker is compared with its own keypoint, never with another marker's; a
+    keypoint with NaN coordinates or weight 0 is missing and costs nothing; the cap bounds
+    what one mislabelled keypoint can cost (a robust loss).
+
+    Parameters
+    ----------
+    projections : array_like, shape (n_views, n_markers, 2)
+    keypoints : array_like, shape (n_views, n_markers, 3)
+        x, y, weight (confidence) of each marker's keypoint in each view.
+    options : ErrorOptions, optional
+        Only ``cap_px`` is used.
+
+    Returns
+    -------
+    error : float
+    error_per_view : ndarray, shape (n_views,)
+    """
+    opts = options or ErrorOptions()
+    proj = np.asarray(projections, dtype=float)
+    kp = np.asarray(keypoints, dtype=float)
+    w = np.nan_to_num(kp[..., 2])
+    present = np.isfinite(kp[..., :2]).all(axis=-1) & (w > 0)
+    d = np.linalg.norm(proj - kp[..., :2], axis=-1)
+    d = np.where(np.isfinite(d), d, opts.cap if np.isfinite(opts.cap) else NAN_MARKER_COST)
+    per_view = np.where(present, w * np.minimum(d, opts.cap), 0.0).sum(axis=1)
+    return float(per_view.sum()), per_view
+
+
+def points3d_error(markers, points, options: ErrorOptions | None = None) -> float:
+    """3D point error (the objective of labelled 3D points), in length units::
+
+        E = sum_i w_i · min(|X_i - Y_i|, cap)
+
+    ``markers`` (n_markers, 3) model markers; ``points`` (n_markers, 4) x, y, z, weight of
+    each marker's point (NaN or weight 0: missing). Only ``cap_px`` of ``options`` is used
+    (read in length units here).
+    """
+    opts = options or ErrorOptions()
+    y = np.asarray(points, dtype=float)
+    w = np.nan_to_num(y[:, 3])
+    present = np.isfinite(y[:, :3]).all(axis=1) & (w > 0)
+    d = np.linalg.norm(np.asarray(markers, float) - y[:, :3], axis=1)
+    return float(np.where(present, w * np.minimum(d, opts.cap), 0.0).sum())

@@ -1,0 +1,108 @@
+"""Labelled observations: 2D keypoints and 3D points, their objectives against the NumPy
+twins, and fitting a freely moving body to them."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from kinematics import _anneal_kernels as ak
+from kinematics.anneal import AnnealParams, Fitter
+from kinematics.error_function import labelled_error, points3d_error
+from kinematics.errors import KinematicsError
+from kinematics.fk import forward_kinematics_reference
+from kinematics.observations import Observations
+from kinematics.settings import ErrorOptions
+from tests.kinematics.test_free_root import mouse_like, planted_frames, three_pinholes
+
+CAPS = [ErrorOptions(), ErrorOptions(cap_px=2.0)]
+
+
+@pytest.mark.parametrize("opts", CAPS, ids=["no-cap", "cap"])
+def test_labelled_error_kernel_equals_twin(opts):
+    rng = np.random.default_rng(4)
+    nv, nm = 3, 5
+    proj = rng.uniform(0, 100, (nv, nm, 2))
+    kp = np.concatenate([proj + rng.normal(0, 2, proj.shape), rng.uniform(0, 1, (nv, nm, 1))],
+                        axis=2)
+    kp[0, 1, :2] = np.nan
+    kp[2, 3, 2] = 0.0
+    want, want_view = labelled_error(proj, kp, opts)
+    pts = np.ascontiguousarray(kp[..., :2].reshape(-1, 2))
+    conf = np.ascontiguousarray(kp[..., 2].ravel())
+    off = np.arange(nv + 1, dtype=np.int64) * nm
+    per_view = np.empty(nv)
+    got = ak.labelled_error(proj, pts, conf, off, opts.cap, per_view)
+    assert got == pytest.approx(want, rel=1e-12)
+    np.testing.assert_allclose(per_view, want_view, rtol=1e-12)
+
+
+@pytest.mark.parametrize("opts", CAPS, ids=["no-cap", "cap"])
+def test_points3d_error_kernel_equals_twin(opts):
+    rng = np.random.default_rng(5)
+    mk = rng.normal(0, 10, (6, 3))
+    pts = np.concatenate([mk + rng.normal(0, 1, mk.shape), rng.uniform(0.2, 1, (6, 1))], 1)
+    pts[2, :3] = np.nan
+    pts[4, 3] = 0.0
+    assert ak.points3d_error(mk, pts, opts.cap) == pytest.approx(
+        points3d_error(mk, pts, opts), rel=1e-12)
+
+
+def test_keypoints_packing_and_errors():
+    body = mouse_like()
+    names = body.marker_names
+    kp = np.random.default_rng(0).uniform(0, 100, (4, 2, 3, 3))
+    kp[1, 0] = np.nan  # view 0 of frame 1 sees nothing: it holds no rows
+    obs = Observations.keypoints(kp, ["a", "b"], [names[2], names[0], names[5]], names)
+    counts = obs.view_counts(np.arange(4))
+    assert counts.tolist() == [[6, 6], [0, 6], [6, 6], [6, 6]]
+    pts, conf, off, _ = obs.select(np.array([2]))
+    rows = pts.reshape(2, 6, 2)
+    np.testing.assert_array_equal(rows[1, 2], kp[2, 1, 0, :2])  # marker 2 is keypoint 0
+    assert np.isnan(rows[0, 1]).all() and conf.reshape(2, 6)[0, 1] == 0.0
+    with pytest.raises(KinematicsError, match="not a marker"):
+        Observations.keypoints(kp, ["a", "b"], ["nose", names[0], names[1]], names)
+    with pytest.raises(KinematicsError, match="shape"):
+        Observations.keypoints(kp[..., :1], ["a", "b"], names[:3], names)
+
+
+def joint_errors(body, results, angles, roots):
+    errs = []
+    for r, a, rt in zip(results, angles, roots, strict=True):
+        fit = forward_kinematics_reference(body, r.angles_deg, r.root_positions)
+        true = forward_kinematics_reference(body, a, rt)
+        errs.append(np.linalg.norm(fit.joints - true.joints, axis=1).max())
+    return np.array(errs)
+
+
+def test_free_body_from_labelled_keypoints():
+    body = mouse_like()
+    cams = three_pinholes()
+    angles, roots, frames = planted_frames(body, cams, n=8, noise=0.5)
+    kp = np.array(frames)  # (n, views, markers, 2), in body-marker order
+    rng = np.random.default_rng(6)
+    kp[rng.uniform(size=kp.shape[:3]) < 0.05] = np.nan
+    obs = Observations.keypoints(kp, [c.name for c in cams], body.marker_names,
+                                 body.marker_names)
+    params = AnnealParams(refine=True, reanalysis_threshold=30.0).with_schedule(5000)
+    res = Fitter(body, cams, params).fit(obs)
+    err = joint_errors(body, res, angles, roots)
+    assert np.median(err) < 0.3, err
+    assert res[0].marker_residuals.shape == (3, len(body.marker_names))
+
+
+def test_free_body_from_3d_points_without_cameras():
+    body = mouse_like()
+    angles, roots, _ = planted_frames(body, three_pinholes(), n=8)
+    rng = np.random.default_rng(7)
+    pts = np.array([forward_kinematics_reference(body, a, r).markers
+                    for a, r in zip(angles, roots, strict=True)])
+    pts += rng.normal(0, 0.1, pts.shape)
+    pts[3, 1] = np.nan
+    obs = Observations.points_3d(pts, body.marker_names, body.marker_names)
+    params = AnnealParams(refine=True, tau0=5.0, reanalysis_threshold=3.0,
+                          refine_gate_px=5.0).with_schedule(5000)
+    res = Fitter(body, {}, params).fit(obs)
+    err = joint_errors(body, res, angles, roots)
+    assert np.median(err) < 0.3, err
+    assert all(r.status in ("ok", "reanalysed") for r in res)
