@@ -393,8 +393,9 @@ class Fitter:
                           for f in range(len(idx)))
                 tri_gate = placement.DEFAULT_GATE_PX if self.params.root_gate_px is None \
                     else gate
-                pos, seed_rot, _ = placement.place_roots(self.body, self.cameras, frames,
-                                                         self.problem.windows, tri_gate)
+                pos, seed_rot, _ = placement.place_roots(
+                    self.body, self.cameras, frames, self.problem.windows, tri_gate,
+                    resolve=lambda f, q, poses: self._resolve(obs, idx[f], q, poses))
             else:
                 pos, seed_rot, _ = placement.place_roots_from_points(
                     self.body, labelled, self.problem.windows)
@@ -402,6 +403,22 @@ class Fitter:
                 out[:, c] = pos[:, q]
                 rot[:, c] = seed_rot[:, q]
         return out, rot
+
+    def _resolve(self, obs: Observations, frame: int, q: int, poses: list) -> int:
+        """Which of several equally good seed poses of free root ``q`` to take in ``frame``:
+        the whole body is fitted from each, the lowest E wins (a mirror-symmetric root
+        constellation cannot tell left from right; the limbs can)."""
+        c = self.problem.free_chains[q]
+        one = np.array([frame], np.int64)
+        errors = []
+        for r, t, *_ in poses:
+            roots = self._roots[None].copy()
+            rots = self.problem.identity_rotations(1)
+            roots[0, c], rots[0, c] = t, r
+            res = self._fit_block(obs, one, one, roots, rots, self.problem.start,
+                                  np.array([0, 1], np.int64))[0]
+            errors.append(res.error)
+        return int(np.argmin(errors))
 
     def _labelled_3d(self, obs: Observations, idx: np.ndarray) -> np.ndarray:
         """3D positions of the labelled markers, (n, n_markers, 3), NaN where unknown:

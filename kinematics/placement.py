@@ -229,24 +229,33 @@ def register_root(model: RootModel, candidates: np.ndarray, prediction=None
     """
     if len(candidates) == 0:
         return None
-    tol = model.tol
-    if prediction is not None:
-        r, t = prediction
-        hit = _match(model.local @ r.T + t, candidates, tol)
-        if model.rigid:
-            ok = hit >= 0
-            if ok.sum() >= 3 and _spread(model.local[ok]) > 1e-6:
-                r2, t2, rms = kabsch(model.local[ok], candidates[hit[ok]])
-                if rms < tol:
-                    return r2, t2, int(ok.sum())
-        elif hit[model.anchor] >= 0:
-            return r, candidates[hit[model.anchor]] - r @ model.local[model.anchor], 1
+    seed = _predicted(model, candidates, prediction)
+    if seed is not None:
+        return seed
     if model.rigid:
         return _search(model, candidates)
     r = np.eye(3) if prediction is None else prediction[0]
     ref = model.hint if prediction is None else prediction[1] + r @ model.local[model.anchor]
     k = int(np.argmin(np.linalg.norm(candidates - ref, axis=1)))
     return r, candidates[k] - r @ model.local[model.anchor], 1
+
+
+def _predicted(model: RootModel, candidates: np.ndarray, prediction):
+    """The pose matched near the prediction (the previous frame's seed), or None."""
+    if prediction is None or len(candidates) == 0:
+        return None
+    r, t = prediction
+    hit = _match(model.local @ r.T + t, candidates, model.tol)
+    if model.rigid:
+        ok = hit >= 0
+        if ok.sum() >= 3 and _spread(model.local[ok]) > 1e-6:
+            r2, t2, rms = kabsch(model.local[ok], candidates[hit[ok]])
+            if rms < model.tol:
+                return r2, t2, int(ok.sum())
+        return None
+    if hit[model.anchor] >= 0:
+        return r, candidates[hit[model.anchor]] - r @ model.local[model.anchor], 1
+    return None
 
 
 def _match(predicted: np.ndarray, candidates: np.ndarray, tol: float) -> np.ndarray:
@@ -265,7 +274,17 @@ def _match(predicted: np.ndarray, candidates: np.ndarray, tol: float) -> np.ndar
 
 
 def _search(model: RootModel, candidates: np.ndarray):
-    """Try every candidate triple matching the model's widest triangle (re-acquisition)."""
+    """The best pose over every candidate triple matching the model's widest triangle
+    (re-acquisition), or None."""
+    found = search_poses(model, candidates)
+    return found[0][:3] if found else None
+
+
+def search_poses(model: RootModel, candidates: np.ndarray, keep: int = 4) -> list:
+    """Distinct poses ``(R, t, n_matched, rms)`` that explain >= 3 root markers, best first
+    (most markers, then lowest residual); at most ``keep``. Several of them fit about
+    equally well when the constellation is nearly symmetric (two hips and two pelvis
+    markers: the left-right mirror), which only the rest of the body can tell apart."""
     a, b, c = model.triangle
     m = model.local
     d = np.linalg.norm(candidates[:, None] - candidates[None], axis=2)
@@ -273,7 +292,7 @@ def _search(model: RootModel, candidates: np.ndarray):
     ab = np.abs(d - np.linalg.norm(m[a] - m[b])) < tol
     ac = np.abs(d - np.linalg.norm(m[a] - m[c])) < tol
     bc = np.abs(d - np.linalg.norm(m[b] - m[c])) < tol
-    best, best_key = None, (-1, np.inf)
+    found = []
     for i, j in zip(*np.nonzero(ab), strict=True):
         for k in np.flatnonzero(ac[i] & bc[j]):
             if k in (i, j) or i == j:
@@ -284,16 +303,39 @@ def _search(model: RootModel, candidates: np.ndarray):
             if ok.sum() < 3:
                 continue
             r, t, rms = kabsch(m[ok], candidates[hit[ok]])
-            key = (int(ok.sum()), rms)
-            if rms < tol and (key[0] > best_key[0] or (key[0] == best_key[0]
-                                                       and rms < best_key[1])):
-                best, best_key = (r, t, key[0]), key
-    return best
+            if rms < tol:
+                found.append((r, t, int(ok.sum()), rms))
+    found.sort(key=lambda p: (-p[2], p[3]))
+    distinct: list = []
+    for pose in found:
+        same = any(np.linalg.norm(pose[1] - q[1]) < tol and _angle(pose[0], q[0]) < 5.0
+                   for q in distinct)
+        if not same:
+            distinct.append(pose)
+    return distinct[:keep]
+
+
+def _angle(r1: np.ndarray, r2: np.ndarray) -> float:
+    """Angle between two rotations, degrees."""
+    c = (np.trace(r1.T @ r2) - 1.0) / 2.0
+    return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
+
+
+def ambiguous(model: RootModel, poses: list) -> bool:
+    """Whether the second pose explains as many root markers nearly as well as the best
+    (within a third of the tolerance): then the constellation alone cannot decide."""
+    return len(poses) > 1 and poses[1][2] == poses[0][2] and (
+        poses[1][3] - poses[0][3] < model.tol / 3.0)
 
 
 def place_roots(body: Body, cameras, frames_views, windows: np.ndarray,
-                gate_px: float = DEFAULT_GATE_PX) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                gate_px: float = DEFAULT_GATE_PX, resolve=None
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Seed poses of every free root for a sequence of frames, in order.
+
+    When a root is (re-)acquired and its constellation fits several poses about equally well
+    (:func:`ambiguous`), ``resolve(frame, chain_number, poses)`` picks one (the fitter
+    fits the whole body from each and keeps the lowest E); without it, the best residual.
 
     Parameters
     ----------
@@ -321,7 +363,15 @@ def place_roots(body: Body, cameras, frames_views, windows: np.ndarray,
     for f, views in enumerate(frames):
         cands, _ = triangulate_candidates(cameras, views, gate_px) if nq else (None, None)
         for q, model in enumerate(models):
-            seed = register_root(model, cands, prediction[q])
+            seed = _predicted(model, cands, prediction[q])
+            if seed is None and model.rigid and len(cands):
+                poses = search_poses(model, cands)
+                if resolve is not None and ambiguous(model, poses):
+                    seed = poses[resolve(f, q, poses)][:3]
+                elif poses:
+                    seed = poses[0][:3]
+            elif seed is None:
+                seed = register_root(model, cands, None)
             if seed is not None:
                 rot[f, q], pos[f, q] = seed[0], seed[1]
                 placed[f, q] = True

@@ -234,3 +234,33 @@ def test_free_root_seed_carried_over_a_frame_without_detections():
     np.testing.assert_allclose(placed[2], placed[1])
     res = fitter.fit(frames)
     assert res[2].status == "no-detections"
+
+
+def planar_pelvis() -> Body:
+    """The pelvis markers lie in one plane, symmetric about the body's long axis: the pose
+    turned 180° about that axis (left and right hips swapped) fits them exactly."""
+    body = mouse_like()
+    j = body.chains[0].root_joint
+    seg = j.segments[0]
+    flat = Segment(seg.name, 0.0, markers=(
+        Marker("hipL", (0.0, 0.0, -8.0)), Marker("hipR", (0.0, 0.0, 8.0)),
+        Marker("back", (-10.0, 0.0, 0.0)), Marker("tail", (-22.0, 0.0, 0.0))),
+        joints=seg.joints)
+    return Body("flat", (Chain("c", Joint(j.name, j.axes, segments=(flat,)), Root("free")),),
+                "mm")
+
+
+def test_mirror_symmetric_root_is_told_apart_by_the_limbs():
+    from kinematics.placement import ambiguous, search_poses
+
+    body = planar_pelvis()
+    cams = three_pinholes()
+    angles, roots, frames = planted_frames(body, cams, n=3, noise=0.05)
+    truth = forward_kinematics_reference(body, angles[0], roots[0]).markers
+    model = RootModel(body, 0, 5.0)
+    poses = search_poses(model, truth)
+    assert len(poses) >= 2 and ambiguous(model, poses)
+    params = AnnealParams(refine=True, reanalysis_threshold=2.0).with_schedule(5000)
+    res = Fitter(body, cams, params).fit(frames)
+    err = joint_errors(body, res, angles, roots)
+    assert err.max() < 1.0, err
