@@ -496,7 +496,8 @@ def anneal_chain(start, free_idx, step, hist, nbins, th, dof_kind, lo, hi, max_r
     """One annealing run from ``start``; the best posture seen is left in ``best``.
 
     Each iteration draws ``j' = j + l·v`` with ``v_i = s(H_i)·r_i``, ``r_i ~ U[-1, 1]``
-    (Eq. 6) for the free axes ``free_idx`` in order; ``r_i`` is redrawn while
+    (Eq. 6) for the free axes ``free_idx`` in order (histogram entries first, then range
+    entries); ``r_i`` is redrawn while
     ``H_i(j'_i) < th`` (for entries of ``dof_kind`` DOF_RANGE: while outside
     ``[lo_i, hi_i]``), at most ``max_redraws`` times, after which axis i stays where it is
     for this iteration. A draw ``u`` made first in each iteration decides acceptance by the
@@ -520,6 +521,9 @@ def anneal_chain(start, free_idx, step, hist, nbins, th, dof_kind, lo, hi, max_r
     iterations : int
     """
     n_free = free_idx.shape[0]
+    n_hist = 0  # free_idx holds the DOF_HISTOGRAM entries first
+    while n_hist < n_free and dof_kind[free_idx[n_hist]] == DOF_HISTOGRAM:
+        n_hist += 1
     any_pinhole = _has_pinhole(kind)
     rs = np.uint64(state)  # the stream state; int64 arithmetic with uint64 would be float
     for k in range(start.shape[0]):
@@ -546,7 +550,9 @@ def anneal_chain(start, free_idx, step, hist, nbins, th, dof_kind, lo, hi, max_r
         # critical path (candidate -> kinematics -> E -> acceptance).
         rs, u = next_uniform(rs)
         e_accept = e_cur + tau * -np.log(u)
-        for q in range(n_free):
+        # Histogram-checked angles first, then range-checked entries (free_idx lists them
+        # in that order): two loops keep the kind test out of the redraw loop.
+        for q in range(n_hist):
             i = free_idx[q]
             scale = length * step[i]
             ok = False
@@ -555,10 +561,21 @@ def anneal_chain(start, free_idx, step, hist, nbins, th, dof_kind, lo, hi, max_r
             while not ok and tries <= max_redraws:
                 rs, u = next_uniform(rs)
                 x = cur[i] + scale * (2.0 * u - 1.0)
-                if dof_kind[i] == DOF_HISTOGRAM:
-                    ok = hist_at(hist, nbins, i, x) >= th
-                else:
-                    ok = lo[i] <= x and x <= hi[i]
+                ok = hist_at(hist, nbins, i, x) >= th
+                tries += 1
+            x = x if ok else cur[i]
+            cand[i] = x
+            sn[i], cs[i] = sincos(x)
+        for q in range(n_hist, n_free):
+            i = free_idx[q]
+            scale = length * step[i]
+            ok = False
+            tries = 0
+            x = cur[i]
+            while not ok and tries <= max_redraws:
+                rs, u = next_uniform(rs)
+                x = cur[i] + scale * (2.0 * u - 1.0)
+                ok = lo[i] <= x and x <= hi[i]
                 tries += 1
             x = x if ok else cur[i]
             cand[i] = x

@@ -156,6 +156,13 @@ def histogram_tables(histograms: Sequence[Histogram]) -> tuple[np.ndarray, np.nd
     return hist, nbins, np.asarray(step, dtype=float)
 
 
+def _kind_order(free, kind: np.ndarray) -> np.ndarray:
+    """Free entries with the DOF_HISTOGRAM ones first (the annealing kernel's order)."""
+    free = np.asarray(free, np.int64)
+    return np.r_[free[kind[free] == DOF_HISTOGRAM], free[kind[free] != DOF_HISTOGRAM]].astype(
+        np.int64)
+
+
 def euler_yxz_from_matrix(m: np.ndarray) -> np.ndarray:
     """Angles (y, x, z) in radians with ``Ry·Rx·Rz = m`` (x in [-π/2, π/2])."""
     ax = np.arcsin(np.clip(-m[1, 2], -1.0, 1.0))
@@ -179,7 +186,8 @@ class FitProblem:
     n_axes, n_state : int
         Joint angles, and all state entries (angles + free-root translations).
     free_idx : (n_free,) int64
-        State entries the fit moves (unlocked, unpinned angles; free-root translations).
+        State entries the fit moves (unlocked, unpinned angles; free-root offsets), the
+        DOF_HISTOGRAM ones first.
     dof_kind, step, lo, hi : (n_state,)
         Kind of each entry, its step scale and its range (radians or length units).
     hist, nbins
@@ -261,7 +269,7 @@ class FitProblem:
             lo[ix], hi[ix], step[ix], start[ix] = -w_r, w_r, w_r / _SQRT3, 0.0
             lo[tr], hi[tr], step[tr] = -w_t, w_t, w_t / _SQRT3
         locked = np.r_[body.locked_mask(), np.zeros(ns - na, bool)]
-        free_idx = np.flatnonzero(~locked).astype(np.int64)
+        free_idx = _kind_order(np.flatnonzero(~locked), kind)
         if free_idx.size == 0:
             raise KinematicsError(f"body '{body.name}' has no free axis: nothing to fit",
                                   field="axes")
@@ -280,7 +288,7 @@ class FitProblem:
             raise KinematicsError(f"no such axis: {unknown[0]}", field="pins")
         merged = {**self.pins, **{k: float(v) for k, v in pins.items()}}
         held = {labels.index(k) for k in merged}
-        free = np.array([i for i in self.free_idx if int(i) not in held], np.int64)
+        free = _kind_order([i for i in self.free_idx if int(i) not in held], self.dof_kind)
         if free.size == 0:
             raise KinematicsError("every axis is pinned: nothing to fit", field="pins")
         return replace(self, free_idx=free, pins=merged)
