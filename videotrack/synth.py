@@ -4,6 +4,8 @@ A chain is moved through an angle trajectory, its markers are projected through 
 cameras and drawn as anti-aliased discs (:func:`videotrack.render.render_markers`), optionally
 with noise, static and flickering ghost markers, occlusions and interlaced fields. Every
 image drawn is recorded in a ground-truth table, so detection and fitting can be scored.
+Given 3D marker trajectories (e.g. real motion capture, :func:`read_points`) are rendered
+the same way without a chain (:func:`simulate_points`, :func:`write_points_project`).
 
 The functions here are pure (arrays in, arrays out) except :func:`write_video`, which writes
 lossless video atomically; the ``videotrack synth`` command ties them together.
@@ -93,6 +95,10 @@ class SynthScene:
     visible : (n_images, n_views, n_markers) bool, False where occluded.
     ghosts : (n_images, n_views, n_ghosts, 2), NaN where a flickering ghost is off.
     view_names : camera (view) names, in order.
+
+    A scene of given 3D points (:func:`simulate_points`) has no posture, root or joints
+    (zero columns); its ``visible`` is also False where a point is absent (NaN) or behind a
+    camera.
     """
 
     angles_deg: np.ndarray
@@ -143,6 +149,97 @@ def simulate(
     visible = _occlusions(rng, proj.shape[:3], options)
     ghosts = _ghosts(rng, n, camera_sizes(cameras), options)
     return SynthScene(angles, roots, pose.markers, pose.joints, proj, visible, ghosts, names)
+
+
+def simulate_points(points: np.ndarray, cameras: Mapping, options: SynthOptions) -> SynthScene:
+    """Project given 3D marker trajectories and decide occlusions and ghosts for every image.
+
+    ``points`` (n_images, n_markers, 3) are in the cameras' world units; a NaN point is a
+    marker absent in that image: it is not drawn and not visible (as one behind a camera).
+    """
+    options.validate()
+    pts = np.asarray(points, dtype=float)
+    if pts.ndim != 3 or pts.shape[2] != 3 or pts.shape[0] < 1 or pts.shape[1] < 1:
+        raise VideoTrackError(f"points need shape (images, markers, 3), got {pts.shape}",
+                              field="points")
+    n = pts.shape[0]
+    if options.interlaced and n % 2:
+        raise VideoTrackError("an interlaced video needs an even number of images (two "
+                              "fields per frame)", field="points")
+    names = tuple(cameras)
+    proj = np.stack([cam.project(pts) for cam in cameras.values()], axis=1)
+    rng = np.random.default_rng(options.seed)
+    visible = _occlusions(rng, proj.shape[:3], options) & np.isfinite(proj).all(axis=-1)
+    ghosts = _ghosts(rng, n, camera_sizes(cameras), options)
+    return SynthScene(np.empty((n, 0)), np.empty((n, 0, 3)), pts, np.empty((n, 0, 3)), proj,
+                      visible, ghosts, names)
+
+
+def read_points(path: str | os.PathLike) -> tuple[list[str], np.ndarray]:
+    """Read 3D marker trajectories from a CSV or NPZ file.
+
+    One row (CSV) or array element (NPZ: one 1-D array per column) per image, columns
+    ``NAME.x``, ``NAME.y``, ``NAME.z`` per marker in world units; an empty CSV cell or NaN is
+    the marker absent in that image (it is not drawn). Other columns (``frame``) are ignored.
+
+    Returns
+    -------
+    names : list of str
+        Marker names, in column order.
+    points : ndarray, shape (n_images, n_markers, 3)
+    """
+    from videotrack.tables import read_table
+
+    path = Path(path)
+    if path.suffix.lower() == ".npz":
+        columns, values = _read_points_npz(path)
+    else:
+        columns, values = read_table(path)
+    coords: dict[str, dict[str, int]] = {}
+    for k, col in enumerate(columns):
+        name, dot, axis = col.strip().rpartition(".")
+        if dot and axis in ("x", "y", "z"):
+            if not name:
+                raise VideoTrackError(f"column '{col}' has no marker name", file=path, line=1)
+            coords.setdefault(name, {})[axis] = k
+    if not coords:
+        raise VideoTrackError("no point columns (NAME.x, NAME.y, NAME.z)", file=path, line=1)
+    for name, axes in coords.items():
+        for axis in "xyz":
+            if axis not in axes:
+                raise VideoTrackError(f"marker '{name}' has no column {name}.{axis}", file=path,
+                                      line=1)
+    if values.shape[0] == 0:
+        raise VideoTrackError("no frames in file", file=path)
+    idx = np.array([[axes[a] for a in "xyz"] for axes in coords.values()])
+    points = values[:, idx]
+    bad = np.isinf(points)
+    if bad.any():
+        row, m, a = (int(v[0]) for v in np.nonzero(bad))
+        name = list(coords)[m]
+        raise VideoTrackError("value is not finite (leave the cell empty for an absent marker)",
+                              file=path, line=row + 2 if path.suffix.lower() != ".npz" else None,
+                              field=f"{name}.{'xyz'[a]}")
+    return list(coords), points
+
+
+def _read_points_npz(path: Path) -> tuple[list[str], np.ndarray]:
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            columns = list(data.files)
+            arrays = [np.asarray(data[c]) for c in columns]
+    except (OSError, ValueError, EOFError) as err:
+        raise VideoTrackError(f"cannot read points: {err}", file=path) from None
+    if not columns:
+        raise VideoTrackError("file is empty", file=path)
+    for c, a in zip(columns, arrays, strict=True):
+        if a.ndim != 1 or a.dtype.kind not in "biuf":
+            raise VideoTrackError(f"needs a 1-D numeric array, got {a.dtype} of shape {a.shape}",
+                                  file=path, field=c)
+        if len(a) != len(arrays[0]):
+            raise VideoTrackError(f"has {len(a)} rows, {columns[0]} has {len(arrays[0])}",
+                                  file=path, field=c)
+    return columns, np.column_stack(arrays).astype(float)
 
 
 def _occlusions(rng, shape, options: SynthOptions) -> np.ndarray:
@@ -288,9 +385,18 @@ def truth_columns(body: Body, view_names: Sequence[str]) -> list[str]:
     """Column names of the ground-truth table (see :func:`truth_table`)."""
     cols = ["frame", *body.axis_labels]
     cols += [f"{c.name}.root.{a}" for c in body.chains for a in "xyz"]
-    cols += [f"{p}.{a}" for p in (*body.marker_names, *body.joint_names) for a in "xyz"]
+    return cols + _point_columns(body.marker_names, body.joint_names, view_names)
+
+
+def points_truth_columns(names: Sequence[str], view_names: Sequence[str]) -> list[str]:
+    """Column names of the ground-truth table of a :func:`simulate_points` scene."""
+    return ["frame", *_point_columns(names, (), view_names)]
+
+
+def _point_columns(markers: Sequence[str], joints: Sequence[str], view_names) -> list[str]:
+    cols = [f"{p}.{a}" for p in (*markers, *joints) for a in "xyz"]
     for v in view_names:
-        for m in body.marker_names:
+        for m in markers:
             cols += [f"{v}.{m}.u", f"{v}.{m}.v", f"{v}.{m}.visible"]
     return cols
 
@@ -315,20 +421,22 @@ def truth_table(scene: SynthScene) -> np.ndarray:
 
 @dataclass(frozen=True)
 class SynthProject:
-    """Paths written by :func:`write_synthetic_project`."""
+    """Paths written by :func:`write_synthetic_project` (:func:`write_points_project`:
+    no chain)."""
 
     videos: tuple[Path, ...]
     truth: Path
     cameras: Path
-    chain: Path
+    chain: Path | None
     config: Path
     n_images: int
 
 
 def project_config_text(video_names: Sequence[str], cameras: Mapping, options: SynthOptions,
-                        chain_name: str, cameras_name: str, detections_name: str) -> str:
+                        chain_name: str | None, cameras_name: str, detections_name: str) -> str:
     """A project config for the synthetic video that ``detect``, ``fit`` and ``run`` take as
-    it is (TOML text)."""
+    it is (TOML text); without a chain (``chain_name`` None) ``fit`` needs ``[chain] path``
+    added."""
     paths = ", ".join(f'"{v}"' for v in video_names)
     lines = [
         "# Project written by 'videotrack synth': the synthetic video, its views and a",
@@ -341,7 +449,8 @@ def project_config_text(video_names: Sequence[str], cameras: Mapping, options: S
         "",
         detection_config_text(cameras, options, len(video_names)),
         "[output]", f'detections = "{detections_name}"', "",
-        "[chain]", f'path = "{chain_name}"', "",
+        *(["[chain]", f'path = "{chain_name}"', ""] if chain_name is not None else
+          ["# [chain] path = \"...\": a chain XML to fit these markers with", ""]),
         "[cameras]", f'path = "{cameras_name}"', "",
         "# [anneal] keys override the paper's Table 1; ground truth is in truth.csv",
         "",
@@ -383,13 +492,48 @@ def write_synthetic_project(
     ``progress`` is called with the number of frames written so far (for a progress bar).
     Every file is written atomically; an interrupted call leaves no partial output.
     """
-    from kinematics.camera_io import save_cameras
     from kinematics.fileio import atomic_write_text
-    from videotrack.tables import write_table
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     scene = simulate(body, cameras, angles_deg, options)
+    project = _write_scene(out, scene, truth_columns(body, scene.view_names), cameras, options,
+                           fps, codec, progress, body.units, "chain.xml")
+    atomic_write_text(out / "chain.xml", chain_text)
+    return project
+
+
+def write_points_project(
+    out_dir: str | os.PathLike,
+    names: Sequence[str],
+    points: np.ndarray,
+    cameras: Mapping,
+    options: SynthOptions,
+    fps: float = 50.0,
+    codec: str = "ffv1",
+    progress=None,
+    units: str | None = None,
+) -> SynthProject:
+    """Render given 3D marker trajectories (:func:`simulate_points`) and write the video(s),
+    ground truth (``truth.csv``: ``NAME.x/y/z`` and each view's ``VIEW.NAME.u/v/visible``),
+    cameras and a project config for ``videotrack detect`` (no chain), atomically."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    scene = simulate_points(points, cameras, options)
+    if len(names) != scene.markers.shape[1]:
+        raise VideoTrackError(f"{len(names)} names for {scene.markers.shape[1]} markers",
+                              field="names")
+    return _write_scene(out, scene, points_truth_columns(names, scene.view_names), cameras,
+                        options, fps, codec, progress, units, None)
+
+
+def _write_scene(out: Path, scene: SynthScene, columns, cameras, options, fps, codec, progress,
+                 units, chain_name) -> SynthProject:
+    """Videos, truth.csv, cameras.toml and project.toml of a scene, each atomically."""
+    from kinematics.camera_io import save_cameras
+    from kinematics.fileio import atomic_write_text
+    from videotrack.tables import write_table
+
     sizes = camera_sizes(cameras)
     ext = CODECS[codec][1]
     if options.layout == "separate":
@@ -406,14 +550,14 @@ def write_synthetic_project(
             if progress is not None:
                 progress(k)
         videos = tuple(sink.commit() for sink in sinks)
-    write_table(out / "truth.csv", truth_columns(body, scene.view_names), truth_table(scene))
-    save_cameras(out / "cameras.toml", cameras, units=body.units)
-    atomic_write_text(out / "chain.xml", chain_text)
+    write_table(out / "truth.csv", columns, truth_table(scene))
+    save_cameras(out / "cameras.toml", cameras, units=units)
     config = out / "project.toml"
     atomic_write_text(config, project_config_text(
-        names, cameras, options, "chain.xml", "cameras.toml", "detections.npz"))
-    return SynthProject(videos, out / "truth.csv", out / "cameras.toml", out / "chain.xml",
-                        config, scene.angles_deg.shape[0])
+        names, cameras, options, chain_name, "cameras.toml", "detections.npz"))
+    return SynthProject(videos, out / "truth.csv", out / "cameras.toml",
+                        None if chain_name is None else out / chain_name, config,
+                        scene.angles_deg.shape[0])
 
 
 def write_synthetic_batch_project(

@@ -19,10 +19,17 @@ examples:
   videotrack synth out/mine --chain leg.xml --cameras cameras.toml --angles angles.csv
   # a project folder of 12 short trials for 'videotrack batch'
   videotrack synth out/project --trials 12 --frames 100
+  # given 3D marker trajectories (e.g. motion capture), no chain: one video per camera
+  videotrack synth out/mocap --points points.csv --cameras cameras.toml --layout separate
 
 Output folder: video.avi (or one video per camera with --layout separate), truth.csv
 (angles, 3D points and 2D projections of every image), cameras.toml, chain.xml and
-project.toml, a project config that 'videotrack detect' runs as it is.
+project.toml, a project config that 'videotrack detect' runs as it is. With --points there
+is no chain and truth.csv holds the given points and their projections.
+
+--points: a CSV (or NPZ, one 1-D array per column) with one row per image and columns
+NAME.x, NAME.y, NAME.z per marker in the cameras' world units; an empty cell (NaN) is a
+marker absent in that image, not drawn; other columns (frame) are ignored.
 """
 
 
@@ -33,7 +40,8 @@ def add_parser(subparsers) -> None:
         description=(
             "Move a chain through a trajectory, project its markers through the cameras and "
             "draw them as anti-aliased discs, as the paper did to measure accuracy "
-            "(Sect. 3.2). Without --chain/--cameras it makes the paper's locust test video."
+            "(Sect. 3.2). Without --chain/--cameras it makes the paper's locust test video; "
+            "with --points it draws given 3D marker trajectories instead of a chain."
         ),
         epilog=EXAMPLES,
         formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -46,6 +54,10 @@ def add_parser(subparsers) -> None:
                           "side and top views, 360x288 px each)")
     src.add_argument("--angles", type=Path,
                      help="trajectory CSV, one column per axis named joint.axis, degrees")
+    src.add_argument("--points", type=Path,
+                     help="3D marker trajectories to draw instead of a chain: CSV or NPZ, "
+                          "columns NAME.x, NAME.y, NAME.z (empty/NaN: marker absent); needs "
+                          "--cameras")
     src.add_argument("--frames", type=int, default=668,
                      help="images of generated smooth random motion (default: 668)")
     src.add_argument("--sequences", type=int, default=10,
@@ -87,8 +99,10 @@ def run(args) -> int:
     from kinematics.chain_xml import loads_body
     from videotrack.motion import read_angles_csv, smooth_random_motion
     from videotrack.paper_setup import bundled_chain, locust_cameras
-    from videotrack.synth import SynthOptions, write_synthetic_project
+    from videotrack.synth import write_synthetic_project
 
+    if args.points is not None:
+        return _write_points(args)
     if args.chain is None:
         with bundled_chain("locust_hindleg.xml") as path:
             chain_path, chain_text = path, Path(path).read_text(encoding="utf-8")
@@ -105,13 +119,7 @@ def run(args) -> int:
         cameras = locust_cameras()
     else:
         cameras = load_cameras(args.cameras)
-    options = SynthOptions(
-        marker_diameter=args.diameter, intensity=args.intensity, background=args.background,
-        noise_sigma=args.noise, static_ghosts=args.ghosts, flicker_ghosts=args.flicker_ghosts,
-        occlusion_fraction=args.occlusions, occlusion_length=args.occlusion_length,
-        interlaced=args.interlaced, top_field_first=not args.bottom_field_first,
-        layout=args.layout, seed=args.seed,
-    )
+    options = _options(args)
     if args.angles is None and args.frames < 1:
         raise VideoTrackError(f"must be at least 1, got {args.frames}", field="--frames")
 
@@ -152,4 +160,45 @@ def _write_batch_project(args, body, chain_text, cameras, trajectory, options) -
           f"cameras.toml and {folders[0].relative_to(args.out_dir).as_posix()} ... "
           f"{folders[-1].relative_to(args.out_dir).as_posix()} (video and truth.csv each)")
     print(f"next: videotrack batch {args.out_dir}")
+    return 0
+
+
+def _options(args):
+    from videotrack.synth import SynthOptions
+
+    return SynthOptions(
+        marker_diameter=args.diameter, intensity=args.intensity, background=args.background,
+        noise_sigma=args.noise, static_ghosts=args.ghosts, flicker_ghosts=args.flicker_ghosts,
+        occlusion_fraction=args.occlusions, occlusion_length=args.occlusion_length,
+        interlaced=args.interlaced, top_field_first=not args.bottom_field_first,
+        layout=args.layout, seed=args.seed,
+    )
+
+
+def _write_points(args) -> int:
+    """``--points``: render given 3D marker trajectories through the cameras."""
+    from kinematics.camera_io import load_camera_file
+    from videotrack.synth import read_points, write_points_project
+
+    given = [name for name, value in (("--chain", args.chain), ("--angles", args.angles),
+                                      ("--trials", args.trials)) if value is not None]
+    if given:
+        raise VideoTrackError(f"--points draws given 3D points; it takes no {given[0]}",
+                              field="--points")
+    if args.cameras is None:
+        raise VideoTrackError("give --cameras to draw --points through", field="--cameras")
+    camera_file = load_camera_file(args.cameras)
+    names, points = read_points(args.points)
+    options = _options(args)
+    n_frames = points.shape[0] // (2 if args.interlaced else 1)
+    with tqdm(total=n_frames, unit="frame", desc="rendering", leave=False) as bar:
+        project = write_points_project(args.out_dir, names, points, camera_file.cameras,
+                                       options, args.fps, args.codec,
+                                       progress=lambda k: bar.update(k - bar.n),
+                                       units=camera_file.units)
+    print(f"wrote {n_frames} frames ({project.n_images} images) of {len(names)} points "
+          f"through {len(camera_file.cameras)} views ({', '.join(camera_file.cameras)}):")
+    for path in (*project.videos, project.truth, project.cameras, project.config):
+        print(f"  {path}")
+    print(f"next: videotrack detect {project.config}")
     return 0
