@@ -260,6 +260,31 @@ def fit_free_root(body, cams, det, params, frames):
     return {r.frame: r for r in res}, time.perf_counter() - t0
 
 
+def fit_observations(body, cams, obs, params):
+    from kinematics.anneal import Fitter
+
+    fitter = Fitter(body, cams, params)
+    t0 = time.perf_counter()
+    res = list(fitter.iter_fit(obs))
+    return {r.frame: r for r in res}, time.perf_counter() - t0
+
+
+def labelled_inputs(body, cams, truth, args):
+    """Labelled 2D keypoints (true projections + ``--kp-noise`` px, ``--kp-missing`` of them
+    NaN) and labelled 3D points (truth + ``--noise-3d`` mm), as Observations."""
+    from kinematics.observations import Observations
+
+    rng = np.random.default_rng(args.seed + 1)
+    names = body.marker_names
+    kp = np.stack([c.project(truth) for c in cams.values()], axis=1)  # (n, views, m, 2)
+    kp = kp + rng.normal(0.0, args.kp_noise, kp.shape)
+    kp[rng.uniform(size=kp.shape[:3]) < args.kp_missing] = np.nan
+    keypoints = Observations.keypoints(kp, list(cams), names, names)
+    p3 = truth + rng.normal(0.0, args.noise_3d, truth.shape)
+    points3d = Observations.points_3d(p3, names, names)
+    return keypoints, points3d
+
+
 def floor_fit(body, truth, frames):
     """Least squares of the chain to the true 3D markers: root position + all free angles."""
     from scipy.optimize import least_squares
@@ -354,6 +379,19 @@ def main() -> int:
     ap.add_argument("--gap", type=int, default=300,
                     help="frames left out on each side of the stretch when building the chain")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--no-labelled", dest="labelled", action="store_false",
+                    help="skip the fits to labelled 2D keypoints and 3D points")
+    ap.add_argument("--kp-noise", type=float, default=1.0, help="keypoint noise (px)")
+    ap.add_argument("--kp-missing", type=float, default=0.05, help="share of keypoints NaN")
+    ap.add_argument("--kp-threshold", type=float, default=60.0,
+                    help="re-analysis threshold of the keypoint fit (px)")
+    ap.add_argument("--noise-3d", type=float, default=0.2, help="3D point noise (mm)")
+    ap.add_argument("--tau0-3d", type=float, default=5.0,
+                    help="start temperature of the 3D-point fit (mm of E)")
+    ap.add_argument("--threshold-3d", type=float, default=4.0,
+                    help="re-analysis threshold of the 3D-point fit (mm)")
+    ap.add_argument("--cap-3d", type=float, default=5.0,
+                    help="largest cost of one 3D point, and the refinement gate (mm)")
     ap.add_argument("--data", type=Path, default=DATA,
                     help="folder of the mocap .mat file (default: ../shared/data/"
                          "mouse_marker_mocap_oist beside the repository)")
@@ -479,6 +517,28 @@ def run(args, out: Path, keep: bool) -> int:
                                         gap_line(body_names, side, truth, fm, frames))
                 series["root free"] = m
 
+    if args.root in ("free", "both") and free_ok and args.labelled:
+        from dataclasses import replace
+
+        keypoints, points3d = labelled_inputs(free_body, cams, truth, args)
+        kp_params = replace(params, reanalysis_threshold=args.kp_threshold)
+        p3_params = replace(params, tau0=args.tau0_3d, reanalysis_threshold=args.threshold_3d,
+                            refine_gate_px=args.cap_3d,
+                            error=ErrorOptions(cap_px=args.cap_3d))
+        for label, obs, prm in (("keypoints (free)", keypoints, kp_params),
+                                ("3D points (free)", points3d, p3_params)):
+            res, dt = fit_observations(free_body, cams if obs.n_views else {}, obs, prm)
+            fm = fitted_markers(free_body, {r: (x.angles_deg, x.root_positions[0])
+                                            for r, x in res.items()})
+            m = metrics(body_names, side, truth, fm, frames)
+            results[label] = (summary(*m), n / dt, status_line(res, frames), "")
+            series[label] = m
+        print(f"Labelled inputs: 2D keypoints = true projections + {args.kp_noise:g} px noise, "
+              f"{100 * args.kp_missing:g} % missing (re-analysis threshold "
+              f"{args.kp_threshold:g} px); 3D points = truth + {args.noise_3d:g} mm noise "
+              f"(tau0 {args.tau0_3d:g} mm, threshold {args.threshold_3d:g} mm, cap "
+              f"{args.cap_3d:g} mm). Goal: median within 1.2x of the floor, >= 200 frames/s.\n")
+
     columns = list(results)
     rows = []
     for j in ("hip", "knee", "ankle"):
@@ -523,8 +583,8 @@ def plot(series, frames, start, path):
     t = (start + frames) / FPS
     first = next(iter(series.values()))
     axes[0].plot(t, first[1], "k-", lw=1.5, label="true")
-    for (name, (err, _, k_fit)), colour in zip(series.items(), ("0.5", "tab:blue", "tab:red"),
-                                               strict=False):
+    colours = ("0.5", "tab:blue", "tab:red", "tab:green", "tab:purple")
+    for (name, (err, _, k_fit)), colour in zip(series.items(), colours, strict=False):
         axes[0].plot(t, k_fit, ".", ms=2.5, color=colour, label=name)
         axes[1].plot(t, err[:, 1], ".", ms=2.5, color=colour, label=name)
         axes[2].plot(t, err[:, 2], ".", ms=2.5, color=colour, label=name)

@@ -17,8 +17,9 @@ seed (translation and rotation offsets in the state, :mod:`kinematics.problem`).
    least-squares rigid fit (Kabsch) when at least three non-collinear markers are matched.
    Without a prediction, or when the predicted match fails (after a gap, a jump), every
    triple of candidates whose distances match the model's widest triangle within ``tol`` is
-   tried and the pose that explains most root markers (then the lowest residual) wins —
-   re-acquisition. With fewer than three root markers only the position is seeded (the named
+   tried (re-acquisition); when more than one pose explains three or more root markers, the
+   fitter fits the whole body from each and keeps the lowest E (a planar, left-right
+   symmetric constellation fits its mirror pose about as well as the true one). With fewer than three root markers only the position is seeded (the named
    root marker, nearest to the prediction or to ``Root.position`` at first), and the rotation
    keeps the previous frame's.
 3. **Gaps** (:func:`place_roots`). A frame whose root cannot be registered takes the previous
@@ -184,8 +185,9 @@ def _widest_triangle(points: np.ndarray) -> tuple[int, int, int]:
 def root_windows(body: Body) -> np.ndarray:
     """Default search windows of each free root, (n_free_chains, 2): translation (length
     units) and rotation (degrees). A root with a rigid constellation (>= 3 non-collinear
-    markers) is seeded in full: a translation window of a quarter of its smallest marker
-    distance and 20°. Otherwise only its position is seeded: a quarter of the chain's
+    markers) is seeded in full: a translation window of half its smallest marker distance
+    (skin markers move by a millimetre or two against each other, and the seed with them)
+    and 20°. Otherwise only its position is seeded: a quarter of the chain's
     longest segment and the full turn (180°)."""
     out = []
     for chain in body.chains:
@@ -194,7 +196,7 @@ def root_windows(body: Body) -> np.ndarray:
         segs = [s.length for _, s in _chain_segments(chain)]
         reach = 0.25 * max(segs, default=1.0) or 1.0
         tmp = RootModel(body, body.chains.index(chain), reach)
-        w_t, w_r = (tmp.tol, 20.0) if tmp.rigid else (reach, 180.0)
+        w_t, w_r = (2.0 * tmp.tol, 20.0) if tmp.rigid else (reach, 180.0)
         if chain.root.translation_window is not None:
             w_t = chain.root.translation_window
         if chain.root.rotation_window_deg is not None:
@@ -245,7 +247,7 @@ def _predicted(model: RootModel, candidates: np.ndarray, prediction):
     if prediction is None or len(candidates) == 0:
         return None
     r, t = prediction
-    hit = _match(model.local @ r.T + t, candidates, model.tol)
+    hit = _match(model.local @ r.T + t, candidates, 2.0 * model.tol)
     if model.rigid:
         ok = hit >= 0
         if ok.sum() >= 3 and _spread(model.local[ok]) > 1e-6:
@@ -280,7 +282,7 @@ def _search(model: RootModel, candidates: np.ndarray):
     return found[0][:3] if found else None
 
 
-def search_poses(model: RootModel, candidates: np.ndarray, keep: int = 4) -> list:
+def search_poses(model: RootModel, candidates: np.ndarray, keep: int = 8) -> list:
     """Distinct poses ``(R, t, n_matched, rms)`` that explain >= 3 root markers, best first
     (most markers, then lowest residual); at most ``keep``. Several of them fit about
     equally well when the constellation is nearly symmetric (two hips and two pelvis
@@ -298,7 +300,9 @@ def search_poses(model: RootModel, candidates: np.ndarray, keep: int = 4) -> lis
             if k in (i, j) or i == j:
                 continue
             r, t, _ = kabsch(m[[a, b, c]], candidates[[i, j, k]])
-            hit = _match(m @ r.T + t, candidates, tol)
+            # Skin markers are not rigid: a marker a little off the triangle's pose still
+            # belongs to it (the residual over all matched markers decides below).
+            hit = _match(m @ r.T + t, candidates, 2.0 * tol)
             ok = hit >= 0
             if ok.sum() < 3:
                 continue
@@ -322,10 +326,11 @@ def _angle(r1: np.ndarray, r2: np.ndarray) -> float:
 
 
 def ambiguous(model: RootModel, poses: list) -> bool:
-    """Whether the second pose explains as many root markers nearly as well as the best
-    (within a third of the tolerance): then the constellation alone cannot decide."""
-    return len(poses) > 1 and poses[1][2] == poses[0][2] and (
-        poses[1][3] - poses[0][3] < model.tol / 3.0)
+    """Whether the constellation alone cannot decide: more than one pose explains at least
+    three root markers within the tolerance. Measured on real pelvis markers (skin moves by
+    a millimetre), the true pose sometimes matches fewer markers or a larger residual than
+    its left-right mirror, so any alternative is worth a fit of the whole body."""
+    return len(poses) > 1
 
 
 def place_roots(body: Body, cameras, frames_views, windows: np.ndarray,
