@@ -13,15 +13,16 @@ seed (translation and rotation offsets in the state, :mod:`kinematics.problem`).
    false matches.
 2. **Registration** (:func:`register_root`). The root's own markers (those on the segments of
    the root joint) form a rigid constellation. With a prediction (the previous frame's
-   seed), each model marker takes the nearest candidate within ``tol``; the pose is the
+   seed), each model marker takes the nearest candidate within ``2 tol``; the pose is the
    least-squares rigid fit (Kabsch) when at least three non-collinear markers are matched.
    Without a prediction, or when the predicted match fails (after a gap, a jump), every
    triple of candidates whose distances match the model's widest triangle within ``tol`` is
    tried (re-acquisition); when more than one pose explains three or more root markers, the
    fitter fits the whole body from each and keeps the lowest E (a planar, left-right
-   symmetric constellation fits its mirror pose about as well as the true one). With fewer than three root markers only the position is seeded (the named
-   root marker, nearest to the prediction or to ``Root.position`` at first), and the rotation
-   keeps the previous frame's.
+   symmetric constellation fits its mirror pose about as well as the true one). With fewer
+   than three root markers only the position is seeded (the named root marker, nearest to
+   the prediction or to ``Root.position`` at first), and the rotation keeps the previous
+   frame's.
 3. **Gaps** (:func:`place_roots`). A frame whose root cannot be registered takes the previous
    frame's seed; frames before the first registered one take its seed.
 """

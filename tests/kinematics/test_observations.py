@@ -56,7 +56,7 @@ def test_keypoints_packing_and_errors():
     obs = Observations.keypoints(kp, ["a", "b"], [names[2], names[0], names[5]], names)
     counts = obs.view_counts(np.arange(4))
     assert counts.tolist() == [[6, 6], [0, 6], [6, 6], [6, 6]]
-    pts, conf, off, _ = obs.select(np.array([2]))
+    pts, conf, _, _ = obs.select(np.array([2]))
     rows = pts.reshape(2, 6, 2)
     np.testing.assert_array_equal(rows[1, 2], kp[2, 1, 0, :2])  # marker 2 is keypoint 0
     assert np.isnan(rows[0, 1]).all() and conf.reshape(2, 6)[0, 1] == 0.0
