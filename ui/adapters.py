@@ -17,6 +17,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from kinematics.chain_xml import default_histogram
+from kinematics.errors import KinematicsError
 from kinematics.fk import forward_kinematics
 from kinematics.histograms import Histogram, bin_centres
 from kinematics.model import Axis, Body, Chain, Joint, Marker, Segment
@@ -265,6 +266,68 @@ def edit_root(body: Body, chain: str, **changes) -> Body:
     return replace(body, chains=tuple(
         replace(c, root=replace(c.root, **changes)) if c.name == chain else c
         for c in body.chains))
+
+
+def chain_marker_names(body: Body, chain: str) -> list[str]:
+    """Names of the markers of one chain, in joint order (the choices of a root marker)."""
+    ch = find_element(body, "chain", chain)
+    return [] if ch is None else Body(body.name, (ch,), body.units).marker_names
+
+
+def parse_window(text: str, what: str, field: str | None = None) -> float | None:
+    """A root window typed by the user: empty is None (the default), else a number."""
+    text = text.strip()
+    if not text:
+        return None
+    try:
+        return float(text)
+    except ValueError:
+        raise KinematicsError(f"{what} must be a number > 0, or empty for the default; "
+                              f"got '{text}'", field=field) from None
+
+
+def edit_root_settings(body: Body, chain: str, *, mode: str, position, marker: str | None,
+                       translation_text: str = "", rotation_text: str = "") -> Body:
+    """The chain editor's root page applied: mode (fixed, marker, free), position, root
+    marker (None for none) and the free root's windows as typed (empty = default, see
+    :func:`kinematics.placement.root_windows`).
+
+    Raises :class:`~kinematics.errors.KinematicsError` for what the typed values cannot
+    express (a window that is no number, a marker root without a marker); the rest is left
+    to :func:`kinematics.model.validate_body`.
+    """
+    where = f"chain '{chain}' root"
+    if mode == "marker" and marker is None:
+        raise KinematicsError("a marker root follows a root marker: choose one of the "
+                              "chain's markers", field=where)
+    return edit_root(
+        body, chain, mode=mode, position=tuple(float(v) for v in position), marker=marker,
+        translation_window=parse_window(translation_text, "translation window", where),
+        rotation_window_deg=parse_window(rotation_text, "rotation window", where))
+
+
+def default_root_windows(body: Body, chain: str) -> tuple[float, float] | None:
+    """The windows a chain's root gets when made free with empty windows, (translation,
+    rotation degrees), or None when it cannot be free (no markers on its root joint's
+    segments)."""
+    from kinematics.placement import root_windows
+
+    ch = find_element(body, "chain", chain)
+    if ch is None or not any(s.markers for s in ch.root_joint.segments):
+        return None
+    free = replace(body, chains=(replace(ch, root=replace(
+        ch.root, mode="free", translation_window=None, rotation_window_deg=None)),))
+    try:
+        w_t, w_r = root_windows(free)[0]
+    except (KinematicsError, ValueError, IndexError):
+        return None
+    return float(w_t), float(w_r)
+
+
+def root_markers(body: Body, chain: str) -> list[str]:
+    """Markers on the segments of a chain's root joint: those that place a free root."""
+    ch = find_element(body, "chain", chain)
+    return [] if ch is None else [m.name for s in ch.root_joint.segments for m in s.markers]
 
 
 def edit_axis(body: Body, index: int, *, min_deg: float | None = None,

@@ -14,6 +14,7 @@ from __future__ import annotations
 from PySide6.QtCore import Qt, Signal
 from PySide6.QtWidgets import (
     QCheckBox,
+    QComboBox,
     QDialog,
     QDialogButtonBox,
     QDoubleSpinBox,
@@ -22,6 +23,7 @@ from PySide6.QtWidgets import (
     QGroupBox,
     QHBoxLayout,
     QLabel,
+    QLineEdit,
     QScrollArea,
     QSplitter,
     QStackedWidget,
@@ -32,7 +34,7 @@ from PySide6.QtWidgets import (
 )
 
 from kinematics.errors import LocatedError
-from kinematics.model import validate_body
+from kinematics.model import ROOT_MODES, validate_body
 from ui import adapters
 from ui.axis_sliders import AxisSliders
 
@@ -139,9 +141,30 @@ class ChainEditor(QDialog):
             self.pages.addWidget(w)
             return w
 
+        self.root_mode = QComboBox()
+        self.root_mode.addItems(ROOT_MODES)
+        self.root_mode.setToolTip("fixed: the root sits at the position; marker: it follows "
+                                  "the root marker; free: its position and orientation are "
+                                  "fitted per frame (a freely moving body)")
+        self.root_marker = QComboBox()
         self.root_pos = Vec3Edit()
-        self.page_chain = page(("root position (x, y, z)", self.root_pos))
+        self.root_twin = QLineEdit()
+        self.root_rwin = QLineEdit()
+        for w in (self.root_twin, self.root_rwin):
+            w.setToolTip("the search window around the seed of a free root; empty for the "
+                         "default from the body's size")
+        self.root_note = QLabel()
+        self.root_note.setWordWrap(True)
+        self.root_note.setStyleSheet("color: grey")
+        self.page_chain = page(("root mode", self.root_mode), ("root marker", self.root_marker),
+                               ("root position (x, y, z)", self.root_pos),
+                               ("translation window ±", self.root_twin),
+                               ("rotation window ±", self.root_rwin), ("", self.root_note))
         self.root_pos.changed.connect(self._edited)
+        self.root_mode.currentIndexChanged.connect(self._edited)
+        self.root_marker.currentIndexChanged.connect(self._edited)
+        self.root_twin.textChanged.connect(self._edited)
+        self.root_rwin.textChanged.connect(self._edited)
         self.joint_orient = Vec3Edit("°")
         self.joint_trans = Vec3Edit()
         self.page_joint = page(("default orientation R^d (y, x, z)", self.joint_orient),
@@ -200,7 +223,8 @@ class ChainEditor(QDialog):
         if kind == "marker":
             return "offset ({:g}, {:g}, {:g})".format(*element.offset)
         if kind == "chain":
-            return f"root {element.root.mode}"
+            r = element.root
+            return f"root {r.mode} {r.marker}" if r.mode == "marker" else f"root {r.mode}"
         return ""
 
     def _item(self, kind: str, name: str) -> QTreeWidgetItem | None:
@@ -225,14 +249,26 @@ class ChainEditor(QDialog):
             return
         kind, name, index = item.data(0, KIND_ROLE)
         self.current = (kind, name, index)
-        widgets = [self.root_pos, self.joint_orient, self.joint_trans, self.axis_min,
+        widgets = [self.root_mode, self.root_marker, self.root_twin, self.root_rwin,
+                   self.root_pos, self.joint_orient, self.joint_trans, self.axis_min,
                    self.axis_max, self.axis_locked, self.axis_lock_value, self.seg_length,
                    self.seg_rot, self.marker_offset]
         for w in widgets:
             w.blockSignals(True)
         b = self.body
         if kind == "chain":
-            self.root_pos.set_value(adapters.find_element(b, kind, name).root.position)
+            root = adapters.find_element(b, kind, name).root
+            self.root_mode.setCurrentText(root.mode)
+            self.root_marker.clear()
+            self.root_marker.addItem("(none)", None)
+            for m in adapters.chain_marker_names(b, name):
+                self.root_marker.addItem(m, m)
+            self.root_marker.setCurrentIndex(max(0, self.root_marker.findData(root.marker)))
+            self.root_pos.set_value(root.position)
+            for box, value in ((self.root_twin, root.translation_window),
+                               (self.root_rwin, root.rotation_window_deg)):
+                box.setText("" if value is None else f"{value:g}")
+            self._root_page_state()
             self.pages.setCurrentWidget(self.page_chain)
         elif kind == "joint":
             j = adapters.find_element(b, kind, name)
@@ -264,7 +300,11 @@ class ChainEditor(QDialog):
         kind, name, index = self.current
         b = self.body
         if kind == "chain":
-            return adapters.edit_root(b, name, position=self.root_pos.value())
+            self._root_page_state()
+            return adapters.edit_root_settings(
+                b, name, mode=self.root_mode.currentText(), position=self.root_pos.value(),
+                marker=self.root_marker.currentData(), translation_text=self.root_twin.text(),
+                rotation_text=self.root_rwin.text())
         if kind == "joint":
             return adapters.edit_joint(b, name, orientation_deg=self.joint_orient.value(),
                                        translation=self.joint_trans.value())
@@ -279,6 +319,35 @@ class ChainEditor(QDialog):
             return adapters.edit_segment(b, name, length=self.seg_length.value(),
                                          rotation_deg=self.seg_rot.value())
         return adapters.edit_marker(b, name, offset=self.marker_offset.value())
+
+    def _root_page_state(self) -> None:
+        """Enable what the chosen root mode uses; the windows' placeholders show the
+        defaults of the last valid chain."""
+        if self.current is None or self.current[0] != "chain":
+            return
+        name = self.current[1]
+        mode = self.root_mode.currentText()
+        self.root_marker.setEnabled(mode != "fixed")
+        self.root_twin.setEnabled(mode == "free")
+        self.root_rwin.setEnabled(mode == "free")
+        default = adapters.default_root_windows(self.body, name)
+        units = self.body.units
+        self.root_twin.setPlaceholderText("" if default is None
+                                          else f"default {default[0]:.4g} {units}")
+        self.root_rwin.setPlaceholderText("" if default is None
+                                          else f"default {default[1]:.4g}°")
+        placing = adapters.root_markers(self.body, name)
+        notes = {
+            "fixed": "The root joint stays at the position.",
+            "marker": "The root joint follows the detected root marker, searched near the "
+                      "position in the first frame.",
+            "free": "Position and orientation of the root joint are fitted per frame, seeded "
+                    "by the markers of its segments ("
+                    + (", ".join(placing) or "none") + "); with fewer than three the root "
+                    "marker seeds the position only. The windows bound the search around the "
+                    "seed (empty: default).",
+        }
+        self.root_note.setText(notes.get(mode, ""))
 
     def _edited(self, *_) -> None:
         if self.current is None:

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from kinematics.anneal import FrameResult
+from kinematics.errors import KinematicsError
 from kinematics.fk import forward_kinematics
 from kinematics.histograms import Histogram
 from kinematics.model import validate_body
@@ -138,6 +139,47 @@ def test_body_edits_change_the_projection_and_stay_valid(locust, cams, posture):
     assert adapters.edit_axis(locked, 8, locked_deg=None).axis_refs()[8].axis.locked_deg is None
     for b in (longer, moved, rooted, narrow, locked):
         validate_body(b)
+
+
+def test_root_settings_choose_mode_marker_and_windows(locust):
+    assert adapters.chain_marker_names(locust, "hindleg") == ["M0", "M1", "M2", "M3"]
+    assert adapters.root_markers(locust, "hindleg") == ["M0", "M1"]  # on the coxa
+    follow = adapters.edit_root_settings(locust, "hindleg", mode="marker", position=(1, 2, 3),
+                                         marker="M0")
+    root = follow.chains[0].root
+    assert (root.mode, root.marker, root.position) == ("marker", "M0", (1.0, 2.0, 3.0))
+    free = adapters.edit_root_settings(locust, "hindleg", mode="free", position=(0, 0, 0),
+                                       marker=None, translation_text=" 2.5 ",
+                                       rotation_text="")
+    root = free.chains[0].root
+    assert (root.mode, root.translation_window, root.rotation_window_deg) == ("free", 2.5, None)
+    for b in (follow, free):
+        validate_body(b)
+    # empty windows take the defaults of kinematics.placement.root_windows
+    from kinematics.placement import root_windows
+
+    assert adapters.default_root_windows(locust, "hindleg") == tuple(
+        root_windows(adapters.edit_root(locust, "hindleg", mode="free"))[0])
+    # what the typed values cannot express is a located error, the rest validate_body's
+    with pytest.raises(KinematicsError, match="chain 'hindleg' root: a marker root follows"):
+        adapters.edit_root_settings(locust, "hindleg", mode="marker", position=(0, 0, 0),
+                                    marker=None)
+    with pytest.raises(KinematicsError, match=r"rotation window must be a number > 0.*'abc'"):
+        adapters.edit_root_settings(locust, "hindleg", mode="free", position=(0, 0, 0),
+                                    marker=None, rotation_text="abc")
+    negative = adapters.edit_root_settings(locust, "hindleg", mode="free", position=(0, 0, 0),
+                                           marker=None, translation_text="-1")
+    with pytest.raises(KinematicsError, match="translation_window must be a number > 0"):
+        validate_body(negative)
+    # a free root turns about all three axes of its joint: not with a locked one
+    locked = adapters.edit_axis(free, 1, locked_deg=0.0)
+    with pytest.raises(KinematicsError, match=r"free root .* 'psi' is locked"):
+        validate_body(locked)
+    # and it needs markers on the root joint's segments
+    bare = adapters.edit_segment(free, "coxa", markers=())
+    assert adapters.default_root_windows(bare, "hindleg") is None
+    with pytest.raises(KinematicsError, match="needs markers on the segments"):
+        validate_body(bare)
 
 
 def test_marker_axes_follow_the_chain_to_the_root(locust):

@@ -203,6 +203,57 @@ def test_chain_editor_sliders_preview_and_cancel(window, tmp_path):
     assert not s.dirty
 
 
+def test_chain_editor_root_mode_marker_and_windows(window):
+    s = window.session
+    editor = window.open_chain_editor()
+    ok = editor.buttons.button(editor.buttons.StandardButton.Ok)
+    editor.select("chain", "hindleg")
+    assert editor.root_mode.currentText() == "fixed" and not editor.root_twin.isEnabled()
+    assert [editor.root_marker.itemText(i) for i in range(editor.root_marker.count())] == [
+        "(none)", "M0", "M1", "M2", "M3"]
+    # a marker root without a marker is reported, not applied
+    editor.root_mode.setCurrentText("marker")
+    assert "a marker root follows a root marker" in editor.message.text()
+    assert not ok.isEnabled() and editor.body.chains[0].root.mode == "fixed"
+    editor.root_marker.setCurrentText("M0")
+    assert editor.message.text() == "✓ valid chain" and ok.isEnabled()
+    assert editor.tree.currentItem().text(1) == "root marker M0"
+    # free: the windows are enabled, empty shows the default from the body's size
+    editor.root_mode.setCurrentText("free")
+    assert editor.root_twin.isEnabled() and editor.root_rwin.isEnabled()
+    w_t, w_r = adapters.default_root_windows(editor.body, "hindleg")
+    assert editor.root_twin.placeholderText() == f"default {w_t:.4g} px"
+    assert editor.root_rwin.placeholderText() == f"default {w_r:.4g}°"
+    assert "(M0, M1)" in editor.root_note.text()
+    editor.root_twin.setText("abc")
+    assert "translation window must be a number > 0" in editor.message.text()
+    assert not ok.isEnabled()
+    editor.root_twin.setText("0")
+    assert "translation_window must be a number > 0, got 0" in editor.message.text()
+    editor.root_twin.setText("4")
+    editor.root_rwin.setText("30")
+    assert ok.isEnabled()
+    root = editor.body.chains[0].root
+    assert (root.mode, root.marker, root.translation_window, root.rotation_window_deg) == (
+        "free", "M0", 4.0, 30.0)
+    assert_drawn_is_model(window, body=editor.body)
+    # a free root cannot have a locked root axis: the axis page says so
+    editor.select("axis", "psi")
+    editor.axis_locked.setChecked(True)
+    assert "a free root turns about all three axes" in editor.message.text()
+    assert not ok.isEnabled()
+    editor.axis_locked.setChecked(False)
+    assert ok.isEnabled()
+    # selecting the chain again shows what was set
+    editor.select("chain", "hindleg")
+    assert (editor.root_mode.currentText(), editor.root_marker.currentText(),
+            editor.root_twin.text(), editor.root_rwin.text()) == ("free", "M0", "4", "30")
+    editor.accept()
+    assert s.body.chains[0].root.mode == "free" and s.undo_label == "edit chain"
+    window.act_undo.trigger()
+    assert s.body.chains[0].root.mode == "fixed"
+
+
 def test_manual_correction_with_sliders_and_undo(window, qtbot, wait_idle):
     s = window.session
     s.fit()

@@ -40,8 +40,66 @@ def test_show_marker_root_and_locked_axis_with_range(tmp_path, capsys):
     path.write_text(text)
     assert main(["chain", "show", str(path)]) == 0
     out = capsys.readouterr().out
-    assert "root follows marker M0, starting near (1, 2, 3) px" in out
+    assert "chain hindleg: root marker M0, followed from near (1, 2, 3) px in the first frame" \
+        in out
+    assert "root placement" not in out and "root windows" not in out
     assert "axis psi   (rot x)  locked at 5 deg (range [-40, 40])" in out
+
+
+FREE_ROOT = """<?xml version="1.0"?>
+<body name="mouse" units="mm" format="1">
+  <chain name="hindlimb">
+    <root mode="free" position="1 2 3" marker="hipR"{windows}/>
+    <joint name="body">
+      <axis rot="y" name="yaw" min="-180" max="180"/>
+      <axis rot="x" name="pitch" min="-90" max="90"/>
+      <axis rot="z" name="roll" min="-180" max="180"/>
+      <segment name="pelvis" length="0">
+        <marker name="hipL" offset="0 0 -8"/>
+        <marker name="hipR" offset="0 0 8"/>
+        {more}
+        <joint name="hip">
+          <axis rot="y" name="ry" locked="0"/>
+          <axis rot="x" name="rx" locked="0"/>
+          <axis rot="z" name="flex" min="-120" max="0"/>
+          <segment name="femur" length="20"><marker name="knee"/></segment>
+        </joint>
+      </segment>
+    </joint>
+  </chain>
+</body>
+"""
+
+
+def test_show_free_root_with_default_windows(tmp_path, capsys):
+    from kinematics.chain_xml import load_body
+    from kinematics.placement import root_windows
+
+    path = tmp_path / "mouse.xml"
+    path.write_text(FREE_ROOT.format(windows="", more='<marker name="tail" offset="-22 2 0"/>'))
+    assert main(["chain", "show", str(path)]) == 0
+    out = capsys.readouterr().out.splitlines()
+    w_t, w_r = root_windows(load_body(path))[0]
+    assert out[1] == ("chain hindlimb: root free (position and orientation fitted per frame), "
+                      "position hint (1, 2, 3) mm")
+    # the markers of the root joint's segments place the root; the knee marker does not
+    assert out[2] == "  root placement: registered on markers hipL, hipR, tail"
+    assert out[3] == (f"  root windows: translation ±{w_t:.4g} mm (default), "
+                      f"rotation ±{w_r:.4g} deg (default)")
+    assert w_r == 20.0 and out[4].startswith("  joint body:")
+
+
+def test_show_free_root_with_set_windows_and_two_markers(tmp_path, capsys):
+    path = tmp_path / "mouse.xml"
+    path.write_text(FREE_ROOT.format(
+        windows=' translation_window="2.5" rotation_window_deg="300"', more=""))
+    assert main(["chain", "show", str(path)]) == 0
+    out = capsys.readouterr().out
+    # two root markers seed only the position, from the named root marker
+    assert ("  root placement: position from marker hipR; orientation not seeded (root "
+            "markers hipL, hipR: fewer than three non-collinear)") in out
+    assert "  root windows: translation ±2.5 mm (set), rotation ±180 deg (set 300, capped)" \
+        in out
 
 
 def test_check_ok(capsys):

@@ -8,6 +8,7 @@ import sys
 from kinematics.chain_xml import load_body
 from kinematics.errors import KinematicsError
 from kinematics.model import Axis, Body, Joint
+from kinematics.placement import RootModel, root_windows
 
 DESCRIPTION = """\
 Inspect kinematic chain files (XML; format in docs/formats.md).
@@ -106,15 +107,48 @@ def format_tree(body: Body) -> list[str]:
     # Histogram means unwrapped next to each axis's range (φ in [120, 220] shows 170, not -190).
     means = dict(zip(body.axis_labels, body.mean_posture_deg(), strict=True))
     lines = [f"body {body.name}  [units: {u}; {summary(body)}]"]
-    for chain in body.chains:
-        root = chain.root
-        if root.mode == "marker":
-            place = f"follows marker {root.marker}, starting near {_vec(root.position)} {u}"
-        else:
-            place = f"fixed at {_vec(root.position)} {u}"
-        lines.append(f"chain {chain.name}: root {place}")
+    windows = iter(root_windows(body))
+    for index, chain in enumerate(body.chains):
+        lines.append(f"chain {chain.name}: root {_root_text(body, index, u)}")
+        if chain.root.free:
+            lines.extend(_free_root_lines(body, index, next(windows), u))
         _joint_lines(chain.root_joint, 1, u, means, lines)
     return lines
+
+
+def _root_text(body: Body, index: int, u: str) -> str:
+    """``fixed at ...``, ``marker M0, ...`` or ``free (...)``: the root mode comes first."""
+    root = body.chains[index].root
+    if root.mode == "marker":
+        return (f"marker {root.marker}, followed from near {_vec(root.position)} {u} "
+                "in the first frame")
+    if root.free:
+        return (f"free (position and orientation fitted per frame), position hint "
+                f"{_vec(root.position)} {u}")
+    return f"fixed at {_vec(root.position)} {u}"
+
+
+def _free_root_lines(body: Body, index: int, window, u: str) -> list[str]:
+    """The markers that place a free root and the search windows around the seed."""
+    root = body.chains[index].root
+    w_t, w_r = (float(w) for w in window)
+    model = RootModel(body, index, w_t)
+    if model.rigid:
+        placed = "registered on markers " + ", ".join(model.names)
+    else:
+        placed = (f"position from marker {model.names[model.anchor]}; orientation not "
+                  f"seeded (root markers {', '.join(model.names)}: fewer than three "
+                  "non-collinear)")
+    return [f"  root placement: {placed}",
+            f"  root windows: translation ±{w_t:.4g} {u} "
+            f"({_source(root.translation_window, w_t)}), "
+            f"rotation ±{w_r:.4g} deg ({_source(root.rotation_window_deg, w_r)})"]
+
+
+def _source(given: float | None, used: float) -> str:
+    if given is None:
+        return "default"
+    return "set" if given == used else f"set {given:g}, capped"
 
 
 def _joint_lines(
