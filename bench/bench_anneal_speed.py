@@ -38,6 +38,7 @@ from kinematics import _refine_kernels as rk
 from kinematics.anneal import AnnealParams, Fitter, _as_ragged, anneal_reference
 from kinematics.chain_xml import load_body
 from kinematics.fk import forward_kinematics
+from kinematics.observations import ObservationArrays
 from kinematics.refine import refine_reference
 from videotrack.motion import smooth_random_motion
 from videotrack.paper_setup import bundled_chain, locust_cameras
@@ -141,9 +142,10 @@ def main() -> int:
     def kernel_all():
         a = starts.copy()
         pr = one.problem
-        rk.refine_frames(a, 0, rag.points, np.ones(len(rag.points)), rag.offsets,
-                         np.zeros((len(a), 4, 4)), roots, rots, pr.free_idx, pr.lo, pr.hi,
-                         pr.dof_kind, 10, 5.0, *pr.folded, *pr.cams, sse, pairs)
+        obs = ObservationArrays(0, rag.points, np.ones(len(rag.points)), rag.offsets,
+                                np.zeros((len(a), 4, 4)))
+        rk.refine_frames(a, roots, rots, pr.folded, pr.cams, pr.dofs, 10, 5.0, obs, sse,
+                         pairs)
 
     kernel_all()
     numba.set_num_threads(1)

@@ -612,16 +612,8 @@ def anneal_chain(start, free_idx, step, hist, nbins, th, dof_kind, lo, hi, max_r
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def fit_frames(seg_off, frame_ids, objective, det_points, det_conf, det_off, obs3, root_pos,
-               root_rot, start,
-               start_previous,
-               parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index,
-               joint_flags, marker_joint, marker_local, slide_index, kind, P, K, dist, R, t,
-               free_idx, step, hist, nbins, th, dof_kind, max_redraws,
-               n_end, n_l, n_tau, tau0, l0, c_l, c_tau, eps, seed, reanalysis_threshold,
-               max_runs, bidirectional, weight, cap, penalty_cap, lo, hi, refine_steps,
-               refine_gate,
-               out_angles, out_error, out_view_error, out_runs, out_iterations, out_pairs):
+def fit_frames(seg_off, frame_ids, root_pos, root_rot, start, body, cams, dofs, schedule,
+               error, obs, out):
     """Fit many frames in parallel (``prange`` over segments of consecutive frames).
 
     Frames ``seg_off[s]:seg_off[s + 1]`` form segment ``s``, fitted in order by one thread;
@@ -634,18 +626,33 @@ def fit_frames(seg_off, frame_ids, objective, det_points, det_conf, det_off, obs
     ``reanalysis_threshold`` is fitted again on the random stream of the next run index
     (Table 1 note), ``max_runs`` runs at most; the run with the lowest error is kept.
 
-    Parameters
+    Parameters (the namedtuples are defined in :mod:`kinematics.problem`)
     ----------
     seg_off : (n_segments + 1,) int64; frame_ids : (n,) int64 frame numbers (seed streams).
-    objective : OBJ_NEAREST, OBJ_LABELLED or OBJ_POINTS3D (:func:`evaluate`).
-    det_points : (n_points, 2); det_conf : (n_points,) weights of labelled keypoints;
-    det_off : (n * n_views + 1,) int64, frame-major; obs3 : (n, n_markers or 0, 4) 3D points.
     root_pos : (n, n_chains, 3); root_rot : (n, n_chains, 3, 3) seed rotations of free roots
-    (identity otherwise); start : (n_state,) radians (lengths for translation entries).
-    out_angles : (n, n_axes) radians, NaN for frames without any detection; out_error (n,);
-    out_view_error (n, n_views); out_runs, out_iterations (n,) int64 (iterations summed
-    over runs); out_pairs (n,) int64 refinement pairs of the kept run (0 without).
+        (identity otherwise); start : (n_state,) radians (lengths for translation entries).
+    body : FoldedBody; cams : CameraArrays.
+    dofs : DofArrays (free_idx, step, hist, nbins, dof_kind, lo, hi).
+    schedule : Schedule (Table 1 and the fitter's own settings, ``start_previous``).
+    error : ErrorArgs (bidirectional, weight, cap, penalty_cap).
+    obs : ObservationArrays (objective: OBJ_NEAREST, OBJ_LABELLED or OBJ_POINTS3D; points
+        (n_points, 2); conf (n_points,) weights of labelled keypoints; offsets (n * n_views +
+        1,) frame-major; points3d (n, n_markers or 0, 4)).
+    out : FitOutputs: angles (n, n_state), NaN for frames without any observation; error
+        (n,); view_error (n, n_views); runs, iterations (n,) int64 (iterations summed over
+        runs); pairs (n,) int64 refinement pairs of the kept run (0 without).
     """
+    # Unpacked once here; the loops below pass plain arrays (a tuple passed to a
+    # non-inlined call costs reference counting on every call).
+    (parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index, joint_flags,
+     marker_joint, marker_local, slide_index) = body
+    kind, P, K, dist, R, t = cams
+    free_idx, step, hist, nbins, dof_kind, lo, hi = dofs
+    (th, max_redraws, n_end, n_l, n_tau, tau0, l0, c_l, c_tau, eps, seed,
+     reanalysis_threshold, max_runs, refine_steps, refine_gate, start_previous) = schedule
+    bidirectional, weight, cap, penalty_cap = error
+    objective, det_points, det_conf, det_off, obs3 = obs
+    out_angles, out_error, out_view_error, out_runs, out_iterations, out_pairs = out
     nv = kind.shape[0]
     nj = parent.shape[0]
     nm = marker_joint.shape[0]
@@ -771,7 +778,7 @@ def solve_spd(a, b, n):
 
 # -- root marker tracking (Sect. 2.1, 3.3.1) ---------------------------------------------
 @njit(cache=True, nogil=True)
-def track_root(det_points, det_off, x0, gate, ridge, kind, P, K, dist, R, t, out):
+def track_root(det_points, det_off, x0, gate, ridge, cams, out):
     """Follow one root marker through frames by nearest neighbour in every view.
 
     For each frame in turn, the marker's previous 3D position is projected into every view;
@@ -786,13 +793,14 @@ def track_root(det_points, det_off, x0, gate, ridge, kind, P, K, dist, R, t, out
     Parameters
     ----------
     det_points : (n_points, 2); det_off : (n_frames * n_views + 1,) int64, frame-major.
-    x0 : (3,) the marker's position before the first frame.
+    x0 : (3,) the marker's position before the first frame; cams : CameraArrays.
     out : (n_frames, 3) tracked positions.
 
     Returns
     -------
     n_lost : int, frames where no view observed the marker.
     """
+    kind, P, K, dist, R, t = cams
     nv = kind.shape[0]
     nf = out.shape[0]
     obs = np.empty((nv, 2))

@@ -223,14 +223,17 @@ def refine_posture(angles, free_idx, lo, hi, dof_kind, n_steps, gate, root_pos, 
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def refine_frames(angles, objective, det_points, det_conf, det_off, obs3, root_pos, root_rot,
-                  free_idx, lo, hi, dof_kind, n_steps, gate, parent, chain, pre_rot, pre_trans,
-                  post_trans, elem_axis, elem_index, joint_flags, marker_joint, marker_local,
-                  slide_index, kind, P, K, dist, R, t, out_sse, out_pairs):
+def refine_frames(angles, root_pos, root_rot, body, cams, dofs, n_steps, gate, obs, out_sse,
+                  out_pairs):
     """:func:`refine_posture` for many frames in parallel, in place: ``angles`` (n, n_state),
-    observations as in ``fit_frames``, ``root_pos`` (n, n_chains, 3), ``root_rot`` (n,
-    n_chains, 3, 3). Rows holding NaN are skipped. Writes ``out_sse`` (n,) and ``out_pairs``
-    (n,) int64."""
+    ``root_pos`` (n, n_chains, 3), ``root_rot`` (n, n_chains, 3, 3); ``body``, ``cams``,
+    ``dofs`` and ``obs`` the namedtuples of ``fit_frames``. Rows holding NaN are skipped.
+    Writes ``out_sse`` (n,) and ``out_pairs`` (n,) int64."""
+    (parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index, joint_flags,
+     marker_joint, marker_local, slide_index) = body
+    kind, P, K, dist, R, t = cams
+    free_idx, _, _, _, dof_kind, lo, hi = dofs
+    objective, det_points, det_conf, det_off, obs3 = obs
     nv = kind.shape[0]
     for f in prange(angles.shape[0]):
         out_sse[f] = np.nan

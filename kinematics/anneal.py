@@ -51,10 +51,13 @@ from kinematics.fk import forward_kinematics_reference
 from kinematics.model import Body
 from kinematics.observations import Observations
 from kinematics.problem import (  # noqa: F401 (re-exported: the packing lived here)
+    FitOutputs,
     FitProblem,
     FoldedBody,
+    error_args,
     fold_body,
     histogram_tables,
+    schedule_of,
 )
 from kinematics.settings import START_MODES, AnnealParams, ErrorOptions  # noqa: F401 (re-exported)
 
@@ -382,7 +385,7 @@ class Fitter:
             x0 = np.ascontiguousarray(markers0[self._root_marker[k]], dtype=float)
             if labelled is None:
                 track = np.empty((len(idx), 3))
-                _ak.track_root(pts, off, x0, gate, 1e-9, *self.problem.cams, track)
+                _ak.track_root(pts, off, x0, gate, 1e-9, self.problem.cams, track)
             else:  # a labelled root marker needs no tracking; gaps keep the last position
                 track = _carry_forward(labelled[:, self._root_marker[k]], x0)
             out[:, k] = self._roots[k] + (track - x0)
@@ -552,28 +555,16 @@ class Fitter:
                    ) -> list[FrameResult]:
         """Fit frames ``sel`` of ``obs`` (``frame_ids`` key their random streams)."""
         p, pr = self.params, self.problem
-        pts, conf, off, obs3 = obs.select(sel)
+        arrays = obs.arrays(sel)
+        pts, off = arrays.points, arrays.offsets
         dropped = obs.dropped[sel]
         n, ns, nv = len(frame_ids), pr.n_state, self.n_views
-        state = np.empty((n, ns))
-        err = np.empty(n)
-        view_err = np.empty((n, nv))
-        runs = np.empty(n, np.int64)
-        its = np.empty(n, np.int64)
-        pairs = np.empty(n, np.int64)
-        e = p.error
-        _ak.fit_frames(seg_off, frame_ids, obs.objective, pts, conf, off, obs3, roots, rots,
-                       start,
-                       p.start == "previous", *pr.folded, *pr.cams, pr.free_idx, pr.step,
-                       pr.hist, pr.nbins, p.threshold, pr.dof_kind, p.max_redraws, p.n_end,
-                       p.n_l, p.n_tau, float(p.tau0), float(p.l0), float(p.c_l),
-                       float(p.c_tau), float(p.epsilon), p.seed,
-                       float(p.reanalysis_threshold), p.max_runs, e.bidirectional,
-                       float(e.penalty_weight), e.cap, e.penalty_cap, pr.lo, pr.hi,
-                       p.refine_steps if p.refine else 0, float(p.refine_gate_px), state,
-                       err, view_err, runs, its, pairs)
+        out = FitOutputs.empty(n, ns, nv)
+        _ak.fit_frames(seg_off, frame_ids, roots, rots, start, pr.folded, pr.cams, pr.dofs,
+                       schedule_of(p), error_args(p.error), arrays, out)
+        state, err, view_err, runs, its, pairs = out
         counts = obs.view_counts(sel)
-        out = []
+        results = []
         for k in range(n):
             if runs[k] == 0:
                 status = "no-detections"
@@ -587,7 +578,7 @@ class Fitter:
             if runs[k]:
                 residuals = self._residuals(obs, state[k], roots[k], rots[k], pts,
                                             off[k * nv: k * nv + nv + 1])
-            out.append(FrameResult(
+            results.append(FrameResult(
                 frame=int(frame_ids[k]),
                 angles_deg=self._to_range_deg(angles),
                 error=float(err[k]),
@@ -602,7 +593,7 @@ class Fitter:
                 refined_pairs=int(pairs[k]) if p.refine else None,
                 marker_residuals=residuals,
             ))
-        return out
+        return results
 
     def _residuals(self, obs: Observations, state, root_pos, root_rot, pts, view_off
                    ) -> np.ndarray:

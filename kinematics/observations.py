@@ -24,6 +24,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -31,6 +32,16 @@ from kinematics import _anneal_kernels as _ak
 from kinematics.errors import KinematicsError
 
 KINDS = ("points", "keypoints", "points3d")
+
+
+class ObservationArrays(NamedTuple):
+    """Observations of some frames as the kernels take them (see the module doc)."""
+
+    objective: int
+    points: np.ndarray  # (n_points, 2)
+    conf: np.ndarray  # (n_points,)
+    offsets: np.ndarray  # (n_frames * n_views + 1,) int64
+    points3d: np.ndarray  # (n_frames, n_markers or 0, 4)
 _OBJECTIVE = {"points": _ak.OBJ_NEAREST, "keypoints": _ak.OBJ_LABELLED,
               "points3d": _ak.OBJ_POINTS3D}
 
@@ -164,6 +175,10 @@ class Observations:
         np.cumsum(counts, out=off[1:])
         return (np.ascontiguousarray(self.points[rows].reshape(-1, 2)),
                 np.ascontiguousarray(self.conf[rows]), off, p3)
+
+    def arrays(self, frames: np.ndarray) -> ObservationArrays:
+        """:meth:`select` as the kernels' namedtuple."""
+        return ObservationArrays(int(self.objective), *self.select(frames))
 
     def view_counts(self, frames: np.ndarray) -> np.ndarray:
         """(len(frames), n_views) rows per view."""

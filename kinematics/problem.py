@@ -69,6 +69,83 @@ class FoldedBody(NamedTuple):
     slide_index: np.ndarray  # (nj,) int64 first state entry of the root's translation, or -1
 
 
+class DofArrays(NamedTuple):
+    """What the kernels need to move the state: the free entries (DOF_HISTOGRAM first), the
+    step scale, histogram tables and kind of every entry, and its range."""
+
+    free_idx: np.ndarray  # (n_free,) int64
+    step: np.ndarray  # (n_state,)
+    hist: np.ndarray  # (n_state, max_bins)
+    nbins: np.ndarray  # (n_state,) int64
+    dof_kind: np.ndarray  # (n_state,) int64
+    lo: np.ndarray  # (n_state,)
+    hi: np.ndarray  # (n_state,)
+
+
+class Schedule(NamedTuple):
+    """The annealing schedule and the per-frame procedure of ``fit_frames`` (plain numbers;
+    :func:`schedule_of` builds it from :class:`~kinematics.settings.AnnealParams`)."""
+
+    th: float
+    max_redraws: int
+    n_end: int
+    n_l: int
+    n_tau: int
+    tau0: float
+    l0: float
+    c_l: float
+    c_tau: float
+    eps: float
+    seed: int
+    reanalysis_threshold: float
+    max_runs: int
+    refine_steps: int
+    refine_gate: float
+    start_previous: bool
+
+
+class ErrorArgs(NamedTuple):
+    """The error function's numbers (:class:`~kinematics.settings.ErrorOptions`)."""
+
+    bidirectional: bool
+    weight: float
+    cap: float
+    penalty_cap: float
+
+
+class FitOutputs(NamedTuple):
+    """Output arrays of ``fit_frames`` for n frames."""
+
+    angles: np.ndarray  # (n, n_state)
+    error: np.ndarray  # (n,)
+    view_error: np.ndarray  # (n, n_views)
+    runs: np.ndarray  # (n,) int64
+    iterations: np.ndarray  # (n,) int64
+    pairs: np.ndarray  # (n,) int64
+
+    @classmethod
+    def empty(cls, n: int, n_state: int, n_views: int) -> FitOutputs:
+        return cls(np.empty((n, n_state)), np.empty(n), np.empty((n, n_views)),
+                   np.empty(n, np.int64), np.empty(n, np.int64), np.empty(n, np.int64))
+
+
+def schedule_of(params) -> Schedule:
+    """:class:`Schedule` of an :class:`~kinematics.settings.AnnealParams` (typed exactly, so
+    the kernels compile once)."""
+    p = params
+    return Schedule(float(p.threshold), int(p.max_redraws), int(p.n_end), int(p.n_l),
+                    int(p.n_tau), float(p.tau0), float(p.l0), float(p.c_l), float(p.c_tau),
+                    float(p.epsilon), int(p.seed), float(p.reanalysis_threshold),
+                    int(p.max_runs), int(p.refine_steps) if p.refine else 0,
+                    float(p.refine_gate_px), p.start == "previous")
+
+
+def error_args(options) -> ErrorArgs:
+    """:class:`ErrorArgs` of an :class:`~kinematics.settings.ErrorOptions`."""
+    return ErrorArgs(bool(options.bidirectional), float(options.penalty_weight),
+                     float(options.cap), float(options.penalty_cap))
+
+
 def free_root_chains(body: Body) -> list[int]:
     """Indices of the chains whose root is ``free``."""
     return [k for k, c in enumerate(body.chains) if c.root.free]
@@ -277,6 +354,11 @@ class FitProblem:
         return cls(body, cams, names, folded, pack_cameras(cams), na, ns, free_idx, kind,
                    c(step), c(lo), c(hi), c(hist), c(nbins), c(start), mean_deg, free_chains,
                    root_axes, win, {})
+
+    @property
+    def dofs(self) -> DofArrays:
+        return DofArrays(self.free_idx, self.step, self.hist, self.nbins, self.dof_kind,
+                         self.lo, self.hi)
 
     # -- pins -----------------------------------------------------------------------------
     def with_pins(self, pins: Mapping[str, float]) -> FitProblem:

@@ -26,6 +26,7 @@ from kinematics import _anneal_kernels as _ak
 from kinematics import _refine_kernels as _rk
 from kinematics.anneal import Fitter, _as_ragged
 from kinematics.errors import KinematicsError
+from kinematics.observations import ObservationArrays
 
 
 @dataclass(frozen=True, eq=False)
@@ -139,9 +140,10 @@ def refine_many(fitter: Fitter, angles_deg, detections, root_positions=None, *,
     sse = np.empty(n)
     pairs = np.empty(n, np.int64)
     nm = pr.folded.marker_joint.size
-    _rk.refine_frames(state, _ak.OBJ_NEAREST, rag.points, np.ones(len(rag.points)),
-                      rag.offsets, np.zeros((n, nm, 4)), pos, rot, pr.free_idx, pr.lo, pr.hi,
-                      pr.dof_kind, steps, gate, *pr.folded, *pr.cams, sse, pairs)
+    obs = ObservationArrays(_ak.OBJ_NEAREST, rag.points, np.ones(len(rag.points)),
+                            rag.offsets, np.zeros((n, nm, 4)))
+    _rk.refine_frames(state, pos, rot, pr.folded, pr.cams, pr.dofs, steps, gate, obs, sse,
+                      pairs)
     out = []
     nv = rag.n_views
     for k in range(n):
