@@ -89,17 +89,25 @@ def refine(fitter: Fitter, angles_deg, detections_frame, root_positions=None, *,
     """
     steps, gate = _gate_steps(fitter, steps, gate_px)
     pr = fitter.problem
-    state, pos, rot = fitter.state(angles_deg, root_positions)
     rag = fitter._frame_ragged(detections_frame)
     nm = pr.folded.marker_joint.size
-    sse, n_pairs = _rk.refine_posture(state, pr.free_idx, pr.lo, pr.hi, pr.dof_kind, steps,
-                                      gate, pos, rot, *pr.folded, *pr.cams, _ak.OBJ_NEAREST,
-                                      rag.points, np.ones(len(rag.points)), rag.offsets,
-                                      np.zeros((nm, 4)))
-    angles, roots = pr.posture(state, pos, rot)
-    out = fitter._to_range_deg(angles)
-    error, per_view = fitter.error(out, detections_frame, roots)
-    return RefineResult(out, float(sse), int(n_pairs), error, per_view, roots)
+
+    def run(n_steps: int, start_deg, start_roots):
+        state, pos, rot = fitter.state(start_deg, start_roots)
+        sse, n_pairs = _rk.refine_posture(state, pr.free_idx, pr.lo, pr.hi, pr.dof_kind,
+                                          n_steps, gate, pos, rot, *pr.folded, *pr.cams,
+                                          _ak.OBJ_NEAREST, rag.points,
+                                          np.ones(len(rag.points)), rag.offsets,
+                                          np.zeros((nm, 4)))
+        angles, roots = pr.posture(state, pos, rot)
+        out = fitter._to_range_deg(angles)
+        error, per_view = fitter.error(out, detections_frame, roots)
+        return RefineResult(out, float(sse), int(n_pairs), error, per_view, roots)
+
+    start = run(0, angles_deg, root_positions)  # the start as it is scored (locked axes set)
+    refined = run(steps, angles_deg, root_positions)
+    # Refinement minimises squared pair residuals, not E: never hand back a worse E.
+    return refined if refined.error <= start.error else start
 
 
 def refine_many(fitter: Fitter, angles_deg, detections, root_positions=None, *,
@@ -156,8 +164,11 @@ def refine_many(fitter: Fitter, angles_deg, detections, root_positions=None, *,
         frame = [rag.points[rag.offsets[k * nv + v]: rag.offsets[k * nv + v + 1]]
                  for v in range(nv)]
         error, per_view = fitter.error(a, frame, fitted_roots)
-        out.append(RefineResult(a, float(sse[k]), int(pairs[k]), error, per_view,
-                                fitted_roots))
+        result = RefineResult(a, float(sse[k]), int(pairs[k]), error, per_view, fitted_roots)
+        start_e = fitter.error(start[k], frame, roots[k])[0]
+        if error > start_e:  # never a worse E than the start (as refine)
+            result = refine(fitter, start[k], frame, roots[k], steps=0, gate_px=gate)
+        out.append(result)
     return out
 
 
