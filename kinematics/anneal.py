@@ -36,6 +36,7 @@ depend on the thread count. Re-runs of a frame always start from the means.
 
 from __future__ import annotations
 
+import copy
 import math
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
@@ -239,6 +240,14 @@ class Fitter:
         self._tracked = [k for k, c in enumerate(body.chains) if c.root.mode == "marker"]
         names = body.marker_names
         self._root_marker = {k: names.index(body.chains[k].root.marker) for k in self._tracked}
+
+    def with_pins(self, pins) -> Fitter:
+        """A fitter that holds the given axes (``joint.axis`` labels or posture indices ->
+        degrees) at their values while it fits the rest (:meth:`FitProblem.with_pins`):
+        a manual correction re-fitted around what the user set."""
+        other = copy.copy(self)
+        other.problem = self.problem.with_pins(pins)
+        return other
 
     # -- small helpers --------------------------------------------------------------------
     @property

@@ -361,19 +361,31 @@ class FitProblem:
                          self.lo, self.hi)
 
     # -- pins -----------------------------------------------------------------------------
-    def with_pins(self, pins: Mapping[str, float]) -> FitProblem:
-        """The same problem with the named axes (``joint.axis`` labels) held at the given
-        values in degrees: the fit never moves them (a manual correction)."""
+    def with_pins(self, pins: Mapping[str | int, float]) -> FitProblem:
+        """The same problem with the given axes (``joint.axis`` labels or posture indices)
+        held at the given values in degrees, clipped into their ranges: the fit never moves
+        them (a manual correction)."""
         labels = self.body.axis_labels
-        unknown = [k for k in pins if k not in labels]
-        if unknown:
-            raise KinematicsError(f"no such axis: {unknown[0]}", field="pins")
-        merged = {**self.pins, **{k: float(v) for k, v in pins.items()}}
+        named = {}
+        for k, v in pins.items():
+            if isinstance(k, int | np.integer) and not isinstance(k, bool):
+                if not 0 <= k < len(labels):
+                    raise KinematicsError(f"no axis number {k}", field="pins")
+                k = labels[int(k)]
+            if k not in labels:
+                raise KinematicsError(f"no such axis: {k}", field="pins")
+            lo, hi = self.body.ranges_deg()[labels.index(k)]
+            named[k] = float(np.clip(float(v), lo, hi))
+        merged = {**self.pins, **named}
         held = {labels.index(k) for k in merged}
         free = _kind_order([i for i in self.free_idx if int(i) not in held], self.dof_kind)
         if free.size == 0:
             raise KinematicsError("every axis is pinned: nothing to fit", field="pins")
-        return replace(self, free_idx=free, pins=merged)
+        start = self.start.copy()
+        for k, v in merged.items():
+            if self.dof_kind[labels.index(k)] == DOF_HISTOGRAM:  # not a free root's offset
+                start[labels.index(k)] = np.deg2rad(v)
+        return replace(self, free_idx=free, pins=merged, start=start)
 
     # -- state <-> posture ------------------------------------------------------------------
     @property

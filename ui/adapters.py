@@ -349,19 +349,6 @@ def edit_axis(body: Body, index: int, *, min_deg: float | None = None,
     return _replace_axis(body, index, new)
 
 
-def pin_axes(body: Body, values_deg: Mapping[int, float]) -> Body:
-    """A copy of ``body`` whose axes at the given posture indices are locked at the given
-    values (``locked_deg`` and a single-bin histogram, the paper's hinge lock), clipped into
-    their ranges, so the fitter holds them while it fits the others."""
-    refs = body.axis_refs()
-    for index, value in values_deg.items():
-        a = refs[index].axis
-        v = float(np.clip(value, a.min_deg, a.max_deg))
-        body = _replace_axis(body, index, replace(a, locked_deg=v,
-                                                  histogram=Histogram.locked(v)))
-    return body
-
-
 def _replace_axis(body: Body, index: int, axis: Axis) -> Body:
     ref = body.axis_refs()[index]
     k = index - 3 * (index // 3)

@@ -647,8 +647,9 @@ class Session(QObject):
         """Set axes of a frame by hand and hold them while the rest is re-fitted.
 
         The axes given (posture indices -> degrees) join those already pinned in this frame;
-        the fitter then fits a copy of the chain in which the pinned axes are locked at the
-        user's values (:func:`ui.adapters.pin_axes`), starting from the current posture.
+        the fitter then holds the pinned axes at the user's values
+        (:meth:`kinematics.anneal.Fitter.with_pins`) while it fits the others, starting from
+        the current posture.
         Without ``refit``, or when nothing is left free, the posture is taken as it is and
         only its error is computed. The result has status ``corrected``; undo restores the
         frame's previous result.
@@ -659,8 +660,11 @@ class Session(QObject):
             return False
         angles, roots, _ = self.posture(frame)
         pins = {**self.pins.get(frame, {}), **{int(k): float(v) for k, v in values_deg.items()}}
-        pinned = adapters.pin_axes(self.body, pins)
-        angles = adapters.clamp_to_range(pinned, angles)
+        angles = adapters.clamp_to_range(self.body, angles)
+        lo, hi = self.body.ranges_deg().T
+        for k, v in pins.items():
+            angles[k] = float(np.clip(v, lo[k], hi[k]))
+        left_free = [k for k in adapters.free_axes(self.body) if k not in pins]
         dets = self.frame_detections(frame)
         seed = self.params.seed
         label = label or "set " + ", ".join(self.body.axis_labels[k] for k in values_deg)
@@ -679,8 +683,8 @@ class Session(QObject):
             self.status.emit(f"frame {frame} corrected: error {result.error:.2f} px")
 
         try:
-            if refit and adapters.free_axes(pinned):
-                fitter = self._fitter(pinned)
+            if refit and left_free:
+                fitter = self._fitter().with_pins(pins)
                 return self.run_task(
                     lambda _w: fitter.fit_frame(dets, frame, start_deg=angles,
                                                 root_positions=roots),
@@ -784,39 +788,22 @@ class Session(QObject):
     # -- detection ----------------------------------------------------------------------
     def detect(self) -> bool:
         """Detect markers in every frame (background) and save the detections file."""
-        from videotrack.detect import detect_video, video_paths
-        from videotrack.detections import save_detections
-        from videotrack.video import open_videos
-
         if self.settings is None:
             self.error.emit("the project's views or filters are not valid")
             return False
-        config, settings, out = self.config, self.settings, self.detections_path
+        config = self.config
 
         def work(worker: TaskWorker):
-            # Its own video handles: OpenCV captures must not be shared between threads.
-            with open_videos(video_paths(config), colour=settings.filters.needs_colour,
-                             fps=config["video"]["fps"] or None) as videos:
-                total, done = videos.n_frames, [0]
+            return backend.detect_markers(config, worker.report, worker.cancel_requested)
 
-                def step(n: int) -> None:
-                    worker.check_cancel()
-                    done[0] += n
-                    worker.report(done[0], total)
-
-                with warnings.catch_warnings(record=True) as caught:
-                    warnings.simplefilter("always", VideoTrackWarning)
-                    detections = detect_video(videos, settings, progress=step)
-            return save_detections(detections, out), detections, caught
-
-        def finish(result) -> None:
-            path, detections, caught = result
-            self.detections = detections
+        def finish(run) -> None:
+            self.detections, self.detections_path = run.detections, run.detections_path
             self._frames.clear()
             self.set_frame(min(self.frame, max(self.n_frames - 1, 0)))
-            self.status.emit(f"wrote {path}: {len(detections.points)} markers in "
-                             f"{detections.n_records} frames")
-            self._report_warnings(caught)
+            self.status.emit(f"wrote {run.detections_path}: {len(run.detections.points)} "
+                             f"markers in {run.detections.n_records} frames")
+            for message in run.warnings:
+                self.status.emit(f"warning: {message}")
             self.detectionsChanged.emit()
             self.frameChanged.emit(self.frame)
 

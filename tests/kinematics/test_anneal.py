@@ -458,3 +458,23 @@ def test_annealing_loop_allocates_nothing(locust):
     assert its == 500
     ir = fresh.inspect_llvm(fresh.signatures[0])
     assert not re.search(r"NRT_MemInfo_alloc|NRT_Allocate", ir)
+
+
+def test_pins_hold_axes_while_the_rest_is_fitted(locust):
+    """Pinning is a method of the problem: no rebuilt body, the pinned axes never move."""
+    cams = locust_cameras()
+    truth = smooth_random_motion(locust, 3, 1, seed=21)
+    dets = planted(locust, cams, truth, seed=21)
+    fitter = Fitter(locust, cams, AnnealParams().with_schedule(4000))
+    pinned = fitter.with_pins({"J2.gamma": 90.0, 0: 500.0})  # label or index; clipped
+    assert fitter.problem.pins == {}
+    assert pinned.problem.pins == {"J2.gamma": 90.0, "J0.phi": 220.0}
+    for k, frame in enumerate(dets):
+        r = pinned.fit_frame(frame, k)
+        assert r.angles_deg[8] == pytest.approx(90.0)
+        assert r.angles_deg[0] == pytest.approx(220.0)
+    with pytest.raises(KinematicsError, match="no such axis"):
+        fitter.with_pins({"J9.x": 1.0})
+    every = {label: 0.0 for label in locust.axis_labels}
+    with pytest.raises(KinematicsError, match="nothing to fit"):
+        fitter.with_pins(every)
