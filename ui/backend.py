@@ -2,13 +2,16 @@
 
 Everything the GUI uses from :mod:`kinematics.anneal`, :mod:`videotrack.pipeline` and
 :mod:`videotrack.results` goes through this module, so a rename there is a one-line change
-here. Nothing in it computes anything itself: it forwards and converts.
+here. Nothing in it computes anything itself: it forwards and converts. Detecting markers is
+the project workflow :func:`videotrack.pipeline.run_project` without its fit; fitting is
+interactive (frames chosen, results shown as they arrive, undoable) and saved by
+:func:`save_project_results`.
 """
 
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
 
@@ -17,11 +20,14 @@ import numpy as np
 from kinematics.anneal import AnnealParams, Fitter, FrameResult
 from kinematics.model import Body
 from videotrack.pipeline import (
+    Cancelled,
     ProjectModel,
+    ProjectRun,
     anneal_params,
     check_detection_views,
     load_model,
     results_sidecar,
+    run_project,
 )
 from videotrack.project import command_config, trial_outputs
 from videotrack.results import (
@@ -36,11 +42,14 @@ from videotrack.results import write_results as _write_results
 __all__ = [
     "STATUSES",
     "AnnealParams",
+    "Cancelled",
     "Fitter",
     "FrameResult",
     "ProjectModel",
+    "ProjectRun",
     "anneal_params",
     "check_detection_views",
+    "detect_markers",
     "frame_results",
     "load_model",
     "load_project_config",
@@ -59,6 +68,19 @@ def make_fitter(body: Body, cameras: Mapping, params: AnnealParams) -> Fitter:
     """A :class:`~kinematics.anneal.Fitter` for a body, the cameras of the views (name ->
     camera, in view order) and parameters."""
     return Fitter(body, cameras, params)
+
+
+def detect_markers(config, progress: Callable[[int, int], object],
+                   cancel: Callable[[], bool]) -> ProjectRun:
+    """Detect the markers of a project (or trial) and save the detections file: the
+    project workflow without its fit, run although the file is up to date (the user asked).
+
+    ``progress(done, total)`` follows the video frames; when ``cancel()`` returns True the
+    run raises :class:`Cancelled`. The run's ``detections``, ``detections_path`` and
+    ``warnings`` are what the GUI shows.
+    """
+    return run_project(config, fit=False, force=True, cancel=cancel,
+                       progress=lambda p: progress(p.done, p.total))
 
 
 def fit_chunk_size() -> int:

@@ -27,8 +27,8 @@ def error_text(err: BaseException) -> str:
     return f"internal error: {type(err).__name__}: {err}"
 
 
-class Cancelled(Exception):
-    """Raised inside a task when its worker was asked to stop."""
+#: Raised inside a task when its worker was asked to stop (the project workflow's own).
+Cancelled = backend.Cancelled
 
 
 class TaskWorker(QThread):
@@ -51,6 +51,9 @@ class TaskWorker(QThread):
 
     def cancel(self) -> None:
         self._cancel = True
+
+    def cancel_requested(self) -> bool:
+        return self._cancel
 
     def check_cancel(self) -> None:
         if self._cancel:

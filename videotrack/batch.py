@@ -1,8 +1,9 @@
 """Batch processing of a project: every trial detected and fitted, locally or on Dask.
 
-:func:`run_trial` does one trial from start to end — detection (skipped when up to date),
-fitting (skipped when the results are up to date, resumed from its checkpoint when an earlier
-run was killed), the plot — and never raises for a problem of the trial: it returns a
+:func:`run_trial` does one trial from start to end with
+:func:`videotrack.pipeline.run_project` — detection (skipped when up to date), fitting
+(skipped when the results are up to date, resumed from its checkpoint when an earlier run was
+killed), the plot — and never raises for a problem of the trial: it returns a
 :class:`TrialReport` saying ``done``, ``up to date`` or ``failed``. :func:`run_batch` runs
 trials in this process, in a pool of worker processes, or as tasks of a Dask cluster, and
 reports each as it finishes; :func:`plan_trial` says what a run would do (``--dry-run``).
@@ -134,68 +135,40 @@ def run_trial(trial: Trial, force: bool = False, threads: int = 1,
         except Exception as err:  # a bug must not stop the other trials; the log has it
             lines.append(traceback.format_exc().rstrip())
             report = TrialReport(trial.name, FAILED, message=f"{type(err).__name__}: {err}")
-    notes = tuple(f"{w.category.__name__}: {w.message}" for w in caught)
+    notes = (*(f"VideoTrackWarning: {w}" for w in report.warnings),
+             *(f"{w.category.__name__}: {w.message}" for w in caught))
     return replace(report, seconds=time.perf_counter() - t0, log=(*lines, *notes),
-                   warnings=tuple(str(w.message) for w in caught
-                                  if issubclass(w.category, VideoTrackWarning)))
+                   warnings=(*report.warnings, *(str(w.message) for w in caught
+                                                 if issubclass(w.category, VideoTrackWarning))))
 
 
 def _run_trial(trial: Trial, force: bool, threads: int, progress: Progress | None,
                lines: list[str]) -> TrialReport:
-    import numba
-
-    from videotrack.detect import detect_project
-    from videotrack.pipeline import (
-        check_detection_views,
-        discard_checkpoint,
-        fit_project,
-        load_model,
-        results_stale_reason,
-    )
-    from videotrack.results import read_results
+    from videotrack.pipeline import run_project
 
     config = trial.config
-    numba.set_num_threads(max(1, min(config["fit"]["jobs"] or threads,
-                                     numba.config.NUMBA_NUM_THREADS)))
-    out = trial_outputs(config)
-    for path in remove_stray_temporaries(out):
+    for path in remove_stray_temporaries(trial_outputs(config)):
         lines.append(f"removed {path.name}, left by an interrupted run")
-    steps = []
-    detections, det_path, fresh = detect_project(config, force=force, output=out.detections,
-                                                 log=lines.append)
-    if not fresh:
-        steps.append("detect")
-        lines.append(f"detected {detections.n_records} records into {det_path.name}")
-    model = load_model(config)
-    check_detection_views(model, detections, det_path)
-    n = detections.n_records
-    reason = "--force" if force else results_stale_reason(model, det_path, out.results, n)
-    if reason is None:
-        results = read_results(out.results)
-        discard_checkpoint(out.results)  # left if a run was killed right after its last write
-    else:
-        lines.append(f"fitting {n} records ({reason}), {numba.get_num_threads()} thread(s)")
-        if progress is not None:
-            progress(0, n)
-        results = fit_project(model, detections, det_path, out.results,
-                              progress=None if progress is None else lambda r: progress(1, 0))
-        steps.append("fit")
-    if config["fit"]["plot"] and (steps or _older(out.plot, out.results)):
-        from videotrack.plots import plot_angles
-
-        plot_angles(results, out.plot, model.body.locked_mask())
-        steps.append("plot")
-    ok = results.ok_mask()
-    err = results.error[np.isfinite(results.error)]
-    return TrialReport(trial.name, DONE if steps else UP_TO_DATE, frames=len(results),
+    run = run_project(config, force=force, threads=config["fit"]["jobs"] or threads,
+                      progress=_frames_progress(progress), log=lines.append)
+    err = run.results.error[np.isfinite(run.results.error)]
+    return TrialReport(trial.name, DONE if run.steps else UP_TO_DATE, frames=run.n_frames,
                        median_error=float(np.median(err)) if err.size else float("nan"),
-                       bad_pct=100.0 * float(1 - ok.mean()) if len(results) else float("nan"),
-                       steps=tuple(steps))
+                       bad_pct=100.0 * run.n_bad / run.n_frames if run.n_frames
+                       else float("nan"), steps=run.steps, warnings=run.warnings)
 
 
-def _older(path: Path, than: Path) -> bool:
-    """True when ``path`` is missing or older than ``than`` (e.g. a plot of earlier results)."""
-    return not path.exists() or path.stat().st_mtime_ns < than.stat().st_mtime_ns
+def _frames_progress(progress: Progress | None):
+    """A run's progress as the batch's frames bar: the frames to fit are announced when the
+    fit starts, then each fitted frame counts one."""
+    if progress is None:
+        return None
+
+    def on_step(p) -> None:
+        if p.step == "fit":
+            progress(*((0, p.total) if p.done == 0 else (1, 0)))
+
+    return on_step
 
 
 def remove_stray_temporaries(outputs: TrialOutputs) -> list[Path]:
@@ -216,32 +189,16 @@ def remove_stray_temporaries(outputs: TrialOutputs) -> list[Path]:
 def plan_trial(trial: Trial, force: bool = False) -> tuple[str, str]:
     """What :func:`run_trial` would do, without doing it: ``(action, why)``.
 
-    Actions: ``"detect + fit"``, ``"fit"``, ``"plot"``, ``"up to date"``, ``"fails"``.
-    Reads the videos' headers, the detections and the results' sidecars; writes nothing.
+    Actions: ``"detect + fit"``, ``"fit"``, ``"plot"``, ``"up to date"``, ``"fails"``
+    (:func:`videotrack.pipeline.plan_project`). Reads the videos' headers, the detections
+    and the results' sidecars; writes nothing.
     """
-    from videotrack.detect import detections_status
-    from videotrack.pipeline import check_detection_views, load_model, results_stale_reason
+    from videotrack.pipeline import plan_project
 
     if trial.config is None:
         return "fails", trial.error or "no config"
-    if force:
-        return "detect + fit", "--force"
     try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", VideoTrackWarning)
-            out = trial_outputs(trial.config)
-            reason, detections = detections_status(trial.config, output=out.detections)
-            if reason is not None:
-                return "detect + fit", reason
-            model = load_model(trial.config)
-            check_detection_views(model, detections, out.detections)
-            reason = results_stale_reason(model, out.detections, out.results,
-                                          detections.n_records)
-            if reason is not None:
-                return "fit", reason
-            if trial.config["fit"]["plot"] and _older(out.plot, out.results):
-                return "plot", "no plot of the current results"
-            return "up to date", ""
+        return plan_project(trial.config, force=force)
     except LocatedError as err:
         return "fails", str(err)
 

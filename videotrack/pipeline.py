@@ -1,8 +1,13 @@
 """Project-level fitting: from a project config and its detections to a results file.
 
-Used by the ``fit``/``run`` commands and the GUI: the model (chain + histograms + cameras per
-view + annealing parameters) is loaded once by :func:`load_model`; :func:`fit_project`
-drives the fitter's generator with progress and resumable, atomic writing.
+:func:`run_project` is the one workflow every front end runs (``fit``, ``run``, ``batch``,
+``demo`` and the GUI): detect the markers when the detections are stale, load the model, skip
+the fit when the results are up to date, else fit and write the results, and plot. It
+returns a :class:`ProjectRun` and never prints: the commands print, the GUI shows it.
+:func:`plan_project` says what it would do without doing it. Its steps are public too:
+:func:`load_model` loads the model (chain + histograms + cameras per view + annealing
+parameters) once; :func:`fit_project` drives the fitter's generator with progress and
+resumable, atomic writing.
 
 Resuming: while fitting, finished frames are checkpointed every few seconds to
 ``<results>.partial`` (with its own sidecar). A run that is killed and started again with the
@@ -16,8 +21,9 @@ from __future__ import annotations
 import contextlib
 import os
 import time
-from collections.abc import Callable
-from dataclasses import dataclass, replace
+import warnings
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -25,7 +31,7 @@ import numpy as np
 from kinematics.anneal import AnnealParams, Fitter, FrameResult
 from kinematics.model import Body
 from videotrack.config import record_from_table
-from videotrack.errors import VideoTrackError
+from videotrack.errors import VideoTrackError, VideoTrackWarning
 from videotrack.results import (
     Results,
     file_sha256,
@@ -256,3 +262,322 @@ def _resume(partial: Path, sidecar: dict) -> dict[int, FrameResult]:
     except VideoTrackError:
         return {}
     return frame_results(table, int(meta["seed"]))
+
+
+# -- the workflow -----------------------------------------------------------------------------
+#: The steps of :func:`run_project`, as :attr:`ProjectRun.steps` and
+#: :attr:`StepProgress.step` name them.
+DETECT, FIT, PLOT = "detect", "fit", "plot"
+
+
+class Cancelled(Exception):
+    """:func:`run_project` stopped because its ``cancel`` callback asked it to (a fit keeps
+    its last checkpoint and resumes from it)."""
+
+
+@dataclass(frozen=True)
+class StepProgress:
+    """Where a step of :func:`run_project` stands: ``done`` of ``total`` video frames
+    (``"detect"``) or records (``"fit"``); ``bad`` counts fitted records that are not ok."""
+
+    step: str
+    done: int
+    total: int
+    bad: int = 0
+
+
+@dataclass(frozen=True)
+class ProjectRun:
+    """What :func:`run_project` did.
+
+    Attributes
+    ----------
+    detections_path, results_path : Path
+    steps : tuple of str
+        What was computed: ``"detect"``, ``"fit"``, ``"plot"`` (none: all was up to date).
+    fit_reason : str
+        Why the fit ran (``"no results yet"``, ``"changed: seed"``, ``"--force"``,
+        ``"records 0:100"``); ``""`` when it did not.
+    plot_path : Path or None
+        The plot this run wrote.
+    n_frames, n_ok, n_bad : int
+        Rows of the results; those whose fit is ok (ok, re-analysed, corrected) and the
+        others (failed, no detections).
+    detect_seconds, fit_seconds : float
+        Time spent detecting and fitting (0 for a step that was skipped).
+    warnings : tuple of str
+        Messages of the :class:`~videotrack.errors.VideoTrackWarning` s of the run.
+    model, detections, results
+        The model, the detections and the results table (model and results are None with
+        ``fit=False``).
+    """
+
+    detections_path: Path
+    results_path: Path
+    steps: tuple[str, ...] = ()
+    fit_reason: str = ""
+    plot_path: Path | None = None
+    n_frames: int = 0
+    n_ok: int = 0
+    n_bad: int = 0
+    detect_seconds: float = 0.0
+    fit_seconds: float = 0.0
+    warnings: tuple[str, ...] = ()
+    model: ProjectModel | None = field(default=None, repr=False, compare=False)
+    detections: object = field(default=None, repr=False, compare=False)
+    results: Results | None = field(default=None, repr=False, compare=False)
+
+    @property
+    def detected(self) -> bool:
+        """The detections were made by this run (else they were up to date)."""
+        return DETECT in self.steps
+
+    @property
+    def fitted(self) -> bool:
+        """The results were fitted by this run (else they were up to date)."""
+        return FIT in self.steps
+
+    @property
+    def up_to_date(self) -> bool:
+        """Nothing had to be computed."""
+        return not self.steps
+
+
+def run_project(
+    config,
+    *,
+    detect: bool = True,
+    fit: bool = True,
+    force: bool = False,
+    anneal: Mapping[str, object] | None = None,
+    frames: slice | None = None,
+    results: str | os.PathLike | None = None,
+    plot: bool | None = None,
+    threads: int | None = None,
+    progress: Callable[[StepProgress], object] | None = None,
+    cancel: Callable[[], bool] | None = None,
+    log: Callable[[str], object] | None = None,
+) -> ProjectRun:
+    """Detect, fit and plot a project (or trial), each step skipped when its outputs are up
+    to date; every file is written atomically and an interrupted fit resumes.
+
+    Parameters
+    ----------
+    config : Config
+        A loaded project (or trial) config.
+    detect : bool
+        Detect the markers when the detections file is missing or stale. False: use the
+        file as it is; it must exist and have been made from the project's video(s) with
+        its settings (``videotrack fit``).
+    fit : bool
+        False: stop after the detections (no model is needed).
+    force : bool
+        Recompute the steps run although their outputs are up to date.
+    anneal : mapping, optional
+        Overrides of ``[anneal]`` (``n_end``, ``seed``, ``refine``, ``start``, ...; None
+        values keep the file's), as :func:`anneal_params`.
+    frames : slice, optional
+        Records of the detections to fit (clipped to them); such a subset is always fitted.
+    results : path, optional
+        Results file; default :func:`default_results_path`.
+    plot : bool, optional
+        Write ``<results>.png`` when the results are new or newer than it; default
+        ``[fit] plot``.
+    threads : int, optional
+        numba threads for fitting; default ``[fit] jobs``; 0 keeps numba's setting.
+    progress : callable, optional
+        Called with a :class:`StepProgress` after each video frame detected and each
+        record fitted (and once with ``done=0`` when a fit starts).
+    cancel : callable, optional
+        Asked after each progress step; when it returns True the run raises
+        :class:`Cancelled`.
+    log : callable, optional
+        Receives one-line notes (stale detections detected again, why a fit runs).
+
+    Returns
+    -------
+    ProjectRun
+
+    Raises
+    ------
+    LocatedError
+        Anything the user can get wrong: config, video, chain, cameras, parameters,
+        detections of other views, stale detections with ``detect=False``.
+    Cancelled
+    """
+    report = _reporter(progress, cancel)
+    with _recorded_warnings() as caught:
+        model = load_model(config, **(anneal or {})) if fit else None  # fails before work
+        t0 = time.perf_counter()
+        detections, det_path, detected = _detections(config, detect, force, report, log)
+        run = ProjectRun(det_path, Path(results) if results is not None else
+                         default_results_path(config, det_path),
+                         steps=(DETECT,) if detected else (),
+                         detect_seconds=time.perf_counter() - t0 if detected else 0.0,
+                         detections=detections)
+        if fit:
+            run = _fit(run, model, frames, force,
+                       config["fit"]["jobs"] if threads is None else threads, report, log)
+            run = _plot(run, config["fit"]["plot"] if plot is None else plot)
+    return replace(run, warnings=tuple(caught))
+
+
+def plan_project(config, *, force: bool = False, plot: bool | None = None) -> tuple[str, str]:
+    """What :func:`run_project` would do, without doing it: ``(action, why)``.
+
+    Actions: ``"detect + fit"``, ``"fit"``, ``"plot"``, ``"up to date"``. Reads the videos'
+    headers, the detections and the results' sidecars; writes nothing.
+
+    Raises
+    ------
+    LocatedError
+        What would make the run fail (config, video, chain, cameras, views).
+    """
+    from videotrack.detect import default_output, detections_status
+
+    if force:
+        return "detect + fit", "--force"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", VideoTrackWarning)
+        model = load_model(config)
+        reason, detections = detections_status(config)
+        if reason is not None:
+            return "detect + fit", reason
+        det_path = default_output(config)
+        check_detection_views(model, detections, det_path)
+        results = default_results_path(config, det_path)
+        reason = results_stale_reason(model, det_path, results, detections.n_records)
+        if reason is not None:
+            return "fit", reason
+        if (config["fit"]["plot"] if plot is None else plot) and _older(
+                default_plot_path(results), results):
+            return "plot", "no plot of the current results"
+        return "up to date", ""
+
+
+def load_fresh_detections(config, path: str | os.PathLike):
+    """The detections file ``path`` of a project, refused when missing or made from other
+    video(s) or with other detection settings (a missing video is only a warning)."""
+    from videotrack.detect import settings_from_config, video_paths
+    from videotrack.detections import check_fresh, load_detections
+    from videotrack.video import open_videos
+
+    path = Path(path)
+    if not path.exists():
+        raise VideoTrackError("no detections yet: run 'videotrack detect' first (or use "
+                              "'videotrack run')", file=path)
+    detections = load_detections(path)
+    videos = video_paths(config)
+    if not all(p.exists() for p in videos):
+        warnings.warn(f"{videos[0]}: video not found; cannot check that {path.name} was "
+                      "made from it", VideoTrackWarning, stacklevel=2)
+        return detections
+    with open_videos(videos) as opened:
+        try:
+            check_fresh(detections, opened, settings_from_config(config))
+        except VideoTrackError as err:
+            raise VideoTrackError(f"stale detections: {err.message}; run 'videotrack detect' "
+                                  "again", file=path) from None
+    return detections
+
+
+def _reporter(progress, cancel) -> Callable[..., None]:
+    """``report(step, done, total, bad=0)``: hand on the progress, then honour a cancel."""
+    def report(step: str, done: int, total: int, bad: int = 0) -> None:
+        if progress is not None:
+            progress(StepProgress(step, done, total, bad))
+        if cancel is not None and cancel():
+            raise Cancelled
+    return report
+
+
+@contextlib.contextmanager
+def _recorded_warnings():
+    """Collect the messages of VideoTrack's warnings into the yielded list (once the block
+    has ended); other warnings, and all of a block that raises, are passed on."""
+    kept: list[str] = []
+    caught: list = []
+    ok = False
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", VideoTrackWarning)
+            yield kept
+            ok = True
+    finally:
+        for w in caught:
+            if ok and issubclass(w.category, VideoTrackWarning):
+                kept.append(str(w.message))
+            else:
+                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+
+
+def _detections(config, detect: bool, force: bool, report, log):
+    """``(detections, path, made now)``: detected when stale (or forced), else as on disk."""
+    from videotrack.detect import default_output, detect_project
+
+    if not detect:
+        path = default_output(config)
+        return load_fresh_detections(config, path), path, False
+    detections, path, up_to_date = detect_project(
+        config, force=force, progress=lambda done, total: report(DETECT, done, total),
+        log=log)
+    if not up_to_date and log is not None:
+        log(f"detected {detections.n_records} records into {path.name}")
+    return detections, path, not up_to_date
+
+
+def _fit(run: ProjectRun, model: ProjectModel, frames: slice | None, force: bool,
+         threads: int, report, log) -> ProjectRun:
+    """The fit step: results read when up to date, else fitted and written."""
+    import numba
+
+    detections, out = run.detections, run.results_path
+    check_detection_views(model, detections, run.detections_path)
+    n = detections.n_records
+    idx = None if frames is None else range(*frames.indices(n))
+    why = ("--force" if force else
+           f"records {idx.start}:{idx.stop}" if idx is not None else
+           results_stale_reason(model, run.detections_path, out, n))
+    if why is None:
+        discard_checkpoint(out)  # left if a run was killed right after its last write
+        return _with_results(replace(run, model=model), read_results(out))
+    if threads:
+        numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
+    total = n if idx is None else len(idx)
+    if log is not None:
+        log(f"fitting {total} records ({why}), {numba.get_num_threads()} thread(s)")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    counts = {"done": 0, "bad": 0}
+
+    def fitted(r: FrameResult) -> None:
+        counts["done"] += 1
+        counts["bad"] += not r.ok
+        report(FIT, counts["done"], total, counts["bad"])
+
+    t0 = time.perf_counter()
+    report(FIT, 0, total)
+    table = fit_project(model, detections, run.detections_path, out, idx, fitted)
+    return _with_results(replace(run, model=model, steps=(*run.steps, FIT), fit_reason=why,
+                                 fit_seconds=time.perf_counter() - t0), table)
+
+
+def _with_results(run: ProjectRun, table: Results) -> ProjectRun:
+    n_ok = int(table.ok_mask().sum())
+    return replace(run, results=table, n_frames=len(table), n_ok=n_ok,
+                   n_bad=len(table) - n_ok)
+
+
+def _plot(run: ProjectRun, wanted: bool) -> ProjectRun:
+    """The angle plot, when wanted and missing or older than the results."""
+    png = default_plot_path(run.results_path)
+    if not wanted or not (run.fitted or _older(png, run.results_path)):
+        return run
+    from videotrack.plots import plot_angles
+
+    png = plot_angles(run.results, png, run.model.body.locked_mask())
+    return replace(run, steps=(*run.steps, PLOT), plot_path=Path(png))
+
+
+def _older(path: Path, than: Path) -> bool:
+    """True when ``path`` is missing or older than ``than`` (e.g. a plot of earlier results)."""
+    return not path.exists() or path.stat().st_mtime_ns < than.stat().st_mtime_ns

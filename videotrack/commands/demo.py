@@ -67,8 +67,8 @@ def run(args) -> int:
     import numpy as np
     from tqdm import tqdm
 
+    from videotrack.commands._common import print_warnings, step_bars
     from videotrack.config import load_config
-    from videotrack.detect import detect_project
     from videotrack.errors import VideoTrackError
     from videotrack.evaluate import evaluate, truth_angles
     from videotrack.paper_setup import (
@@ -79,7 +79,7 @@ def run(args) -> int:
         TABLE2_SYMBOLS,
         write_paper_project,
     )
-    from videotrack.pipeline import default_results_path, fit_project, load_model
+    from videotrack.pipeline import run_project
     from videotrack.tables import read_table, text_table
 
     if args.frames < 1:
@@ -101,26 +101,15 @@ def run(args) -> int:
         t_render = time.perf_counter() - t0
         print(f"  rendered the video and its ground truth in {t_render:.1f} s")
 
-        config = load_config(project.config)
-        t0 = time.perf_counter()
-        with bar("detecting") as b:
-            def detected(done: int, total: int) -> None:
-                b.total = total
-                b.update(done - b.n)
-
-            detections, det_path, _ = detect_project(config, force=True, progress=detected)
-        t_detect = time.perf_counter() - t0
-        print(f"  detected {len(detections.points)} markers in {t_detect:.1f} s "
+        with step_bars() as progress:
+            run = run_project(load_config(project.config), force=True, plot=False,
+                              anneal={"n_end": args.n_end, "seed": args.seed},
+                              progress=progress)
+        print_warnings(run)
+        t_detect, t_fit = run.detect_seconds, run.fit_seconds
+        print(f"  detected {len(run.detections.points)} markers in {t_detect:.1f} s "
               f"({args.frames / t_detect:.0f} frames/s; the paper: {PAPER_DETECTION_FPS:g})")
-
-        model = load_model(config, n_end=args.n_end, seed=args.seed)
-        t0 = time.perf_counter()
-        with bar("fitting", detections.n_records) as b:
-            results = fit_project(model, detections, det_path,
-                                  default_results_path(config, det_path),
-                                  progress=lambda r: b.update(1))
-        t_fit = time.perf_counter() - t0
-        n = len(results)
+        results, model, n = run.results, run.model, run.n_frames
         runs = {s: results.status.count(s) for s in ("reanalysed", "failed")}
         print(f"  fitted {n} frames in {t_fit:.1f} s ({n / t_fit:.0f} frames/s on "
               f"{numba.get_num_threads()} threads, N_end {model.params.n_end}; the paper: "

@@ -79,7 +79,7 @@ def add_parser(subparsers) -> None:
 def run(args) -> int:
     from tqdm import tqdm
 
-    from videotrack.detect import detect_project, format_summary, summarize
+    from videotrack.detect import detect_project
     from videotrack.errors import VideoTrackError
     from videotrack.project import command_config
     from videotrack.video import parse_frame_range
@@ -103,10 +103,17 @@ def run(args) -> int:
     if up_to_date:
         print(f"{output} is up to date (--force detects again)")
         return 0
+    print_detected(detections, output)
+    return 0
+
+
+def print_detected(detections, output) -> None:
+    """What ``detect`` prints after detecting: markers per view per frame, the file written."""
+    from videotrack.detect import format_summary, summarize
+
     unit = "half-frame" if detections.parities.max(initial=-1) >= 0 else "frame"
     start, stop = detections.metadata["frames"]
     print(f"markers per view per {unit} ({detections.n_records} {unit}s from frames "
           f"{start}:{stop}, {detections.frame_rate:g} per second):")
     print(format_summary(summarize(detections)))
     print(f"wrote {output} ({len(detections.points)} markers)")
-    return 0

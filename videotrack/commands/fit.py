@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import sys
-import time
 from pathlib import Path
 
 EXAMPLES = """\
@@ -75,115 +73,52 @@ def add_parser(subparsers) -> None:
 
 
 def run_run(args) -> int:
-    from videotrack.commands import detect
-
-    det_args = argparse.Namespace(config=args.config, trial=args.trial, frames=None,
-                                  output=None, force=args.force)
-    code = detect.run(det_args)
-    if code:
-        return code
-    return run_fit(args)
+    return run_fit(args, detect=True)
 
 
-def run_fit(args) -> int:
+def run_fit(args, detect: bool = False) -> int:
+    """``fit`` (the detections as they are), or with ``detect`` ``run`` (detected first when
+    stale)."""
     import numba
     import numpy as np
-    from tqdm import tqdm
 
-    from videotrack.detect import default_output
-    from videotrack.detections import load_detections
+    from videotrack.commands._common import note, print_warnings, step_bars
     from videotrack.errors import VideoTrackError
-    from videotrack.pipeline import (
-        check_detection_views,
-        default_results_path,
-        fit_project,
-        load_model,
-        results_stale_reason,
-    )
+    from videotrack.pipeline import run_project
     from videotrack.project import command_config
-    from videotrack.results import read_results
     from videotrack.video import parse_frame_range
 
     config = command_config(args.config, args.trial)
-    model = load_model(config, n_end=args.n_end, seed=args.seed, refine=args.refine,
-                       start=args.start)
-    det_path = default_output(config)
-    if not det_path.exists():
-        raise VideoTrackError("no detections yet: run 'videotrack detect' first (or use "
-                              "'videotrack run')", file=det_path)
-    detections = load_detections(det_path)
-    _check_detections_fresh(config, detections, det_path)
-    check_detection_views(model, detections, det_path)
     frames = None
     if args.frames:
         try:
-            start, stop = parse_frame_range(args.frames)
+            frames = slice(*parse_frame_range(args.frames))
         except ValueError as err:
             raise VideoTrackError(str(err), field="--frames") from None
-        frames = range(start, min(stop if stop is not None else detections.n_records,
-                                  detections.n_records))
-    jobs = args.jobs if args.jobs is not None else config["fit"]["jobs"]
-    if jobs:
-        numba.set_num_threads(max(1, min(jobs, numba.config.NUMBA_NUM_THREADS)))
-    out = args.results or default_results_path(config, det_path)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    if not args.force and frames is None and results_stale_reason(
-            model, det_path, out, detections.n_records) is None:
-        print(f"{out} is up to date (--force fits again)")
-        _maybe_plot(args, config, read_results(out), out, model)
-        return 0
-    total = detections.n_records if frames is None else len(frames)
-    bad = done = 0
-    t0 = time.perf_counter()
-    with tqdm(total=total, unit="frame", desc="fitting", file=sys.stderr, leave=False,
-              disable=None) as bar:
-        def progress(r) -> None:
-            nonlocal bad, done
-            bad += not r.ok
-            done += 1
-            bar.update(1)
-            bar.set_postfix_str(f"bad {100 * bad / done:.1f}%", refresh=False)
+    anneal = {"n_end": args.n_end, "seed": args.seed, "refine": args.refine,
+              "start": args.start}
+    with step_bars() as progress:
+        run = run_project(config, detect=detect, force=args.force, anneal=anneal,
+                          frames=frames, results=args.results, plot=args.plot,
+                          threads=args.jobs, progress=progress, log=note)
+    print_warnings(run)
+    if detect:
+        from videotrack.commands.detect import print_detected
 
-        results = fit_project(model, detections, det_path, out, frames, progress)
-    seconds = time.perf_counter() - t0
-    n = len(results)
-    counts = {s: results.status.count(s) for s in dict.fromkeys(results.status)}
-    print(f"fitted {n} frames in {seconds:.1f} s ({n / max(seconds, 1e-9):.1f} frames/s, "
-          f"{numba.get_num_threads()} threads); median error "
-          f"{np.nanmedian(results.error) if n else float('nan'):.2f} px")
-    print("status: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
-    print(f"wrote {out} (+ .json sidecar)")
-    _maybe_plot(args, config, results, out, model)
+        if run.detected:
+            print_detected(run.detections, run.detections_path)
+        else:
+            print(f"{run.detections_path} is up to date (--force detects again)")
+    if run.fitted:
+        results, seconds, n = run.results, run.fit_seconds, run.n_frames
+        counts = {s: results.status.count(s) for s in dict.fromkeys(results.status)}
+        print(f"fitted {n} frames in {seconds:.1f} s ({n / max(seconds, 1e-9):.1f} frames/s, "
+              f"{numba.get_num_threads()} threads); median error "
+              f"{np.nanmedian(results.error) if n else float('nan'):.2f} px")
+        print("status: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
+        print(f"wrote {run.results_path} (+ .json sidecar)")
+    else:
+        print(f"{run.results_path} is up to date (--force fits again)")
+    if run.plot_path is not None:
+        print(f"wrote {run.plot_path}")
     return 0
-
-
-def _maybe_plot(args, config, results, out, model) -> None:
-    """The angle plot, when asked for on the command line or in [fit] plot."""
-    if args.plot or (args.plot is None and config["fit"]["plot"]):
-        from videotrack.pipeline import default_plot_path
-        from videotrack.plots import plot_angles
-
-        png = plot_angles(results, default_plot_path(out), model.body.locked_mask())
-        print(f"wrote {png}")
-
-
-def _check_detections_fresh(config, detections, det_path) -> None:
-    """Refuse detections made from another video or with other detection settings."""
-    import warnings
-
-    from videotrack.detect import settings_from_config, video_paths
-    from videotrack.detections import check_fresh
-    from videotrack.errors import VideoTrackError, VideoTrackWarning
-    from videotrack.video import open_videos
-
-    paths = video_paths(config)
-    if not all(p.exists() for p in paths):
-        warnings.warn(f"{paths[0]}: video not found; cannot check that {det_path.name} was "
-                      "made from it", VideoTrackWarning, stacklevel=2)
-        return
-    with open_videos(paths) as videos:
-        try:
-            check_fresh(detections, videos, settings_from_config(config))
-        except VideoTrackError as err:
-            raise VideoTrackError(f"stale detections: {err.message}; run 'videotrack detect' "
-                                  "again", file=det_path) from None
