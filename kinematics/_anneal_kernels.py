@@ -145,12 +145,17 @@ def hist_at(hist, nbins, i, x):
 @njit(cache=True, nogil=True, inline="always")
 def _project_cs(values, cs, sn, root_pos, root_rot, parent, chain, pre_rot, pre_trans,
                 post_trans, elem_axis, elem_index, joint_flags, marker_joint, marker_local,
-                slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj, any_pinhole):
+                slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj, any_pinhole, span):
     """Markers of the posture with cosines ``cs`` and sines ``sn`` (n_axes,) projected into
     every view: fills ``proj`` (n_views, n_markers, 2); ``rot`` (nj, 3, 3), ``pos`` (nj, 3)
     and ``mk`` (nm, 3) receive A'_j, the joint centres and the 3D markers.
-    ``any_pinhole`` says whether ``kind`` has a pinhole view."""
-    for j in range(parent.shape[0]):
+    ``any_pinhole`` says whether ``kind`` has a pinhole view. ``span = (j0, j1, m0, m1)``:
+    only joints ``j0:j1`` and markers ``m0:m1`` are computed (a partition's subtree; its
+    parents' ``rot``, ``pos`` must be current); ``(0, nj, 0, nm)`` computes everything. (One
+    tuple, not four numbers: a call with more than 30 arguments compiles to a star-args call,
+    which numba cannot inline.)"""
+    j0, j1, m0, m1 = span
+    for j in range(j0, j1):
         p = parent[j]
         if p < 0:
             c = chain[j]
@@ -231,7 +236,7 @@ def _project_cs(values, cs, sn, root_pos, root_rot, parent, chain, pre_rot, pre_
         rot[j, 1, 0], rot[j, 1, 1], rot[j, 1, 2] = b10, b11, b12
         rot[j, 2, 0], rot[j, 2, 1], rot[j, 2, 2] = b20, b21, b22
         pos[j, 0], pos[j, 1], pos[j, 2] = px, py, pz
-    for m in range(marker_joint.shape[0]):
+    for m in range(m0, m1):
         j = marker_joint[m]
         a0, a1, a2 = marker_local[m, 0], marker_local[m, 1], marker_local[m, 2]
         x = pos[j, 0] + rot[j, 0, 0] * a0 + rot[j, 0, 1] * a1 + rot[j, 0, 2] * a2
@@ -247,15 +252,15 @@ def _project_cs(values, cs, sn, root_pos, root_rot, parent, chain, pre_rot, pre_
             proj[v, m, 0] = P[v, 0, 0] * x + P[v, 0, 1] * y + P[v, 0, 2] * z + P[v, 0, 3]
             proj[v, m, 1] = P[v, 1, 0] * x + P[v, 1, 1] * y + P[v, 1, 2] * z + P[v, 1, 3]
     if any_pinhole:
-        _project_pinhole(kind, P, K, dist, R, t, mk, proj)
+        _project_pinhole(kind, P, K, dist, R, t, mk, proj, m0, m1)
 
 
 @njit(cache=True, nogil=True)
-def _project_pinhole(kind, P, K, dist, R, t, mk, proj):
-    """Project the 3D markers ``mk`` (nm, 3) into the pinhole views of ``proj``."""
+def _project_pinhole(kind, P, K, dist, R, t, mk, proj, m0, m1):
+    """Project the 3D markers ``mk[m0:m1]`` into the pinhole views of ``proj``."""
     for v in range(kind.shape[0]):
         if kind[v] != ORTHOGRAPHIC:
-            for m in range(mk.shape[0]):
+            for m in range(m0, m1):
                 u, w = project_point(kind, P, K, dist, R, t, v, mk[m, 0], mk[m, 1], mk[m, 2])
                 proj[v, m, 0] = u
                 proj[v, m, 1] = w
@@ -281,7 +286,8 @@ def project_posture(angles, root_pos, root_rot, parent, chain, pre_rot, pre_tran
         sn[k], cs[k] = sincos(angles[k])
     _project_cs(angles, cs, sn, root_pos, root_rot, parent, chain, pre_rot, pre_trans,
                 post_trans, elem_axis, elem_index, joint_flags, marker_joint, marker_local,
-                slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj, _has_pinhole(kind))
+                slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj, _has_pinhole(kind),
+                (0, parent.shape[0], 0, marker_joint.shape[0]))
 
 
 # -- Eq. 5 -------------------------------------------------------------------------------
@@ -459,6 +465,82 @@ def evaluate(objective, proj, mk, points, conf, view_off, obs3, bidirectional, w
 
 
 @njit(cache=True, nogil=True)
+def partition_error(objective, proj, mk, points, conf, view_off, obs3, cap, m0, m1, claimed):
+    """E of the markers ``m0:m1`` only (one partition; the rest is constant while it moves).
+
+    Unlabelled points: each marker's nearest detection among those not ``claimed`` by the
+    markers of other partitions (:func:`claim_detections`), capped: a leg cannot take a
+    neighbour's marker. Labelled keypoints and 3D points: each marker against its own, as
+    :func:`labelled_error` and :func:`points3d_error`.
+    """
+    missing = cap if cap < np.inf else NAN_MARKER_COST
+    total = 0.0
+    if objective == OBJ_POINTS3D:
+        for i in range(m0, m1):
+            w = obs3[i, 3]
+            if w > 0.0:
+                dx = mk[i, 0] - obs3[i, 0]
+                dy = mk[i, 1] - obs3[i, 1]
+                dz = mk[i, 2] - obs3[i, 2]
+                total += w * min(np.sqrt(dx * dx + dy * dy + dz * dz), cap)
+        return total
+    nm = proj.shape[1]
+    for v in range(proj.shape[0]):
+        a = view_off[v]
+        b = view_off[v + 1]
+        if b <= a:
+            continue
+        if objective == OBJ_LABELLED:
+            if b - a == nm:
+                for i in range(m0, m1):
+                    w = conf[a + i]
+                    if w > 0.0 and np.isfinite(points[a + i, 0]):
+                        dx = proj[v, i, 0] - points[a + i, 0]
+                        dy = proj[v, i, 1] - points[a + i, 1]
+                        d = np.sqrt(dx * dx + dy * dy)
+                        total += w * min(d if np.isfinite(d) else missing, cap)
+            continue
+        for i in range(m0, m1):
+            px = proj[v, i, 0]
+            py = proj[v, i, 1]
+            best = np.inf
+            for c in range(a, b):
+                dx = px - points[c, 0]
+                dy = py - points[c, 1]
+                d2 = dx * dx + dy * dy
+                best = d2 if d2 < best and not claimed[c] else best
+            d = np.sqrt(best) if best < np.inf else missing
+            total += min(d, cap)
+    return total
+
+
+@njit(cache=True, nogil=True)
+def claim_detections(proj, points, view_off, m0, m1, gate, claimed):
+    """Mark the detections that markers outside ``m0:m1`` explain: each such marker's
+    nearest detection in each view, if within ``gate`` pixels (a marker far from every
+    detection, e.g. occluded, claims nothing)."""
+    claimed[:] = False
+    g2 = gate * gate
+    for v in range(proj.shape[0]):
+        a = view_off[v]
+        b = view_off[v + 1]
+        for i in range(proj.shape[1]):
+            if m0 <= i < m1:
+                continue
+            best = g2
+            arg = -1
+            for c in range(a, b):
+                dx = proj[v, i, 0] - points[c, 0]
+                dy = proj[v, i, 1] - points[c, 1]
+                d2 = dx * dx + dy * dy
+                if d2 <= best:
+                    best = d2
+                    arg = c
+            if arg >= 0:
+                claimed[arg] = True
+
+
+@njit(cache=True, nogil=True)
 def posture_error(angles, root_pos, root_rot, parent, chain, pre_rot, pre_trans, post_trans,
                   elem_axis, elem_index, joint_flags, marker_joint, marker_local, slide_index,
                   kind, P, K, dist, R, t, objective, points, conf, view_off, obs3,
@@ -491,7 +573,7 @@ def anneal_chain(start, free_idx, step, hist, nbins, th, dof_kind, lo, hi, max_r
                  elem_index, joint_flags, marker_joint, marker_local, slide_index, kind, P, K,
                  dist, R, t,
                  objective, points, conf, view_off, obs3, bidirectional, weight, cap,
-                 penalty_cap,
+                 penalty_cap, j0, j1, m0, m1, claimed,
                  cur, cand, best, cs, sn, rot, pos, mk, proj, per_view, nearest):
     """One annealing run from ``start``; the best posture seen is left in ``best``.
 
@@ -512,6 +594,10 @@ def anneal_chain(start, free_idx, step, hist, nbins, th, dof_kind, lo, hi, max_r
     free_idx : (n_free,) int64; step : (n_axes,) s(H_i) in radians.
     hist : (n_axes, n_bins_max), nbins : (n_axes,) int64 histogram tables.
     state : uint64 start state of the random stream (:func:`stream_state`).
+    j0, j1, m0, m1 : the joints and markers the moved entries reach (a partition's subtree;
+        ``0, nj, 0, nm`` for the whole body). With a partition, E is :func:`partition_error`
+        of its markers ``m0:m1`` (detections ``claimed`` by other partitions excluded), and
+        ``rot``, ``pos``, ``mk``, ``proj`` must hold the current posture of the rest.
     cur, cand, best, cs, sn : (n_axes,) scratch; rot (nj, 3, 3), pos (nj, 3), mk (nm, 3),
     proj (n_views, n_markers, 2), per_view (n_views,), nearest (n_markers,) int64 scratch.
 
@@ -531,12 +617,17 @@ def anneal_chain(start, free_idx, step, hist, nbins, th, dof_kind, lo, hi, max_r
         cand[k] = start[k]
         best[k] = start[k]
         sn[k], cs[k] = sincos(start[k])
+    whole = j0 == 0 and j1 == parent.shape[0] and m0 == 0 and m1 == marker_joint.shape[0]
+    span = (j0, j1, m0, m1)
     _project_cs(cand, cs, sn, root_pos, root_rot, parent, chain, pre_rot, pre_trans,
                 post_trans, elem_axis, elem_index, joint_flags, marker_joint, marker_local,
-                slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj, any_pinhole)
-    e_cur = evaluate(objective, proj, mk, points, conf, view_off, obs3, bidirectional, weight,
-                     cap, penalty_cap, per_view,
-                             nearest)
+                slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj, any_pinhole, span)
+    if not whole:
+        e_cur = partition_error(objective, proj, mk, points, conf, view_off, obs3, cap, m0,
+                                m1, claimed)
+    else:
+        e_cur = evaluate(objective, proj, mk, points, conf, view_off, obs3, bidirectional,
+                         weight, cap, penalty_cap, per_view, nearest)
     e_best = e_cur
     tau = tau0
     length = l0
@@ -581,11 +672,12 @@ def anneal_chain(start, free_idx, step, hist, nbins, th, dof_kind, lo, hi, max_r
             cand[i] = x
             sn[i], cs[i] = sincos(x)
         _project_cs(cand, cs, sn, root_pos, root_rot, parent, chain, pre_rot, pre_trans,
-                    post_trans,
-                    elem_axis, elem_index, joint_flags, marker_joint, marker_local, slide_index,
-                    kind, P, K,
-                    dist, R, t, rot, pos, mk, proj, any_pinhole)
-        if objective == OBJ_NEAREST and not bidirectional:
+                    post_trans, elem_axis, elem_index, joint_flags, marker_joint, marker_local,
+                    slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj, any_pinhole, span)
+        if not whole:
+            e = partition_error(objective, proj, mk, points, conf, view_off, obs3, cap, m0,
+                                m1, claimed)
+        elif objective == OBJ_NEAREST and not bidirectional:
             e = _paper_error(proj, points, view_off, cap)
         else:
             e = evaluate(objective, proj, mk, points, conf, view_off, obs3, bidirectional,
@@ -611,9 +703,69 @@ def anneal_chain(start, free_idx, step, hist, nbins, th, dof_kind, lo, hi, max_r
     return e_best, it
 
 
+@njit(cache=True, nogil=True)
+def anneal_partitions(origin, state, rp, rr, body, cams, dofs, schedule, error, objective,
+                      points, conf, view_off, obs3, parts, claimed, work, cur, cand, best, cs,
+                      sn, rot, pos, mk, proj, per_view, nearest):
+    """One annealing run over partitions, each in turn (partitioned sampling): partition p
+    moves only its own entries, with the schedule of ``schedule``, scored by
+    :func:`partition_error` of the markers it reaches (in the first round a trunk by its own
+    markers only: its limbs are not fitted yet). The first round fits every partition
+    against all detections; later rounds (``rounds`` > 1) exclude the detections that the
+    other partitions' markers explain (:func:`claim_detections` within ``claim_gate`` px),
+    so limbs do not share or take each other's markers. Leaves the result in ``best``.
+
+    Returns
+    -------
+    error : float, E of the whole posture (:func:`evaluate`)
+    iterations : int, summed over partitions and rounds
+    """
+    (parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index, joint_flags,
+     marker_joint, marker_local, slide_index) = body
+    kind, P, K, dist, R, t = cams
+    _, step, hist, nbins, dof_kind, lo, hi = dofs
+    (th, max_redraws, n_end, n_l, n_tau, tau0, l0, c_l, c_tau, eps, _, _, _, _, _,
+     _) = schedule
+    bidirectional, weight, cap, penalty_cap = error
+    bounds, part_off, part_dofs, rounds, claim_gate = parts
+    work[:] = origin
+    its = 0
+    rs = np.uint64(state)
+    for r in range(rounds):
+        for p in range(bounds.shape[0]):
+            project_posture(work, rp, rr, parent, chain, pre_rot, pre_trans, post_trans,
+                            elem_axis, elem_index, joint_flags, marker_joint, marker_local,
+                            slide_index, kind, P, K, dist, R, t, cs, sn, rot, pos, mk, proj)
+            j0, j1, m0, m1 = bounds[p, 0], bounds[p, 1], bounds[p, 2], bounds[p, 3]
+            if r == 0 and bounds[p, 4] > m0:
+                m1 = bounds[p, 4]  # a trunk before its limbs are fitted: its own markers
+            if r > 0 and objective == OBJ_NEAREST:
+                claim_detections(proj, points, view_off, m0, m1, claim_gate, claimed)
+            else:
+                claimed[:] = False
+            rs, _ = next_uniform(rs)  # a stream of its own for each partition and round
+            _, n = anneal_chain(work, part_dofs[part_off[p]:part_off[p + 1]], step, hist,
+                                nbins, th, dof_kind, lo, hi, max_redraws, n_end, n_l, n_tau,
+                                tau0, l0, c_l, c_tau, eps, mix64(rs), rp, rr, parent, chain,
+                                pre_rot, pre_trans, post_trans, elem_axis, elem_index,
+                                joint_flags, marker_joint, marker_local, slide_index, kind, P,
+                                K, dist, R, t, objective, points, conf, view_off, obs3,
+                                bidirectional, weight, cap, penalty_cap, j0, j1, m0, m1,
+                                claimed, cur, cand, best, cs, sn, rot, pos, mk, proj,
+                                per_view, nearest)
+            its += n
+            work[:] = best
+    project_posture(work, rp, rr, parent, chain, pre_rot, pre_trans, post_trans, elem_axis,
+                    elem_index, joint_flags, marker_joint, marker_local, slide_index, kind, P,
+                    K, dist, R, t, cs, sn, rot, pos, mk, proj)
+    best[:] = work
+    return evaluate(objective, proj, mk, points, conf, view_off, obs3, bidirectional, weight,
+                    cap, penalty_cap, per_view, nearest), its
+
+
 @njit(cache=True, nogil=True, parallel=True)
 def fit_frames(seg_off, frame_ids, root_pos, root_rot, start, body, cams, dofs, schedule,
-               error, obs, out):
+               error, obs, parts, out):
     """Fit many frames in parallel (``prange`` over segments of consecutive frames).
 
     Frames ``seg_off[s]:seg_off[s + 1]`` form segment ``s``, fitted in order by one thread;
@@ -638,6 +790,11 @@ def fit_frames(seg_off, frame_ids, root_pos, root_rot, start, body, cams, dofs, 
     obs : ObservationArrays (objective: OBJ_NEAREST, OBJ_LABELLED or OBJ_POINTS3D; points
         (n_points, 2); conf (n_points,) weights of labelled keypoints; offsets (n * n_views +
         1,) frame-major; points3d (n, n_markers or 0, 4)).
+    parts : Partitions (bounds (n_parts, 5): joints j0:j1 and markers m0:m1 each partition
+        reaches, m0:m_own its own markers; dof_off/dofs its free entries; rounds;
+        claim_gate): one partition anneals the whole body at once (the paper); more are
+        annealed in turn
+        (:func:`anneal_partitions`).
     out : FitOutputs: angles (n, n_state), NaN for frames without any observation; error
         (n,); view_error (n, n_views); runs, iterations (n,) int64 (iterations summed over
         runs); pairs (n,) int64 refinement pairs of the kept run (0 without).
@@ -653,6 +810,7 @@ def fit_frames(seg_off, frame_ids, root_pos, root_rot, start, body, cams, dofs, 
     bidirectional, weight, cap, penalty_cap = error
     objective, det_points, det_conf, det_off, obs3 = obs
     out_angles, out_error, out_view_error, out_runs, out_iterations, out_pairs = out
+    n_parts = parts[0].shape[0]
     nv = kind.shape[0]
     nj = parent.shape[0]
     nm = marker_joint.shape[0]
@@ -666,6 +824,8 @@ def fit_frames(seg_off, frame_ids, root_pos, root_rot, start, body, cams, dofs, 
         sn = np.empty(na)
         per_view = np.empty(nv)
         nearest = np.empty(nm, np.int64)
+        claimed = np.zeros(det_points.shape[0], np.bool_)
+        work = np.empty(na)
         cur = np.empty(na)
         cand = np.empty(na)
         best = np.empty(na)
@@ -693,17 +853,24 @@ def fit_frames(seg_off, frame_ids, root_pos, root_rot, start, body, cams, dofs, 
                 while run < max_runs and not e_keep <= reanalysis_threshold:
                     state = stream_state(seed, frame_ids[f], run)
                     origin = first if run == 0 else start
-                    e, its = anneal_chain(origin, free_idx, step, hist, nbins, th,
-                                          dof_kind, lo, hi, max_redraws, n_end, n_l, n_tau,
-                                          tau0, l0, c_l, c_tau, eps, state, rp, rr, parent,
-                                          chain, pre_rot, pre_trans, post_trans, elem_axis,
-                                          elem_index, joint_flags, marker_joint,
-                                          marker_local, slide_index, kind, P, K, dist, R, t,
-                                          objective, det_points, det_conf, vo, obs3[f],
-                                          bidirectional,
-                                          weight, cap, penalty_cap, cur, cand, best, cs, sn,
-                                          rot, pos,
-                                          mk, proj, per_view, nearest)
+                    if n_parts > 1:
+                        e, its = anneal_partitions(origin, state, rp, rr, body, cams, dofs,
+                                                   schedule, error, objective, det_points,
+                                                   det_conf, vo, obs3[f], parts, claimed,
+                                                   work, cur, cand, best, cs, sn, rot, pos,
+                                                   mk, proj, per_view, nearest)
+                    else:
+                        e, its = anneal_chain(origin, free_idx, step, hist, nbins, th,
+                                              dof_kind, lo, hi, max_redraws, n_end, n_l,
+                                              n_tau, tau0, l0, c_l, c_tau, eps, state, rp, rr,
+                                              parent, chain, pre_rot, pre_trans, post_trans,
+                                              elem_axis, elem_index, joint_flags,
+                                              marker_joint, marker_local, slide_index, kind,
+                                              P, K, dist, R, t, objective, det_points,
+                                              det_conf, vo, obs3[f], bidirectional, weight,
+                                              cap, penalty_cap, 0, nj, 0, nm, claimed, cur,
+                                              cand, best, cs, sn, rot, pos, mk, proj,
+                                              per_view, nearest)
                     out_iterations[f] += its
                     pairs = 0
                     if refine_steps > 0:

@@ -58,6 +58,7 @@ from kinematics.problem import (  # noqa: F401 (re-exported: the packing lived h
     error_args,
     fold_body,
     histogram_tables,
+    partitions_of,
     schedule_of,
 )
 from kinematics.settings import START_MODES, AnnealParams, ErrorOptions  # noqa: F401 (re-exported)
@@ -569,8 +570,9 @@ class Fitter:
         dropped = obs.dropped[sel]
         n, ns, nv = len(frame_ids), pr.n_state, self.n_views
         out = FitOutputs.empty(n, ns, nv)
+        parts = partitions_of(pr, p.partitions, p.partition_rounds, p.claim_gate_px)
         _ak.fit_frames(seg_off, frame_ids, roots, rots, start, pr.folded, pr.cams, pr.dofs,
-                       schedule_of(p), error_args(p.error), arrays, out)
+                       schedule_of(p), error_args(p.error), arrays, parts, out)
         state, err, view_err, runs, its, pairs = out
         counts = obs.view_counts(sel)
         results = []

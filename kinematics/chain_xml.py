@@ -14,13 +14,24 @@ from __future__ import annotations
 
 import os
 from collections import defaultdict
+from dataclasses import replace
 
 from kinematics import safe_xml
 from kinematics.errors import KinematicsError
 from kinematics.fileio import atomic_write_text
 from kinematics.histogram_xml import axis_keys, histogram_lines, key_text, read_histograms
 from kinematics.histograms import Histogram
-from kinematics.model import Axis, Body, Chain, Joint, Marker, Root, Segment, validate_body
+from kinematics.model import (
+    Axis,
+    Body,
+    Chain,
+    Joint,
+    Marker,
+    Root,
+    Segment,
+    check_histogram_range,
+    validate_body,
+)
 
 ROOT_TAG = "body"
 FORMAT_VERSION = "1"
@@ -181,7 +192,16 @@ def _with_histograms(body: Body, section: safe_xml.Element) -> Body:
         if key not in axes:
             raise KinematicsError(f"not an axis of body '{body.name}'", line=line,
                                   field=f"histogram {key_text(key)}")
-    return body.with_histograms({f"{j}.{a}": h for (_, j, a), (h, _) in entries.items()})
+    body = body.with_histograms({f"{j}.{a}": h for (_, j, a), (h, _) in entries.items()})
+    free_roots = {c.root_joint.name for c in body.chains if c.root.free}
+    for key, (hist, line) in entries.items():
+        if key[1] not in free_roots:
+            try:
+                check_histogram_range(replace(axes[key], histogram=hist),
+                                      f"histogram {key_text(key)}")
+            except KinematicsError as err:
+                raise err.located(line=line) from None
+    return body
 
 
 # -- saving ---------------------------------------------------------------------------------

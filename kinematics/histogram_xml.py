@@ -26,8 +26,8 @@ import numpy as np
 from kinematics import safe_xml
 from kinematics.errors import KinematicsError
 from kinematics.fileio import atomic_write_text
-from kinematics.histograms import N_BINS_DEFAULT, Histogram, merge_histograms
-from kinematics.model import Axis, Body
+from kinematics.histograms import MAX_BIN_VALUE, N_BINS_DEFAULT, Histogram, merge_histograms
+from kinematics.model import Axis, Body, check_histogram_range
 
 Key = tuple[str, str, str]
 """``(chain, joint, axis)`` names of one axis."""
@@ -89,9 +89,11 @@ def apply_archive(body: Body, archive: Mapping[Key, Histogram]) -> Body:
     """A copy of ``body`` whose axes carry the archive's histograms.
 
     Axes the archive does not name keep theirs. Raises :class:`KinematicsError` for an entry
-    that names no axis of the body or whose bin count differs from the axis's histogram.
+    that names no axis of the body, whose bin count differs from the axis's histogram, or
+    that lies entirely outside the range of a free axis.
     """
     axes = axis_keys(body)
+    free_roots = {(c.name, c.root_joint.name) for c in body.chains if c.root.free}
     for key, hist in archive.items():
         axis = axes.get(key)
         if axis is None:
@@ -101,6 +103,8 @@ def apply_archive(body: Body, archive: Mapping[Key, Histogram]) -> Body:
                 f"histogram has {hist.n_bins} bins, the body's has {axis.histogram.n_bins}",
                 field=key_text(key),
             )
+        if key[:2] not in free_roots:
+            check_histogram_range(replace(axis, histogram=hist), key_text(key))
     return body.with_histograms({f"{j}.{a}": h for (_, j, a), h in archive.items()})
 
 
@@ -214,6 +218,10 @@ def _read_histogram(elem: safe_xml.Element, where: str) -> Histogram:
                 raise KinematicsError("run needs from < to")
             if value < 0:
                 raise KinematicsError(f"run value must be >= 0, got {value!r}")
+            if value > MAX_BIN_VALUE:
+                raise KinematicsError(
+                    f"run value {value!r} is too large (at most {MAX_BIN_VALUE:g}; values are "
+                    "normalised to sum 1 on loading, so probabilities or counts will do)")
             if covered[lo:hi].any():
                 raise KinematicsError("run overlaps another run")
         except KinematicsError as err:

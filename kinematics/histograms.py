@@ -20,6 +20,10 @@ from kinematics.errors import KinematicsError
 
 N_BINS_DEFAULT = 360
 
+#: Largest bin value accepted. Values are normalised to sum 1, so any scale up to this will do
+#: (probabilities, percentages, counts); beyond it sums overflow and the scale is a mistake.
+MAX_BIN_VALUE = 1e12
+
 
 def wrap_deg(angle_deg):
     """Wrap angles (degrees) into [-180, 180)."""
@@ -47,6 +51,11 @@ class Histogram:
             raise KinematicsError("histogram needs a 1-D array of bin values")
         if not np.all(np.isfinite(values)) or np.any(values < 0):
             raise KinematicsError("histogram bin values must be finite and non-negative")
+        if values.max() > MAX_BIN_VALUE:
+            raise KinematicsError(
+                f"histogram bin value {values.max():g} is too large (at most "
+                f"{MAX_BIN_VALUE:g}; values are normalised to sum 1, so probabilities or "
+                "counts will do)")
         total = values.sum()
         if total <= 0:
             raise KinematicsError("histogram is empty (all bins are zero)")
@@ -145,6 +154,18 @@ class Histogram:
         x = self._unwrapped_centres()
         m = self.values @ x
         return float(np.sqrt(max(self.values @ (x - m) ** 2, 0.0)))
+
+    def mass_in_range(self, min_deg: float, max_deg: float) -> float:
+        """Probability of the bins that overlap ``[min_deg, max_deg]`` (degrees; the range may
+        pass ±180°): the share of the histogram an axis with that range can reach."""
+        span = max_deg - min_deg
+        if not span < 360.0:
+            return float(self.values.sum())
+        w = self.bin_width_deg
+        starts = -180.0 + np.arange(self.n_bins) * w
+        inside = ((starts - min_deg) % 360.0 <= span + 1e-9) | (
+            (min_deg - starts) % 360.0 < w - 1e-9)
+        return float(self.values[inside].sum())
 
     def support_deg(self) -> tuple[float, float]:
         """Smallest (lo, hi) interval covering all non-zero bins, lo in [-180, 180)."""

@@ -264,7 +264,9 @@ def validate_body(body: Body) -> None:
     body because posture columns are ``joint.axis``); no marker named like a joint and no
     axis named x, y or z (3D point columns are ``name.x``); each joint has one axis per rotation
     y, x, z with unique names; numbers finite; min <= max; locked values inside the range;
-    segment lengths >= 0; a ``marker`` root names a marker of its chain.
+    segment lengths >= 0; a ``marker`` root names a marker of its chain; the histogram of
+    every axis the annealing moves has mass inside the axis's range
+    (:func:`check_histogram_range`).
     """
     if body.units not in UNITS:
         raise KinematicsError(f"units must be one of {UNITS}, got '{body.units}'", field="units")
@@ -281,7 +283,7 @@ def validate_body(body: Body) -> None:
 
     for chain in body.chains:
         unique("chain", chain.name)
-    for _, joint, _, _ in body.joints():
+    for chain, joint, parent, _ in body.joints():
         unique("joint", joint.name)
         where = f"joint '{joint.name}'"
         _check_vec(joint.orientation_deg, f"{where} orientation")
@@ -301,6 +303,10 @@ def validate_body(body: Body) -> None:
                     field=f"{where} axis '{a.name}'")
         for a in joint.axes:
             _check_axis(a, f"{where} axis '{a.name}'")
+        # A free root's axes are searched around a seed within a window, not by histogram.
+        if not (parent is None and chain.root.free):
+            for a in joint.axes:
+                check_histogram_range(a, f"{where} axis '{a.name}'")
         for seg in joint.segments:
             unique("segment", seg.name)
             sw = f"segment '{seg.name}'"
@@ -344,6 +350,22 @@ def validate_body(body: Body) -> None:
                 raise KinematicsError(
                     f"a free root needs markers on the segments of its joint "
                     f"'{chain.root_joint.name}' to place the body", field=where)
+
+
+def check_histogram_range(axis: Axis, where: str) -> None:
+    """Refuse a free axis whose histogram has no mass inside the axis's range: annealing only
+    accepts angles in the range with a non-zero histogram bin, so every frame would fail.
+    Locked axes are skipped (their histogram is never consulted)."""
+    if axis.locked:
+        return
+    h = axis.histogram
+    if h.mass_in_range(axis.min_deg, axis.max_deg) > 0:
+        return
+    lo, hi = h.support_deg()
+    raise KinematicsError(
+        f"histogram lies entirely outside the axis range [{axis.min_deg:g}, {axis.max_deg:g}]"
+        f" deg (its non-zero bins cover [{lo:g}, {hi:g}]); no angle would be plausible and "
+        "every frame would fail: learn it on this axis or widen the range", field=where)
 
 
 def _check_vec(v, where: str) -> None:

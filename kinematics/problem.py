@@ -146,6 +146,80 @@ def error_args(options) -> ErrorArgs:
                      float(options.cap), float(options.penalty_cap))
 
 
+class Partitions(NamedTuple):
+    """Which entries are annealed together (``fit_frames``): partition p moves
+    ``dofs[dof_off[p]:dof_off[p + 1]]`` and reaches joints ``bounds[p, 0]:bounds[p, 1]`` and
+    markers ``bounds[p, 2]:bounds[p, 3]`` (its subtree, contiguous in depth-first order), of
+    which ``bounds[p, 2]:bounds[p, 4]`` are on its own joints (a trunk's, before its limbs)."""
+
+    bounds: np.ndarray  # (n_parts, 5) int64
+    dof_off: np.ndarray  # (n_parts + 1,) int64
+    dofs: np.ndarray  # (n_free,) int64
+    rounds: int
+    claim_gate: float
+
+
+def partitions_of(problem: FitProblem, mode: str = "auto", rounds: int = 2,
+                  claim_gate: float = 10.0) -> Partitions:
+    """The partitions of a problem's free entries.
+
+    ``"auto"``: every chain is annealed on its own; within a chain, the trunk (the root joint
+    and the joints below it down to the first joint with several child joints, free-root
+    translations included) comes first and reaches the whole chain, then each child subtree
+    is partitioned the same way (hierarchical, root before limbs; in the first round a trunk
+    is scored by its own markers only, its limbs not fitted yet). ``"none"``, or a body that
+    is a single unbranched chain: one partition with every free entry (the paper).
+    """
+    f = problem.folded
+    nj, nm = f.parent.size, f.marker_joint.size
+    free = problem.free_idx
+    whole = Partitions(np.array([[0, nj, 0, nm, nm]], np.int64),
+                       np.array([0, free.size], np.int64), free.copy(), int(rounds),
+                       float(claim_gate))
+    if mode == "none":
+        return whole
+    children: list[list[int]] = [[] for _ in range(nj)]
+    for j in range(nj):
+        if f.parent[j] >= 0:
+            children[f.parent[j]].append(j)
+    end = np.arange(1, nj + 1)  # one past the last joint of each subtree (depth-first order)
+    for j in range(nj - 1, -1, -1):
+        if children[j]:
+            end[j] = max(end[c] for c in children[j])
+    axis_index = pack_body(problem.body).axis_index
+    owner = np.full(problem.n_state, -1, np.int64)  # the joint each state entry belongs to
+    for j in range(nj):
+        owner[axis_index[j]] = j
+        if f.slide_index[j] >= 0:
+            owner[f.slide_index[j]: f.slide_index[j] + 3] = j
+    parts: list[tuple[tuple[int, int, int, int, int], list[int]]] = []
+
+    def visit(top: int) -> None:
+        trunk, j = [top], top
+        while len(children[j]) == 1:
+            j = children[j][0]
+            trunk.append(j)
+        marks = np.flatnonzero((f.marker_joint >= top) & (f.marker_joint < end[top]))
+        m0, m1 = (int(marks[0]), int(marks[-1]) + 1) if marks.size else (0, 0)
+        own = np.flatnonzero((f.marker_joint >= top) & (f.marker_joint <= j))
+        m_own = int(own[-1]) + 1 if own.size else m1  # the trunk's own markers come first
+        dofs = [int(i) for i in free if owner[i] in trunk]
+        if dofs:
+            parts.append(((top, int(end[top]), m0, m1, m_own), dofs))
+        for c in children[j]:
+            visit(c)
+
+    for j in range(nj):
+        if f.parent[j] < 0:
+            visit(j)
+    if len(parts) <= 1:
+        return whole
+    dofs = [_kind_order(d, problem.dof_kind) for _, d in parts]
+    off = np.r_[0, np.cumsum([len(d) for d in dofs])].astype(np.int64)
+    return Partitions(np.array([b for b, _ in parts], np.int64), off,
+                      np.concatenate(dofs).astype(np.int64), int(rounds), float(claim_gate))
+
+
 def free_root_chains(body: Body) -> list[int]:
     """Indices of the chains whose root is ``free``."""
     return [k for k, c in enumerate(body.chains) if c.root.free]

@@ -28,7 +28,12 @@ from lxml import etree
 from kinematics.errors import KinematicsError
 
 MAX_BYTES = 20 * 1024 * 1024
-MAX_DEPTH = 64
+#: Joints a chain may nest, from its root joint to a tip (a 60-vertebra spine needs 60).
+MAX_JOINT_DEPTH = 120
+#: XML nesting that allows: a joint ``d`` levels down sits at element level ``2·d + 1``
+#: (``<body>``, ``<chain>``, then joint/segment pairs) and its markers at ``2·d + 3``. It stays
+#: below libxml2's own limit of 256 levels (lifting that would need its ``huge_tree`` mode).
+MAX_DEPTH = 2 * MAX_JOINT_DEPTH + 3
 MAX_ELEMENTS = 200_000
 
 _PARSER_OPTIONS = dict(
@@ -95,7 +100,7 @@ def parse_document(
         if not data.strip():
             raise KinematicsError("file is empty")
         _refuse_doctype_bytes(data)
-        elem = _parse_streaming(data, max_depth, max_elements)
+        elem = _parse_streaming(data, max_depth, max_elements, root)
         if elem.tag != root:
             raise KinematicsError(
                 f"root element is <{elem.tag}>, expected <{root}>", line=elem.sourceline
@@ -122,7 +127,7 @@ def _refuse_doctype_bytes(data: bytes) -> None:
         raise KinematicsError(_DOCTYPE_MESSAGE, line=data.count(b"\n", 0, at) + 1)
 
 
-def _parse_streaming(data: bytes, max_depth: int, max_elements: int) -> Element:
+def _parse_streaming(data: bytes, max_depth: int, max_elements: int, root: str = "") -> Element:
     """Parse with the hardened options, refusing deep or huge documents while streaming."""
     parser = etree.XMLPullParser(events=("start", "end"), **_PARSER_OPTIONS)
     depth = count = 0
@@ -138,21 +143,36 @@ def _parse_streaming(data: bytes, max_depth: int, max_elements: int) -> Element:
                 depth += 1
                 count += 1
                 if depth > max_depth:
-                    raise KinematicsError(_too_deep(max_depth), line=elem.sourceline)
+                    raise KinematicsError(_too_deep(max_depth, elem), line=elem.sourceline)
                 if count > max_elements:
                     raise KinematicsError(
                         f"too many elements (more than {max_elements})", line=elem.sourceline
                     )
         return parser.close()
     except etree.XMLSyntaxError as err:
-        raise _syntax_error(data, err, max_depth) from None
+        raise _syntax_error(data, err, max_depth, root) from None
 
 
-def _too_deep(max_depth: int) -> str:
+def _too_deep(max_depth: int, elem: Element | None = None, root: str = "") -> str:
+    """The message for a document nested deeper than ``max_depth``, in joints for chains."""
+    joints = (max_depth - 3) // 2
+    if elem is not None:
+        in_chain = any(True for _ in elem.iterancestors("chain"))
+    else:
+        in_chain = root == "body"
+    if in_chain:
+        where = ""
+        if elem is not None:
+            n = sum(1 for _ in elem.iterancestors("joint")) + (elem.tag == "joint")
+            where = f" (this line is {n} joints down)"
+        return (f"chain is nested too deeply: a chain may nest at most {joints} joints from "
+                f"its root joint to a tip{where}; XML nesting is limited to {max_depth} "
+                "levels")
     return f"elements are nested too deeply (more than {max_depth} levels)"
 
 
-def _syntax_error(data: bytes, err: etree.XMLSyntaxError, max_depth: int) -> KinematicsError:
+def _syntax_error(data: bytes, err: etree.XMLSyntaxError, max_depth: int,
+                  root: str = "") -> KinematicsError:
     # The pull parser sometimes reports a follow-up error ("no element found"); a plain parse
     # of the same (size-limited) bytes names the first problem.
     try:
@@ -168,7 +188,7 @@ def _syntax_error(data: bytes, err: etree.XMLSyntaxError, max_depth: int) -> Kin
     elif msg.startswith("Document is empty"):
         msg = "file holds no XML element"
     elif msg.startswith("Excessive depth"):  # libxml2's own limit, hit within one chunk
-        msg = _too_deep(max_depth)
+        msg = _too_deep(max_depth, root=root)
     elif line is not None and line >= data.count(b"\n") + 1 and data.rfind(b"<") > data.rfind(
             b">"):  # an unclosed tag at the very end
         msg = "file ends in the middle of a tag; truncated file?"

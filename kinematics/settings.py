@@ -43,6 +43,7 @@ def setting(default, doc: str, *, min=None, max=None, choices=None, none=None):
 
 
 START_MODES = ("mean", "previous")
+PARTITION_MODES = ("auto", "none")
 
 #: Cost of a marker with no finite projection when no cap is set (same as the kernels).
 NAN_MARKER_COST = 1.0e6
@@ -159,6 +160,18 @@ class AnnealParams:
         None, "Root-marker tracking ignores a view whose nearest detection is farther than "
         "this (pixels) from the predicted root marker; None, written 0 in a project file: no "
         "gate (the paper's nearest neighbour).", min=0.0, max=1e9, none=0.0)
+    partitions: str = setting(
+        "auto", "How a body is annealed: 'auto' anneals each limb in turn (every chain, and "
+        "every subtree below a joint with several children, after its trunk), 'none' moves "
+        "every axis at once (the paper; a single unbranched chain is one partition either "
+        "way).", choices=PARTITION_MODES)
+    partition_rounds: int = setting(
+        2, "Rounds over the partitions per run; from the second on, a partition may not use "
+        "the detections the other partitions' markers explain (limbs cannot share or take "
+        "each other's markers).", min=1, max=100)
+    claim_gate_px: float = setting(
+        10.0, "A marker of another partition claims its nearest detection only within this "
+        "distance (pixels): an occluded marker claims nothing.", min=1e-6, max=1e9)
     error: ErrorOptions = field(default_factory=ErrorOptions, metadata={
         "doc": "The error function: Eq. 5 (default) or a variant.",
         "flatten": {"mode": "error"}})
@@ -171,7 +184,7 @@ class AnnealParams:
     def validate(self) -> None:
         """Raise :class:`KinematicsError` naming the first invalid field."""
         ints = {"n_end": 1, "n_l": 1, "n_tau": 1, "max_redraws": 0, "max_runs": 1,
-                "segment_length": 1, "refine_steps": 0, "seed": 0}
+                "segment_length": 1, "refine_steps": 0, "seed": 0, "partition_rounds": 1}
         for name, least in ints.items():
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int | np.integer) or (
@@ -180,7 +193,7 @@ class AnnealParams:
                                       field=name)
         if self.seed >= 2**63:
             raise KinematicsError(f"must be below 2**63, got {self.seed}", field="seed")
-        positive = ("tau0", "l0", "reanalysis_threshold", "refine_gate_px")
+        positive = ("tau0", "l0", "reanalysis_threshold", "refine_gate_px", "claim_gate_px")
         for name in positive:
             value = getattr(self, name)
             if not _is_real(value) or not (math.isfinite(value) and value > 0):
@@ -202,6 +215,9 @@ class AnnealParams:
         if g is not None and not (_is_real(g) and g > 0):
             raise KinematicsError(f"must be None or a number > 0, got {g!r}",
                                   field="root_gate_px")
+        if self.partitions not in PARTITION_MODES:
+            raise KinematicsError(f"must be one of {', '.join(PARTITION_MODES)}, got "
+                                  f"{self.partitions!r}", field="partitions")
         if self.start not in START_MODES:
             raise KinematicsError(f"must be one of {', '.join(START_MODES)}, got "
                                   f"{self.start!r}", field="start")

@@ -1,0 +1,149 @@
+"""Partitioned annealing: partitions of a body, the partition cost against the twin, limbs
+that may not share a detection, and a three-legged body fitted limb by limb."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from kinematics import _anneal_kernels as ak
+from kinematics.anneal import AnnealParams, Fitter
+from kinematics.cameras import OrthographicCamera
+from kinematics.chain_xml import load_body
+from kinematics.fk import forward_kinematics_reference
+from kinematics.model import Axis, Body, Chain, Joint, Marker, Root, Segment
+from kinematics.problem import FitProblem, partitions_of
+from tests.conftest import CHAINS
+from videotrack.paper_setup import locust_cameras
+
+
+def leg(name: str, at, yaw: float) -> Joint:
+    """A two-segment leg: hip (yaw about y, lift about z), knee hinge; markers at the knee
+    and the tip."""
+    tip = Segment(f"{name}_tibia", 10.0, markers=(Marker(f"{name}_tip"),))
+    knee = Joint(f"{name}_knee", (Axis.fixed("ry", "y"), Axis.fixed("rx", "x"),
+                                  Axis.free("flex", "z", -120, -20)), segments=(tip,))
+    femur = Segment(f"{name}_femur", 12.0, markers=(Marker(f"{name}_knee_mk"),),
+                    joints=(knee,))
+    return Joint(f"{name}_hip", (Axis.free("yaw", "y", yaw - 40, yaw + 40), Axis.fixed("rx", "x"),
+                                 Axis.free("lift", "z", -30, 50)), translation=at,
+                 segments=(femur,))
+
+
+def three_legs(mode="fixed") -> Body:
+    """A body (free yaw about y) with three legs hanging off one segment: a branching joint,
+    so 'auto' makes a trunk partition and one per leg."""
+    legs = (leg("a", (4.0, 0, 6.0), 45.0), leg("b", (0.0, 0, 8.0), 90.0),
+            leg("c", (-4.0, 0, 6.0), 135.0))
+    thorax = Segment("thorax", 0.0, markers=(Marker("head", (8.0, 1.0, 0.0)),
+                                             Marker("tail", (-8.0, 1.0, 0.0))), joints=legs)
+    body = Joint("body", (Axis.free("turn", "y", -20, 20), Axis.fixed("rx", "x"),
+                          Axis.fixed("rz", "z")), segments=(thorax,))
+    return Body("tripod", (Chain("c", body, Root(mode)),), "px")
+
+
+def top_and_side():
+    return {"top": OrthographicCamera.from_axes("top", 4.0, ("x", "z"), (150.0, 150.0)),
+            "side": OrthographicCamera.from_axes("side", 4.0, ("x", "-y"), (150.0, 150.0))}
+
+
+def test_partitions_trunk_first_then_each_limb():
+    body = three_legs()
+    pr = FitProblem.build(body, top_and_side())
+    parts = partitions_of(pr)
+    assert parts.bounds.shape == (4, 5)
+    names = body.joint_names
+    tops = [names[j] for j in parts.bounds[:, 0]]
+    assert tops == ["body", "a_hip", "b_hip", "c_hip"]
+    nm = len(body.marker_names)
+    np.testing.assert_array_equal(parts.bounds[0], [0, len(names), 0, nm, 2])  # trunk: all,
+    # scored by its own markers (head, tail) before the legs are fitted
+    labels = body.axis_labels
+    first = [labels[i] for i in parts.dofs[parts.dof_off[0]: parts.dof_off[1]]]
+    assert first == ["body.turn"]
+    second = [labels[i] for i in parts.dofs[parts.dof_off[1]: parts.dof_off[2]]]
+    assert second == ["a_hip.yaw", "a_hip.lift", "a_knee.flex"]
+    assert sorted(parts.dofs.tolist()) == sorted(pr.free_idx.tolist())
+    assert partitions_of(pr, "none").bounds.shape == (1, 5)
+
+
+def test_single_chains_are_one_partition_and_the_fly_is_six():
+    locust = load_body(CHAINS / "locust_hindleg.xml")
+    assert partitions_of(FitProblem.build(locust, locust_cameras())).bounds.shape == (1, 5)
+    fly = load_body(CHAINS / "fly_six_legs.xml")
+    parts = partitions_of(FitProblem.build(fly, locust_cameras()))
+    assert parts.bounds.shape == (6, 5)
+    assert (np.diff(parts.bounds[:, 2]) > 0).all()  # each leg's markers, in order
+
+
+def test_partition_cost_equals_the_twin_on_its_markers():
+    """No claims: the partition's E is Eq. 5 (capped) summed over its own markers only."""
+    rng = np.random.default_rng(0)
+    nv, nm = 2, 7
+    proj = rng.uniform(0, 100, (nv, nm, 2))
+    counts = [9, 5]
+    pts = rng.uniform(0, 100, (sum(counts), 2))
+    off = np.r_[0, np.cumsum(counts)].astype(np.int64)
+    for cap in (np.inf, 6.0):
+        for m0, m1 in ((0, 7), (2, 5), (6, 7)):
+            got = ak.partition_error(0, proj, np.zeros((nm, 3)), pts, np.ones(len(pts)), off,
+                                     np.zeros((nm, 4)), cap, m0, m1,
+                                     np.zeros(len(pts), np.bool_))
+            want = 0.0
+            for v in range(nv):
+                d = np.linalg.norm(proj[v, m0:m1, None] - pts[off[v]:off[v + 1]][None], axis=2)
+                want += np.minimum(d.min(axis=1), cap).sum()
+            assert got == pytest.approx(want, rel=1e-12, abs=1e-9)
+
+
+def test_claimed_detections_are_not_shared():
+    """Leg B's marker sits nearer leg A's blob than its own: with the blob claimed by A's
+    marker, B must use its own detection."""
+    proj = np.array([[[10.0, 10.0], [11.0, 10.0]]])  # marker 0 of A, marker 1 of B
+    pts = np.array([[10.0, 10.0], [16.0, 10.0]])
+    off = np.array([0, 2], np.int64)
+    claimed = np.zeros(2, np.bool_)
+    ak.claim_detections(proj, pts, off, 1, 2, 3.0, claimed)  # markers outside B claim
+    assert claimed.tolist() == [True, False]
+    e = ak.partition_error(0, proj, np.zeros((2, 3)), pts, np.ones(2), off, np.zeros((2, 4)),
+                           np.inf, 1, 2, claimed)
+    assert e == pytest.approx(5.0)
+    ak.claim_detections(proj, pts, off, 1, 2, 0.5, claimed)
+    assert claimed.tolist() == [True, False]
+    far = np.array([[[40.0, 40.0], [11.0, 10.0]]])  # A's marker is far from every blob
+    ak.claim_detections(far, pts, off, 1, 2, 3.0, claimed)
+    assert claimed.tolist() == [False, False]
+
+
+def planted(body, cams, n, seed):
+    rng = np.random.default_rng(seed)
+    lo, hi = body.ranges_deg().T
+    margin = np.minimum(5.0, (hi - lo) / 4)
+    angles = np.where(body.locked_mask(), 0.0, rng.uniform(lo + margin, hi - margin,
+                                                           (n, len(lo))))
+    frames = []
+    for a in angles:
+        m = forward_kinematics_reference(body, a).markers
+        frames.append([c.project(m) + rng.normal(0, 0.05, (len(m), 2)) for c in cams.values()])
+    return angles, frames
+
+
+def marker_errors(body, results, angles):
+    out = []
+    for r, a in zip(results, angles, strict=True):
+        fit = forward_kinematics_reference(body, r.angles_deg).markers
+        true = forward_kinematics_reference(body, a).markers
+        out.append(np.linalg.norm(fit - true, axis=1).max())
+    return np.array(out)
+
+
+def test_three_legs_fitted_limb_by_limb():
+    body = three_legs()
+    cams = top_and_side()
+    angles, frames = planted(body, cams, 12, seed=4)
+    params = AnnealParams(refine=True, reanalysis_threshold=2.0, partitions="auto"
+                          ).with_schedule(4000)
+    res = Fitter(body, cams, params).fit(frames)
+    err = marker_errors(body, res, angles)
+    assert np.median(err) < 0.1, err
+    assert (err < 1.0).mean() >= 0.9, err
