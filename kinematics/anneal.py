@@ -39,7 +39,7 @@ from __future__ import annotations
 import copy
 import math
 from collections.abc import Iterable, Iterator, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numba
 import numpy as np
@@ -539,6 +539,10 @@ class Fitter:
     def _iter(self, obs: Observations, idx: np.ndarray, chunk_size: int | None
               ) -> Iterator[FrameResult]:
         roots, rots = self._place(obs, idx)
+        params = self.params
+        if params.threshold_mode == "auto" and len(idx):
+            params = replace(params, reanalysis_threshold=self._video_threshold(
+                obs, idx, roots, rots))
         threads = numba.get_num_threads()
         seg = self.params.segment_length if self.params.start == "previous" else 1
         if chunk_size is None:  # enough frames (or segments) to keep every thread busy
@@ -555,16 +559,38 @@ class Fitter:
             seg_off = np.unique(np.r_[np.arange(0, n, seg), n]).astype(np.int64)
             yield from self._fit_block(obs, sel, sel, np.ascontiguousarray(roots[a: a + chunk]),
                                        np.ascontiguousarray(rots[a: a + chunk]),
-                                       self.problem.start, seg_off)
+                                       self.problem.start, seg_off, params)
+
+    def _video_threshold(self, obs: Observations, idx, roots, rots) -> float:
+        """The re-analysis threshold on E measured on the video itself (threshold_mode
+        'auto'): a sample of frames is fitted once, and the threshold per marker image is
+        median + auto_k · 1.4826 · MAD of their E per marker image, at least auto_floor_px;
+        times the marker images of a frame seen in every view."""
+        p = self.params
+        pick = np.unique(np.linspace(0, len(idx) - 1, min(p.auto_sample, len(idx))).astype(int))
+        once = replace(p, max_runs=1, threshold_mode="absolute")
+        res = self._fit_block(obs, idx[pick], idx[pick], np.ascontiguousarray(roots[pick]),
+                              np.ascontiguousarray(rots[pick]), self.problem.start,
+                              np.arange(len(pick) + 1, dtype=np.int64), once)
+        images = marker_images(obs, idx[pick], len(self.body.marker_names))
+        score = np.array([r.error for r in res]) / np.maximum(images, 1)
+        score = score[np.isfinite(score) & (images > 0)]
+        if score.size == 0:
+            return float(p.reanalysis_threshold)
+        med = float(np.median(score))
+        per_image = max(p.auto_floor_px, med + p.auto_k * 1.4826 * float(
+            np.median(np.abs(score - med))))
+        full = len(self.body.marker_names) * max(obs.n_views, 1)
+        return per_image * full
 
     def fit(self, detections, frames=None) -> list[FrameResult]:
         """All results of :meth:`iter_fit` as a list."""
         return list(self.iter_fit(detections, frames))
 
-    def _fit_block(self, obs: Observations, sel, frame_ids, roots, rots, start, seg_off
-                   ) -> list[FrameResult]:
+    def _fit_block(self, obs: Observations, sel, frame_ids, roots, rots, start, seg_off,
+                   params: AnnealParams | None = None) -> list[FrameResult]:
         """Fit frames ``sel`` of ``obs`` (``frame_ids`` key their random streams)."""
-        p, pr = self.params, self.problem
+        p, pr = params or self.params, self.problem
         arrays = obs.arrays(sel)
         pts, off = arrays.points, arrays.offsets
         dropped = obs.dropped[sel]
@@ -619,6 +645,14 @@ class Fitter:
             elif len(d):
                 out[v] = np.linalg.norm(proj[v][:, None] - d[None], axis=2).min(axis=1)
         return out
+
+
+def marker_images(obs: Observations, frames, n_markers: int) -> np.ndarray:
+    """Marker images each frame is scored on: markers × views with observations (3D points:
+    the markers with a point)."""
+    if obs.kind == "points3d":
+        return (obs.points3d[frames, :, 3] > 0).sum(axis=1)
+    return n_markers * (obs.view_counts(frames) > 0).sum(axis=1)
 
 
 def _carry_forward(points: np.ndarray, first: np.ndarray) -> np.ndarray:

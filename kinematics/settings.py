@@ -44,6 +44,7 @@ def setting(default, doc: str, *, min=None, max=None, choices=None, none=None):
 
 START_MODES = ("mean", "previous")
 PARTITION_MODES = ("auto", "none")
+THRESHOLD_MODES = ("absolute", "auto")
 
 #: Cost of a marker with no finite projection when no cap is set (same as the kernels).
 NAN_MARKER_COST = 1.0e6
@@ -160,6 +161,21 @@ class AnnealParams:
         None, "Root-marker tracking ignores a view whose nearest detection is farther than "
         "this (pixels) from the predicted root marker; None, written 0 in a project file: no "
         "gate (the paper's nearest neighbour).", min=0.0, max=1e9, none=0.0)
+    threshold_mode: str = setting(
+        "absolute", "How the re-analysis threshold is set: 'absolute' uses "
+        "reanalysis_threshold (E in pixels, the paper's Table 1 note); 'auto' measures the "
+        "video first — a sample of frames is fitted once and the threshold per marker image "
+        "is median + auto_k MADs of their E per marker image (at least auto_floor_px) — so "
+        "the status adapts to the marker and camera count and the noise of the recording.",
+        choices=THRESHOLD_MODES)
+    auto_k: float = setting(6.0, "With threshold_mode 'auto': how many robust standard "
+                            "deviations (1.4826 MAD) above the median E per marker image a "
+                            "frame may be before it is re-analysed and flagged.",
+                            min=0.0, max=1e3)
+    auto_floor_px: float = setting(0.5, "With threshold_mode 'auto': the smallest threshold "
+                                   "per marker image (pixels); > 0.", min=1e-6, max=1e6)
+    auto_sample: int = setting(64, "With threshold_mode 'auto': frames fitted to measure the "
+                               "video (evenly spaced; all if fewer).", min=3, max=10**6)
     partitions: str = setting(
         "auto", "How a body is annealed: 'auto' anneals each limb in turn (every chain, and "
         "every subtree below a joint with several children, after its trunk), 'none' moves "
@@ -184,7 +200,8 @@ class AnnealParams:
     def validate(self) -> None:
         """Raise :class:`KinematicsError` naming the first invalid field."""
         ints = {"n_end": 1, "n_l": 1, "n_tau": 1, "max_redraws": 0, "max_runs": 1,
-                "segment_length": 1, "refine_steps": 0, "seed": 0, "partition_rounds": 1}
+                "segment_length": 1, "refine_steps": 0, "seed": 0, "partition_rounds": 1,
+                "auto_sample": 3}
         for name, least in ints.items():
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int | np.integer) or (
@@ -193,7 +210,8 @@ class AnnealParams:
                                       field=name)
         if self.seed >= 2**63:
             raise KinematicsError(f"must be below 2**63, got {self.seed}", field="seed")
-        positive = ("tau0", "l0", "reanalysis_threshold", "refine_gate_px", "claim_gate_px")
+        positive = ("tau0", "l0", "reanalysis_threshold", "refine_gate_px", "claim_gate_px",
+                    "auto_floor_px")
         for name in positive:
             value = getattr(self, name)
             if not _is_real(value) or not (math.isfinite(value) and value > 0):
@@ -215,6 +233,12 @@ class AnnealParams:
         if g is not None and not (_is_real(g) and g > 0):
             raise KinematicsError(f"must be None or a number > 0, got {g!r}",
                                   field="root_gate_px")
+        if not _is_real(self.auto_k) or not (math.isfinite(self.auto_k) and self.auto_k >= 0):
+            raise KinematicsError(f"must be a finite number >= 0, got {self.auto_k!r}",
+                                  field="auto_k")
+        if self.threshold_mode not in THRESHOLD_MODES:
+            raise KinematicsError(f"must be one of {', '.join(THRESHOLD_MODES)}, got "
+                                  f"{self.threshold_mode!r}", field="threshold_mode")
         if self.partitions not in PARTITION_MODES:
             raise KinematicsError(f"must be one of {', '.join(PARTITION_MODES)}, got "
                                   f"{self.partitions!r}", field="partitions")

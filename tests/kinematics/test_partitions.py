@@ -147,3 +147,19 @@ def test_three_legs_fitted_limb_by_limb():
     err = marker_errors(body, res, angles)
     assert np.median(err) < 0.1, err
     assert (err < 1.0).mean() >= 0.9, err
+
+
+def test_auto_threshold_is_measured_on_the_video():
+    """threshold_mode 'auto': the threshold follows the recording's own E per marker image,
+    so good frames are 'ok' and a frame whose markers were swapped is flagged."""
+    body = three_legs()
+    cams = top_and_side()
+    angles, frames = planted(body, cams, 30, seed=6)
+    # frame 7: one leg's tip drawn 15 px away in the top view (a wrong detection)
+    frames[7][0] = frames[7][0].copy()
+    frames[7][0][4] += (15.0, 0.0)
+    params = AnnealParams(refine=True, threshold_mode="auto", max_runs=2).with_schedule(3000)
+    res = Fitter(body, cams, params).fit(frames)
+    status = [r.status for r in res]
+    assert status[7] == "failed"
+    assert sum(s == "failed" for s in status) <= 2, status
