@@ -154,7 +154,7 @@ def test_auto_threshold_is_measured_on_the_video():
     so good frames are 'ok' and a frame whose markers were swapped is flagged."""
     body = three_legs()
     cams = top_and_side()
-    angles, frames = planted(body, cams, 30, seed=6)
+    _, frames = planted(body, cams, 30, seed=6)
     # frame 7: one leg's tip drawn 15 px away in the top view (a wrong detection)
     frames[7][0] = frames[7][0].copy()
     frames[7][0][4] += (15.0, 0.0)
