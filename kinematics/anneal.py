@@ -103,6 +103,13 @@ class FrameResult:
     marker_residuals : ndarray, shape (n_views, n_markers), or None
         Distance in pixels from each fitted model marker to its nearest detection in each
         view (NaN where the view has no detection): which marker is off.
+    matched : int
+        Marker images (marker × view) within ``claim_gate_px`` of a detection.
+    unexplained : int
+        Detections farther than ``claim_gate_px`` from every model marker (ghosts, or
+        markers the fit left out).
+    worst_px : float
+        The largest marker residual (NaN without one).
     """
 
     frame: int
@@ -118,6 +125,9 @@ class FrameResult:
     dropped: int = 0
     refined_pairs: int | None = None
     marker_residuals: np.ndarray | None = None
+    matched: int = 0
+    unexplained: int = 0
+    worst_px: float = float("nan")
 
     @property
     def ok(self) -> bool:
@@ -612,9 +622,11 @@ class Fitter:
             missing = tuple(self.view_names[v] for v in range(nv) if counts[k, v] == 0)
             angles, fitted_roots = pr.posture(state[k], roots[k], rots[k])
             residuals = np.full((nv, pr.folded.marker_joint.size), np.nan)
+            unexplained = 0
             if runs[k]:
-                residuals = self._residuals(obs, state[k], roots[k], rots[k], pts,
-                                            off[k * nv: k * nv + nv + 1])
+                residuals, unexplained = self._residuals(obs, state[k], roots[k], rots[k],
+                                                         pts, off[k * nv: k * nv + nv + 1],
+                                                         p.claim_gate_px)
             results.append(FrameResult(
                 frame=int(frame_ids[k]),
                 angles_deg=self._to_range_deg(angles),
@@ -629,22 +641,30 @@ class Fitter:
                 dropped=int(dropped[k]),
                 refined_pairs=int(pairs[k]) if p.refine else None,
                 marker_residuals=residuals,
+                matched=int((residuals <= p.claim_gate_px).sum()),
+                unexplained=int(unexplained),
+                worst_px=float(np.nanmax(residuals)) if np.isfinite(residuals).any()
+                else float("nan"),
             ))
         return results
 
-    def _residuals(self, obs: Observations, state, root_pos, root_rot, pts, view_off
-                   ) -> np.ndarray:
+    def _residuals(self, obs: Observations, state, root_pos, root_rot, pts, view_off,
+                   gate: float) -> tuple[np.ndarray, int]:
         """(n_views, n_markers) distance of each model marker to its nearest detection (to
-        its own keypoint for labelled keypoints; NaN where there is none)."""
+        its own keypoint for labelled keypoints; NaN where there is none), and the number of
+        detections farther than ``gate`` from every marker."""
         proj = self._project_state(state, root_pos, root_rot)
         out = np.full(proj.shape[:2], np.nan)
+        unexplained = 0
         for v in range(self.n_views):
             d = pts[view_off[v]: view_off[v + 1]]
             if len(d) and obs.labelled:
                 out[v] = np.linalg.norm(proj[v] - d, axis=1)
             elif len(d):
-                out[v] = np.linalg.norm(proj[v][:, None] - d[None], axis=2).min(axis=1)
-        return out
+                dist = np.linalg.norm(proj[v][:, None] - d[None], axis=2)
+                out[v] = dist.min(axis=1)
+                unexplained += int((dist.min(axis=0) > gate).sum())
+        return out, unexplained
 
 
 def marker_images(obs: Observations, frames, n_markers: int) -> np.ndarray:
