@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Iterable, Iterator, Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -39,11 +39,13 @@ FORMAT_VERSION = "1"
 @dataclass(frozen=True)
 class HistogramArchive(Mapping):
     """Histograms keyed by ``(chain, joint, axis)``, in file order, plus the body they belong
-    to (informative: archives may be applied to any body with matching axis names)."""
+    to (informative: archives may be applied to any body with matching axis names) and the
+    file they were read from (``source``, named in errors; not compared)."""
 
     histograms: Mapping[Key, Histogram]
     body: str | None = None
     description: str | None = None
+    source: str | None = field(default=None, compare=False)
 
     def __post_init__(self) -> None:
         items = dict(self.histograms)
@@ -92,6 +94,14 @@ def apply_archive(body: Body, archive: Mapping[Key, Histogram]) -> Body:
     that names no axis of the body, whose bin count differs from the axis's histogram, or
     that lies entirely outside the range of a free axis.
     """
+    try:
+        _check_applicable(body, archive)
+    except KinematicsError as err:
+        raise err.located(file=getattr(archive, "source", None)) from None
+    return body.with_histograms({f"{j}.{a}": h for (_, j, a), h in archive.items()})
+
+
+def _check_applicable(body: Body, archive: Mapping[Key, Histogram]) -> None:
     axes = axis_keys(body)
     free_roots = {(c.name, c.root_joint.name) for c in body.chains if c.root.free}
     for key, hist in archive.items():
@@ -105,7 +115,6 @@ def apply_archive(body: Body, archive: Mapping[Key, Histogram]) -> Body:
             )
         if key[:2] not in free_roots:
             check_histogram_range(replace(axis, histogram=hist), key_text(key))
-    return body.with_histograms({f"{j}.{a}": h for (_, j, a), h in archive.items()})
 
 
 def update_archive(
@@ -139,7 +148,7 @@ def update_archive(
             continue
         key = (ref.chain, ref.joint, ref.axis.name)
         out[key] = out.get(key, ref.axis.histogram).updated(angles[:, ref.index])
-    return replace(archive, histograms=out, body=archive.body or body.name)
+    return replace(archive, histograms=out, body=archive.body or body.name, source=None)
 
 
 def merge_archives(archives: Sequence[HistogramArchive]) -> HistogramArchive:
@@ -185,6 +194,7 @@ def _archive_from_element(root: safe_xml.Element, source: str) -> HistogramArchi
         {key: hist for key, (hist, _) in entries.items()},
         body=root.get("body"),
         description=None if desc is None else (desc.text or ""),
+        source=source,
     )
 
 

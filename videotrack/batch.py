@@ -14,6 +14,10 @@ seed and the frame number, never on the thread count or on the other trials.
 Every output is written atomically, so a killed run leaves complete files or none, plus
 temporary files named like :func:`kinematics.fileio.atomic_write` names them, which
 :func:`remove_stray_temporaries` deletes when the trial is run again.
+
+A trial's warnings (stored with its detections and results, so reported again by every run)
+make it ``done-with-warnings`` or ``up-to-date-with-warnings``; a trial whose video(s) could
+not be read to the end, or of which no frame could be fitted, is ``incomplete``.
 """
 
 from __future__ import annotations
@@ -44,9 +48,15 @@ from videotrack.tables import text_table
 
 #: States of a finished trial.
 DONE, UP_TO_DATE, FAILED = "done", "up to date", "failed"
+DONE_WARNINGS, UP_TO_DATE_WARNINGS = "done-with-warnings", "up-to-date-with-warnings"
+INCOMPLETE = "incomplete"
+#: Every state, in the order counts are listed.
+STATES = (DONE, DONE_WARNINGS, UP_TO_DATE, UP_TO_DATE_WARNINGS, INCOMPLETE, FAILED)
 #: Columns of the project summary table.
 SUMMARY_COLUMNS = ("trial", "state", "frames", "median_error_px", "bad_frames_pct", "time_s",
-                   "message")
+                   "message", "warnings")
+#: How the warnings of a trial are joined in one cell of the summary.
+WARNINGS_SEPARATOR = " | "
 
 #: progress(frames done, frames added to the total) — the frames bar of a batch.
 Progress = Callable[[int, int], object]
@@ -59,7 +69,10 @@ class TrialReport:
     Attributes
     ----------
     name : str
-    state : {"done", "up to date", "failed"}
+    state : str
+        ``done`` or ``done-with-warnings`` (computed in this run), ``up to date`` or
+        ``up-to-date-with-warnings`` (nothing to do), ``incomplete`` (the video(s) could not
+        be read to the end, or no frame was fitted: ``message`` says why), ``failed``.
     frames : int
         Rows of the results file (0 when there is none).
     median_error : float
@@ -69,13 +82,14 @@ class TrialReport:
     seconds : float
         Time this run spent on the trial.
     message : str
-        Why it failed, one line.
+        Why it failed or is incomplete, one line.
     steps : tuple of str
         What was computed: ``"detect"``, ``"fit"``, ``"plot"``.
     log : tuple of str
         Lines for the run's log file (notes, the traceback of an unexpected error).
     warnings : tuple of str
-        Warnings raised while processing (truncated video, view without markers, ...).
+        Warnings of the trial (truncated video, view without markers, many failed frames,
+        ...): those of this run and those stored with its detections and results.
     """
 
     name: str
@@ -118,7 +132,9 @@ def run_trial(trial: Trial, force: bool = False, threads: int = 1,
     -------
     TrialReport
         Problems of the trial (bad config, unreadable video, ...) are a ``failed`` report,
-        never an exception; only KeyboardInterrupt passes.
+        never an exception; only KeyboardInterrupt passes. A trial with warnings is
+        ``done-with-warnings`` / ``up-to-date-with-warnings``, one that could not be
+        completed ``incomplete``.
     """
     t0 = time.perf_counter()
     lines: list[str] = []
@@ -137,9 +153,17 @@ def run_trial(trial: Trial, force: bool = False, threads: int = 1,
             report = TrialReport(trial.name, FAILED, message=f"{type(err).__name__}: {err}")
     notes = (*(f"VideoTrackWarning: {w}" for w in report.warnings),
              *(f"{w.category.__name__}: {w.message}" for w in caught))
-    return replace(report, seconds=time.perf_counter() - t0, log=(*lines, *notes),
-                   warnings=(*report.warnings, *(str(w.message) for w in caught
-                                                 if issubclass(w.category, VideoTrackWarning))))
+    found = tuple(dict.fromkeys((*report.warnings, *(
+        str(w.message) for w in caught if issubclass(w.category, VideoTrackWarning)))))
+    return replace(report, state=_with_warnings(report.state, found),
+                   seconds=time.perf_counter() - t0, log=(*lines, *notes), warnings=found)
+
+
+def _with_warnings(state: str, found: Sequence[str]) -> str:
+    """``done`` / ``up to date`` become their ``-with-warnings`` states when there are."""
+    if not found:
+        return state
+    return {DONE: DONE_WARNINGS, UP_TO_DATE: UP_TO_DATE_WARNINGS}.get(state, state)
 
 
 def _run_trial(trial: Trial, force: bool, threads: int, progress: Progress | None,
@@ -152,10 +176,12 @@ def _run_trial(trial: Trial, force: bool, threads: int, progress: Progress | Non
     run = run_project(config, force=force, threads=config["fit"]["jobs"] or threads,
                       progress=_frames_progress(progress), log=lines.append)
     err = run.results.error[np.isfinite(run.results.error)]
-    return TrialReport(trial.name, DONE if run.steps else UP_TO_DATE, frames=run.n_frames,
+    state = INCOMPLETE if run.incomplete else DONE if run.steps else UP_TO_DATE
+    return TrialReport(trial.name, state, frames=run.n_frames,
                        median_error=float(np.median(err)) if err.size else float("nan"),
                        bad_pct=100.0 * run.n_bad / run.n_frames if run.n_frames
-                       else float("nan"), steps=run.steps, warnings=run.warnings)
+                       else float("nan"), message=run.incomplete, steps=run.steps,
+                       warnings=run.warnings)
 
 
 def _frames_progress(progress: Progress | None):
@@ -201,6 +227,25 @@ def plan_trial(trial: Trial, force: bool = False) -> tuple[str, str]:
         return plan_project(trial.config, force=force)
     except LocatedError as err:
         return "fails", str(err)
+
+
+def project_inputs(trials: Sequence[Trial]) -> dict[Path, str]:
+    """Every file the trials read, by what it is (config files, chains, camera files,
+    histogram archives, videos): what no output of a batch may replace."""
+    from videotrack.detect import detection_inputs
+
+    found: dict[Path, str] = {}
+    for trial in trials:
+        if trial.config is None:
+            continue
+        config = trial.config
+        found.update(detection_inputs(config))
+        for section, key, what in (("chain", "path", "a chain"),
+                                   ("chain", "histograms", "a histogram archive"),
+                                   ("cameras", "path", "a camera file")):
+            if config[section][key]:
+                found[Path(config[section][key])] = what
+    return found
 
 
 # -- many trials --------------------------------------------------------------------------------
@@ -393,37 +438,97 @@ def _num(value: float, digits: int) -> str:
 def summary_rows(reports: Sequence[TrialReport]) -> list[tuple[str, ...]]:
     """One row per trial, the cells of :data:`SUMMARY_COLUMNS`."""
     return [(r.name, r.state, str(r.frames) if r.frames else "", _num(r.median_error, 3),
-             _num(r.bad_pct, 1), f"{r.seconds:.1f}", r.message) for r in reports]
+             _num(r.bad_pct, 1), f"{r.seconds:.1f}", _one_line(r.message),
+             WARNINGS_SEPARATOR.join(_one_line(w) for w in r.warnings)) for r in reports]
+
+
+def _one_line(text: str) -> str:
+    return " ".join(text.split())
 
 
 def summary_csv(reports: Sequence[TrialReport]) -> str:
     """The project summary table as CSV text."""
+    return _csv_text(summary_rows(reports))
+
+
+def _csv_text(rows: Sequence[Sequence[str]]) -> str:
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
     writer.writerow(SUMMARY_COLUMNS)
-    writer.writerows(summary_rows(reports))
+    writer.writerows(rows)
     return buf.getvalue()
 
 
-def write_summary(reports: Sequence[TrialReport], path: str | os.PathLike) -> Path:
-    """Write :func:`summary_csv` atomically."""
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(path, summary_csv(reports))
-    return Path(path)
+def read_summary(path: str | os.PathLike) -> list[tuple[str, ...]]:
+    """The rows of an existing summary table, cells in the order of
+    :data:`SUMMARY_COLUMNS` (a column an older file lacks is empty); [] when absent.
+
+    Raises
+    ------
+    VideoTrackError
+        The file is not a summary table.
+    """
+    try:
+        with open(path, newline="", encoding="utf-8") as fh:
+            rows = list(csv.DictReader(fh))
+    except FileNotFoundError:
+        return []
+    except (OSError, UnicodeDecodeError, csv.Error) as err:
+        raise VideoTrackError(f"cannot read the summary: {err}", file=path) from None
+    if rows and not {"trial", "state"} <= set(rows[0]):
+        raise VideoTrackError("not a batch summary (no trial and state columns)", file=path)
+    return [tuple(row.get(c) or "" for c in SUMMARY_COLUMNS) for row in rows]
+
+
+def write_summary(reports: Sequence[TrialReport], path: str | os.PathLike, *,
+                  keep: Sequence[str] = (), order: Sequence[str] = ()) -> Path:
+    """Write the summary table atomically: a row per report.
+
+    ``keep``: trials not run now whose rows in the existing summary stay (a run of
+    selected trials updates their rows and keeps the others'); ``order``: trial names in
+    the order the rows are written (default: the reports', then the kept rows).
+    """
+    path = Path(path)
+    rows = summary_rows(reports)
+    others = set(keep) - {r.name for r in reports}
+    if others:
+        with contextlib.suppress(VideoTrackError):  # not a summary (replaced with --force)
+            rows += [row for row in read_summary(path) if row[0] in others]
+    if order:
+        rank = {name: i for i, name in enumerate(order)}
+        rows.sort(key=lambda row: rank.get(row[0], len(rank)))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(path, _csv_text(rows))
+    return path
 
 
 def format_summary(reports: Sequence[TrialReport]) -> str:
-    """The summary as a terminal table (failures' messages listed below it)."""
+    """The summary as a terminal table; below it why trials failed or are incomplete, and
+    every trial's warnings."""
     head = ("trial", "state", "frames", "median E (px)", "bad (%)", "time (s)")
     table = text_table(head, [row[:6] for row in summary_rows(reports)], left=2)
-    failed = [f"  {r.name}: {r.message}" for r in reports if r.state == FAILED]
-    return table + ("\nfailed:\n" + "\n".join(failed) if failed else "")
+    lines = [line.rstrip() for line in table.splitlines()]
+    for state, title in ((FAILED, "failed"), (INCOMPLETE, "incomplete")):
+        listed = [f"  {r.name}: {r.message}" for r in reports if r.state == state]
+        if listed:
+            lines += [f"{title}:", *listed]
+    warned = [f"  {r.name}: {w}" for r in reports for w in r.warnings]
+    if warned:
+        lines += ["warnings:", *warned]
+    return "\n".join(lines)
 
 
 def count_states(reports: Sequence[TrialReport]) -> str:
     """``"3 done, 1 up to date, 1 failed"``."""
-    counts = {s: sum(r.state == s for r in reports) for s in (DONE, UP_TO_DATE, FAILED)}
+    counts = {s: sum(r.state == s for r in reports) for s in STATES}
     return ", ".join(f"{n} {s}" for s, n in counts.items() if n) or "nothing"
+
+
+def nothing_ran(reports: Sequence[TrialReport]) -> bool:
+    """Every trial was up to date (with or without stored warnings): the run changed
+    nothing."""
+    return all(r.state in (UP_TO_DATE, UP_TO_DATE_WARNINGS) or (
+        r.state == INCOMPLETE and not r.steps) for r in reports)
 
 
 class RunLog:
@@ -446,8 +551,18 @@ class RunLog:
         self.write(f"videotrack batch, {time.strftime('%Y-%m-%d %H:%M:%S')}: python "
                    f"{platform.python_version()}, {platform.node()}, {available_cores()} cores")
 
+    #: Why the log could not be written to the end (a full disk), or None.
+    failed: str | None = None
+
     def write(self, line: str) -> None:
-        self._fh.write(line + "\n")
+        """Append a line; a log that cannot be written (disk full) stops the log, never the
+        run (:attr:`failed` says why)."""
+        if self.failed is not None:
+            return
+        try:
+            self._fh.write(line + "\n")
+        except OSError as err:
+            self.failed = err.strerror or str(err)
 
     def report(self, r: TrialReport) -> None:
         what = f" ({', '.join(r.steps)})" if r.steps else ""
@@ -459,7 +574,16 @@ class RunLog:
             self.write("    " + line.replace("\n", "\n    "))
 
     def close(self) -> None:
-        self._fh.close()
+        try:
+            self._fh.close()
+        except OSError as err:
+            self.failed = self.failed or err.strerror or str(err)
+
+    def discard(self) -> None:
+        """Close and delete the log (a run that changed nothing leaves none)."""
+        self.close()
+        with contextlib.suppress(OSError):
+            self.path.unlink()
 
 
 @contextlib.contextmanager

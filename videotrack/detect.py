@@ -32,6 +32,7 @@ from videotrack.detections import (
 )
 from videotrack.errors import VideoTrackError, VideoTrackWarning
 from videotrack.filters import FilterChain
+from videotrack.identity import video_hash
 from videotrack.markers import MarkerSettings, RegionFinder
 from videotrack.video import VideoSet, as_video_set, open_videos, resolve_frames
 from videotrack.views import Plane, View, check_views
@@ -134,11 +135,19 @@ def detect_project(
     Raises
     ------
     VideoTrackError
-        Bad video or settings, a frame range outside the video, or an existing file at
-        ``output`` that is no detections file (never overwritten unless ``force``).
+        Bad video or settings, a frame range outside the video, an ``output`` that is one
+        of the inputs (the video, a config file: never overwritten), or an existing file at
+        ``output`` that is no detections file (not overwritten unless ``force``).
     """
+    from videotrack.identity import relative_message, relative_path
+    from videotrack.outputs import guard_outputs
+
+    field = ("--output" if output is not None else
+             "output.detections" if config["output"]["detections"] else None)
     output = Path(output) if output is not None else default_output(config)
-    with _project_videos(config, frames, frames_field) as (videos, settings, frame_range):
+    guard_outputs({output: "detections"}, detection_inputs(config), force=force, field=field)
+    with _passed_on_warnings() as caught, _project_videos(
+            config, frames, frames_field) as (videos, settings, frame_range):
         if not force:
             reason, previous = _stale_reason(output, videos, settings, frame_range)
             if reason is None:
@@ -158,9 +167,39 @@ def detect_project(
                                       progress=step if progress is not None else None)
         except VideoTrackError as err:
             raise err.located(file=config.path) from None
+    # what went wrong travels with the detections: later runs report it too; paths are
+    # relative to the file, whose bytes then do not depend on where the project is
+    base = output.absolute().parent
+    for video in detections.metadata["videos"]:
+        video["path"] = relative_path(video["path"], base)
+    detections.metadata["warnings"] = list(dict.fromkeys(
+        relative_message(str(w.message), base) for w in caught
+        if issubclass(w.category, VideoTrackWarning)))
     output.parent.mkdir(parents=True, exist_ok=True)
     save_detections(detections, output)
     return detections, output, False
+
+
+def detection_inputs(config) -> dict[Path, str]:
+    """The files a detection reads, by what they are: config files and video(s)."""
+    inputs = {Path(p): "a config file" for p in (*config.sources, config.path)}
+    for k, path in enumerate(video_paths(config)):
+        inputs[path] = "the video" if not k else f"video {k}"
+    return inputs
+
+
+@contextlib.contextmanager
+def _passed_on_warnings():
+    """Record the warnings of a block into the yielded list and pass them all on when it
+    ends (whether it ends well or not)."""
+    caught: list = []
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", VideoTrackWarning)
+            yield caught
+    finally:
+        for w in list(caught):
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
 
 
 def detections_status(config, frames: str | None = None,
@@ -338,26 +377,32 @@ def detect_video(source, settings: DetectSettings, frames=None,
     """
     videos = as_video_set(source)
     frame_range = resolve_frames(frames, videos.n_frames)
+    # hashed before decoding: a file changed meanwhile is recognised as changed next time
+    identity = [{**ident, "sha256": video_hash(s.path)}
+                for ident, s in zip(videos.identity(), videos.sources, strict=True)]
     per_record, video_frames, parities = [], [], []
     last = None
-    for det in iter_detect(videos, settings, frame_range):
-        per_record.append(list(zip(det.points, det.areas, strict=True)))
-        video_frames.append(det.video_frame)
-        parities.append(-1 if det.parity is None else det.parity)
-        if progress is not None and det.video_frame != last:
-            progress(1)
-        last = det.video_frame
+    with _naming_broken_images(videos):
+        for det in iter_detect(videos, settings, frame_range):
+            per_record.append(list(zip(det.points, det.areas, strict=True)))
+            video_frames.append(det.video_frame)
+            parities.append(-1 if det.parity is None else det.parity)
+            if progress is not None and det.video_frame != last:
+                progress(1)
+            last = det.video_frame
     broken = [s.broken_at for s in videos.sources if s.broken_at is not None]
     metadata = {
         "format": FORMAT,
         "version": VERSION,
         "settings": settings.to_dict(),
         "settings_hash": settings.hash(),
-        "videos": videos.identity(),
+        "videos": identity,
         "view_names": [v.name for v in settings.views],
         "frame_rate": settings.deinterlace.frame_rate(videos.fps),
         "frames": [frame_range.start, frame_range.start if last is None else last + 1],
         "broken_at": min(broken) if broken else None,
+        "broken": [_broken_entry(s) for s in videos.sources if s.broken_at is not None],
+        "warnings": [],
     }
     detections = build_detections(per_record, video_frames, parities, metadata)
     counts = detections.counts()
@@ -367,6 +412,72 @@ def detect_video(source, settings: DetectSettings, frames=None,
                 f"view {name!r}: no markers in any of the {len(counts)} records; check its ROI "
                 "and the filter chain", VideoTrackWarning, stacklevel=2)
     return detections
+
+
+def _broken_image(source) -> Path | None:
+    """The image of an image folder at which decoding stopped (None for a video file)."""
+    if not source.is_sequence or source.broken_at is None:
+        return None
+    from videotrack.identity import image_files
+
+    files = image_files(source.path)
+    return files[source.broken_at] if source.broken_at < len(files) else None
+
+
+def _broken_entry(source) -> dict:
+    """What the detections file records about a video that could not be read to its end."""
+    image = _broken_image(source)
+    return {"video": source.path.name, "frame": int(source.broken_at),
+            "announced": int(source.container_frames),
+            "file": None if image is None else image.name}
+
+
+def incomplete_reason(detections: Detections) -> str:
+    """Why ``detections`` do not cover their video(s) to the end, or ``""``: a video that
+    could not be decoded past a frame (truncated or damaged), an unreadable image."""
+    meta = detections.metadata
+    parts = []
+    for b in meta.get("broken") or []:
+        where = (f"image {b['video']}/{b['file']} (frame {b['frame']}) cannot be read"
+                 if b.get("file") else
+                 f"{b['video']} cannot be decoded from frame {b['frame']} on")
+        parts.append(f"{where}: frames {b['frame']}..{b['announced'] - 1} of "
+                     f"{b['announced']} are missing")
+    if not parts and meta.get("broken_at") is not None:  # files of an earlier version
+        parts.append(f"the video(s) could not be decoded from frame {meta['broken_at']} on")
+    return "; ".join(parts)
+
+
+@contextlib.contextmanager
+def _naming_broken_images(videos: VideoSet):
+    """While detecting: a break in an image folder is reported naming the image (where the
+    video reader's warning names the folder and the frame number only)."""
+    caught: list = []
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", VideoTrackWarning)
+            yield
+    finally:
+        named = {}
+        for source in videos.sources:
+            image = _broken_image(source)
+            if image is not None:
+                named[f"{source.path}: decoding stopped at frame {source.broken_at}"] = (
+                    image, source)
+        for w in caught:
+            text = str(w.message)
+            prefix = next((p for p in named if text.startswith(p)), None)
+            if prefix is not None and named[prefix][0].name in text:
+                del named[prefix]  # the reader named the image itself
+            elif prefix is not None:
+                continue  # replaced by the warning below
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        for image, source in named.values():
+            n = source.container_frames
+            warnings.warn(f"{image}: cannot read this image (frame {source.broken_at} of the "
+                          f"{n} images in its folder; damaged or truncated): frames "
+                          f"{source.broken_at}..{n - 1} are left out", VideoTrackWarning,
+                          stacklevel=4)
 
 
 @dataclass(frozen=True)

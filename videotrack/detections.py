@@ -22,7 +22,12 @@ metadata      str (0-d)             JSON: format, version, settings and their ha
 
 The metadata records what is needed to tell stale detections (:func:`check_fresh`): the
 detection settings (views, filters, markers, de-interlacing) with their SHA-256, and the
-identity of each source video (name, bytes, frame size, frame count, fps).
+identity of each source video (name, path relative to the detections file when saved by
+:func:`videotrack.detect.detect_project`, bytes, frame size, frame count, fps and the SHA-256
+of its content, :func:`videotrack.identity.video_hash`). It also keeps what went wrong while
+detecting, so later runs still report it: ``warnings`` (messages, paths relative to the
+file's folder) and ``broken`` (videos that could not be read to their end: name, the frame
+where decoding stopped, the frames announced, and for an image folder the image).
 """
 
 from __future__ import annotations
@@ -239,8 +244,8 @@ def check_fresh(detections: Detections, videos, settings: DetectSettings,
     ----------
     detections : Detections
     videos : VideoSet or VideoSource
-        The video(s) the detections should come from (compared by name, bytes, frame size,
-        frame count and fps; the folder may differ).
+        The video(s) the detections should come from (compared by bytes, frame size, frame
+        count, fps and the SHA-256 of the content; name and folder may differ).
     settings : DetectSettings
         Compared by hash.
     frames : range, optional
@@ -251,6 +256,7 @@ def check_fresh(detections: Detections, videos, settings: DetectSettings,
     VideoTrackError
         Stale detections, saying what differs; field ``settings``, ``video`` or ``frames``.
     """
+    from videotrack.identity import video_hash
     from videotrack.video import as_video_set
 
     meta = detections.metadata
@@ -262,20 +268,29 @@ def check_fresh(detections: Detections, videos, settings: DetectSettings,
         raise VideoTrackError(
             f"stale detections: made with other {', '.join(changed)} settings; run "
             "'videotrack detect --force' to redo them", file=where, field="settings")
-    now = as_video_set(videos).identity()
+    video_set = as_video_set(videos)
+    now = video_set.identity()
     before = meta.get("videos", [])
     if len(now) != len(before):
         raise VideoTrackError(
             f"stale detections: made from {len(before)} video(s), now {len(now)}",
             file=where, field="video")
-    for old, new in zip(before, now, strict=True):
-        differ = [k for k in ("name", "bytes", "width", "height", "frames", "fps")
+    for old, new, source in zip(before, now, video_set.sources, strict=True):
+        differ = [k for k in ("bytes", "width", "height", "frames", "fps")
                   if old.get(k) != new[k]]
         if differ:
             detail = ", ".join(f"{k} {old.get(k)!r} -> {new[k]!r}" for k in differ)
             raise VideoTrackError(
                 f"stale detections: made from another video ({detail})", file=where,
                 field="video")
+        if "sha256" not in old:
+            raise VideoTrackError(
+                "stale detections: made by an earlier VideoTrack that did not record the "
+                "video's content hash", file=where, field="video")
+        if old["sha256"] != video_hash(source.path):
+            raise VideoTrackError(
+                f"stale detections: made from another video of the same size "
+                f"({new['name']}: other content)", file=where, field="video")
     if frames is not None and len(frames):
         start, stop = meta["frames"]
         wanted_stop = frames.stop

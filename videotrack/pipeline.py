@@ -14,6 +14,19 @@ Resuming: while fitting, finished frames are checkpointed every few seconds to
 same inputs and parameters keeps those frames and fits only the rest; the final file is the
 same as an uninterrupted run's because frames are fitted independently from their own random
 streams (with ``start = "previous"`` the checkpoint is not used).
+
+Identity: the results sidecar names its inputs by paths relative to the results file's
+folder and identifies them by content hash (:mod:`videotrack.identity`); only the hashes and
+the parameters decide whether results are up to date (:data:`IDENTITY_KEYS`), so a project
+copied or moved elsewhere stays up to date and a changed input of the same size does not.
+
+Warnings travel: what went wrong while detecting is kept in the detections file, and the
+sidecar keeps every warning of the run that made the results, so a later run that finds them
+up to date reports them again. :attr:`ProjectRun.incomplete` says when the results do not
+cover the video(s) (a truncated file, an unreadable image) or no frame could be fitted.
+
+Outputs never replace inputs (:func:`videotrack.outputs.guard_outputs`), checked before any
+work is done.
 """
 
 from __future__ import annotations
@@ -22,7 +35,7 @@ import contextlib
 import os
 import time
 import warnings
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -32,6 +45,7 @@ from kinematics.anneal import AnnealParams, Fitter, FrameResult
 from kinematics.model import Body
 from videotrack.config import record_from_table
 from videotrack.errors import VideoTrackError, VideoTrackWarning
+from videotrack.identity import relative_message, relative_path
 from videotrack.results import (
     Results,
     file_sha256,
@@ -43,6 +57,13 @@ from videotrack.results import (
 )
 
 CHECKPOINT_SECONDS = 5.0
+#: A warning is raised when more than this share of the frames failed or had no detections.
+BAD_SHARE_WARNING = 0.1
+#: Sidecar keys that decide whether results are up to date (inputs by content hash, and
+#: every parameter), in the order ``changed: ...`` lists them; paths are not among them.
+IDENTITY_KEYS = ("chain_sha256", "cameras_sha256", "histograms_sha256", "views",
+                 "view_cameras", "axes", "markers", "seed", "anneal", "detections_sha256")
+_KEY_NAMES = {"view_cameras": "view cameras"}
 
 
 @dataclass(frozen=True)
@@ -63,20 +84,35 @@ class ProjectModel:
     def fitter(self) -> Fitter:
         return Fitter(self.body, self.cameras, self.params)
 
-    def signature(self) -> dict:
-        """What a results file depends on, for its sidecar (replay and staleness)."""
+    def signature(self, base: str | os.PathLike | None = None) -> dict:
+        """What a results file depends on, for its sidecar (replay and staleness): the
+        chain, cameras and histograms files (paths relative to the folder ``base`` when
+        given, and content hashes), the views and the camera each uses, axes, markers,
+        seed and every annealing parameter."""
+        def where(path: Path) -> str:
+            return relative_path(path, base) if base is not None else str(path)
+
         sig = {
-            "chain": str(self.chain_path), "chain_sha256": file_sha256(self.chain_path),
-            "cameras": str(self.cameras_path),
+            "chain": where(self.chain_path), "chain_sha256": file_sha256(self.chain_path),
+            "cameras": where(self.cameras_path),
             "cameras_sha256": file_sha256(self.cameras_path),
-            "views": self.view_names, "axes": self.body.axis_labels,
+            "views": self.view_names,
+            "view_cameras": {view: cam.name for view, cam in self.cameras.items()},
+            "axes": self.body.axis_labels,
             "markers": len(self.body.marker_names), "seed": self.params.seed,
             "anneal": _jsonable(self.params.to_dict()),
         }
         if self.histograms_path is not None:
-            sig["histograms"] = str(self.histograms_path)
+            sig["histograms"] = where(self.histograms_path)
             sig["histograms_sha256"] = file_sha256(self.histograms_path)
         return sig
+
+    def inputs(self) -> dict[Path, str]:
+        """The files the model was read from, by what they are (never overwritten)."""
+        found = {self.chain_path: "the chain", self.cameras_path: "the camera file"}
+        if self.histograms_path is not None:
+            found[self.histograms_path] = "the histogram archive"
+        return found
 
 
 def _jsonable(value):
@@ -169,21 +205,41 @@ def check_detection_views(model: ProjectModel, detections, detections_path: Path
     if list(detections.view_names) != model.view_names:
         raise VideoTrackError(f"detections are for views {detections.view_names}, the project "
                               f"has {model.view_names}: detect again", file=detections_path)
+    meta = getattr(detections, "metadata", None) or {}
+    if "settings" in meta and "videos" in meta:  # each view against its camera's image size
+        from videotrack.views import View, check_camera_sizes
+
+        check_camera_sizes([View.from_dict(v) for v in meta["settings"]["views"]],
+                           [(v["width"], v["height"]) for v in meta["videos"]], model.cameras)
 
 
-def results_sidecar(model: ProjectModel, detections_path: Path) -> dict:
+def results_sidecar(model: ProjectModel, detections_path: Path,
+                    results_path: str | os.PathLike | None = None) -> dict:
     """What a results file records about its inputs and parameters (its sidecar, less the
-    rows and the CSV's own hash): chain, cameras and detections with their hashes, views,
-    axes, seed and every annealing parameter."""
-    return {**model.signature(), "detections": str(detections_path),
+    rows, the warnings and the CSV's own hash): chain, cameras and detections with their
+    hashes, views and their cameras, axes, seed and every annealing parameter. Paths are
+    relative to the folder of ``results_path`` when given (so the project can move)."""
+    base = None if results_path is None else Path(results_path).absolute().parent
+    where = str(detections_path) if base is None else relative_path(detections_path, base)
+    return {**model.signature(base), "detections": where,
             "detections_sha256": file_sha256(detections_path)}
+
+
+def changed_inputs(meta: Mapping, expected: Mapping) -> list[str]:
+    """The inputs and parameters (:data:`IDENTITY_KEYS`) in which a sidecar ``meta``
+    differs from ``expected``, named as ``changed: ...`` lists them."""
+    expected = _jsonable(dict(expected))
+    return list(dict.fromkeys(
+        _KEY_NAMES.get(k, k.removesuffix("_sha256")) for k in IDENTITY_KEYS
+        if meta.get(k) != expected.get(k)))
 
 
 def results_stale_reason(model: ProjectModel, detections_path: Path, results_path: Path,
                          n_rows: int) -> str | None:
     """Why ``results_path`` is not the complete fit of these detections with this model, or
     None when it is up to date (same inputs by content hash, same parameters, ``n_rows``
-    rows, and a CSV matching its sidecar: a write cut between the two is caught)."""
+    rows, and a CSV matching its sidecar: a write cut between the two is caught). Where the
+    files are does not matter."""
     results_path = Path(results_path)
     if not results_path.exists():
         return "no results yet"
@@ -193,10 +249,9 @@ def results_stale_reason(model: ProjectModel, detections_path: Path, results_pat
         return err.message
     if not meta:
         return "no sidecar"
-    expected = _jsonable(results_sidecar(model, detections_path))
-    changed = [k.removesuffix("_sha256") for k in expected if meta.get(k) != expected[k]]
+    changed = changed_inputs(meta, results_sidecar(model, detections_path))
     if changed:
-        return "changed: " + ", ".join(dict.fromkeys(changed))
+        return "changed: " + ", ".join(changed)
     if meta.get("rows") != n_rows:
         return f"{meta.get('rows')} rows, {n_rows} wanted"
     if meta.get("csv_sha256") != file_sha256(results_path):
@@ -211,17 +266,28 @@ def fit_project(
     results_path: Path,
     frames=None,
     progress: Callable[[FrameResult], None] | None = None,
+    *,
+    notes: Sequence[str] = (),
+    resumed: Callable[[int, int], object] | None = None,
 ) -> Results:
     """Fit ``frames`` (default all records) and write the results file and its sidecar.
 
     ``progress`` is called with each frame's result as it arrives. Finished frames are
-    checkpointed so an interrupted run resumes (see the module docstring).
+    checkpointed so an interrupted run resumes (see the module docstring); ``resumed`` is
+    called with (frames kept from a checkpoint, frames in all) when it does. The sidecar's
+    ``warnings`` are ``notes`` (e.g. the detections' warnings) followed by
+    :func:`fit_warnings` of the results.
     """
     fitter = model.fitter()
+    results_path = Path(results_path)
     idx = np.arange(detections.n_records) if frames is None else np.asarray(list(frames))
-    sidecar = results_sidecar(model, detections_path)
+    sidecar = results_sidecar(model, detections_path, results_path)
     partial = _partial_path(results_path)
     done = _resume(partial, sidecar) if model.params.start == "mean" else {}
+    wanted = set(idx.tolist())
+    done = {k: r for k, r in done.items() if k in wanted}
+    if done and resumed is not None:
+        resumed(len(done), len(idx))
     for r in done.values():
         if progress is not None:
             progress(r)
@@ -239,9 +305,41 @@ def fit_project(
                 last = time.monotonic()
     ordered = [results[int(f)] for f in idx]
     table = results_from_fit(model.body, ordered, model.view_names, detections)
-    write_results(results_path, table, sidecar)
+    base = results_path.absolute().parent
+    found = [relative_message(w, base) for w in (*notes, *fit_warnings(table, detections))]
+    write_results(results_path, table, {**sidecar, "warnings": list(dict.fromkeys(found))})
     discard_checkpoint(results_path)
     return table
+
+
+def fit_warnings(table: Results, detections=None) -> list[str]:
+    """What looks wrong in fitted results: detections with non-finite coordinates, and more
+    than :data:`BAD_SHARE_WARNING` of the frames failed or without detections (naming the
+    first of them)."""
+    found = []
+    if detections is not None and len(detections.points):
+        bad = ~np.isfinite(detections.points).all(axis=1)
+        if bad.any():
+            rows = np.searchsorted(detections.offsets, np.flatnonzero(bad), side="right") - 1
+            records = sorted({int(k) // max(detections.n_views, 1) for k in rows})
+            found.append(f"{int(bad.sum())} detection(s) with coordinates that are not finite "
+                         f"(records {_listing(records)}); check the detections file")
+    n = len(table)
+    if n:
+        failed = np.flatnonzero(~table.ok_mask())
+        if failed.size > BAD_SHARE_WARNING * n:
+            frames = [int(table.video_frames[i]) for i in failed]
+            kinds = {s: table.status.count(s) for s in ("failed", "no-detections")
+                     if s in table.status}
+            what = ", ".join(f"{v} {k}" for k, v in kinds.items())
+            found.append(f"{failed.size} of {n} frames ({100 * failed.size / n:.1f} %) were "
+                         f"not fitted ({what}): video frames {_listing(frames)}")
+    return found
+
+
+def _listing(values: Sequence[int], most: int = 8) -> str:
+    shown = ", ".join(str(v) for v in values[:most])
+    return shown + (f", ... ({len(values)} in all)" if len(values) > most else "")
 
 
 def _checkpoint(partial: Path, model: ProjectModel, results: dict, detections, sidecar):
@@ -256,7 +354,7 @@ def _resume(partial: Path, sidecar: dict) -> dict[int, FrameResult]:
         return {}
     try:
         meta = read_sidecar(partial)
-        if {k: meta.get(k) for k in sidecar} != _jsonable(sidecar):
+        if changed_inputs(meta, sidecar):
             return {}
         table = read_results(partial)
     except VideoTrackError:
@@ -306,7 +404,15 @@ class ProjectRun:
     detect_seconds, fit_seconds : float
         Time spent detecting and fitting (0 for a step that was skipped).
     warnings : tuple of str
-        Messages of the :class:`~videotrack.errors.VideoTrackWarning` s of the run.
+        Messages of the :class:`~videotrack.errors.VideoTrackWarning` s of the run, and
+        those stored with the detections and the results when these were up to date (so
+        a warning is reported by every run, not only the one that met it); paths relative
+        to the results' folder.
+    incomplete : str
+        Why the results are incomplete, or ``""``: the video(s) could not be read to the
+        end (truncated, an unreadable image), or not one frame was fitted.
+    resumed : int
+        Frames kept from the checkpoint of an interrupted fit (0: none).
     model, detections, results
         The model, the detections and the results table (model and results are None with
         ``fit=False``).
@@ -323,6 +429,8 @@ class ProjectRun:
     detect_seconds: float = 0.0
     fit_seconds: float = 0.0
     warnings: tuple[str, ...] = ()
+    incomplete: str = ""
+    resumed: int = 0
     model: ProjectModel | None = field(default=None, repr=False, compare=False)
     detections: object = field(default=None, repr=False, compare=False)
     results: Results | None = field(default=None, repr=False, compare=False)
@@ -402,24 +510,77 @@ def run_project(
     ------
     LocatedError
         Anything the user can get wrong: config, video, chain, cameras, parameters,
-        detections of other views, stale detections with ``detect=False``.
+        detections of other views, stale detections with ``detect=False``, an output path
+        that is one of the inputs or an existing file of another kind (unless ``force``).
     Cancelled
     """
+    from videotrack.detect import default_output, detection_inputs
+
     report = _reporter(progress, cancel)
+    plot = config["fit"]["plot"] if plot is None else plot
     with _recorded_warnings() as caught:
-        model = load_model(config, **(anneal or {})) if fit else None  # fails before work
+        with _recorded_warnings(pass_on=True) as loading:
+            model = load_model(config, **(anneal or {})) if fit else None  # fails before work
+        det_out = default_output(config)
+        results_path = (Path(results) if results is not None else
+                        default_results_path(config, det_out))
+        _guard(config, model, det_out, results_path, detect=detect, fit=fit, plot=plot,
+               force=force, results_given=results is not None,
+               inputs=detection_inputs(config))
         t0 = time.perf_counter()
         detections, det_path, detected = _detections(config, detect, force, report, log)
-        run = ProjectRun(det_path, Path(results) if results is not None else
-                         default_results_path(config, det_path),
-                         steps=(DETECT,) if detected else (),
+        run = ProjectRun(det_path, results_path, steps=(DETECT,) if detected else (),
                          detect_seconds=time.perf_counter() - t0 if detected else 0.0,
                          detections=detections)
         if fit:
+            notes = [*loading, *detections.metadata.get("warnings", [])]
             run = _fit(run, model, frames, force,
-                       config["fit"]["jobs"] if threads is None else threads, report, log)
-            run = _plot(run, config["fit"]["plot"] if plot is None else plot)
-    return replace(run, warnings=tuple(caught))
+                       config["fit"]["jobs"] if threads is None else threads, report, log,
+                       notes)
+            run = _plot(run, plot)
+    return _reported(run, caught)
+
+
+def _guard(config, model, det_out: Path, results_path: Path, *, detect: bool, fit: bool,
+           plot: bool, force: bool, results_given: bool, inputs: dict) -> None:
+    """Refuse outputs that are inputs, or existing files of another kind (unless force),
+    before any work is done (:func:`videotrack.outputs.guard_outputs`)."""
+    from videotrack.outputs import guard_outputs
+    from videotrack.results import sidecar_path
+
+    if model is not None:
+        inputs = {**inputs, **model.inputs()}
+    if detect:
+        guard_outputs({det_out: "detections"}, inputs, force=force,
+                      field="output.detections" if config["output"]["detections"] else None)
+    if not fit:
+        return
+    outputs = {results_path: "results", sidecar_path(results_path): "sidecar"}
+    partial, partial_side = checkpoint_paths(results_path)
+    outputs.update({partial: "results", partial_side: "sidecar"})
+    if plot:
+        outputs[default_plot_path(results_path)] = "png"
+    field = "--results" if results_given else "fit.results" if config["fit"]["results"] else None
+    guard_outputs(outputs, {**inputs, det_out: "the detections file"}, force=force,
+                  field=field)
+
+
+def _reported(run: ProjectRun, caught: Sequence[str]) -> ProjectRun:
+    """The run with its warnings (this run's, and those stored with its detections and
+    results) and why it is incomplete."""
+    from videotrack.detect import incomplete_reason
+
+    base = run.results_path.absolute().parent
+    stored = list(run.detections.metadata.get("warnings", [])) if run.detections else []
+    if run.results is not None:
+        with contextlib.suppress(VideoTrackError):
+            stored += read_sidecar(run.results_path).get("warnings", [])
+    found = [relative_message(w, base) for w in (*caught, *stored)]
+    why = [incomplete_reason(run.detections)] if run.detections is not None else []
+    if run.results is not None and run.n_frames and not run.n_ok:
+        why.append(f"not one of the {run.n_frames} frames was fitted")
+    return replace(run, warnings=tuple(dict.fromkeys(found)),
+                   incomplete="; ".join(w for w in why if w))
 
 
 def plan_project(config, *, force: bool = False, plot: bool | None = None) -> tuple[str, str]:
@@ -433,24 +594,26 @@ def plan_project(config, *, force: bool = False, plot: bool | None = None) -> tu
     LocatedError
         What would make the run fail (config, video, chain, cameras, views).
     """
-    from videotrack.detect import default_output, detections_status
+    from videotrack.detect import default_output, detection_inputs, detections_status
 
-    if force:
-        return "detect + fit", "--force"
+    wanted = config["fit"]["plot"] if plot is None else plot
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", VideoTrackWarning)
         model = load_model(config)
+        det_path = default_output(config)
+        results = default_results_path(config, det_path)
+        _guard(config, model, det_path, results, detect=True, fit=True, plot=wanted,
+               force=force, results_given=False, inputs=detection_inputs(config))
+        if force:
+            return "detect + fit", "--force"
         reason, detections = detections_status(config)
         if reason is not None:
             return "detect + fit", reason
-        det_path = default_output(config)
         check_detection_views(model, detections, det_path)
-        results = default_results_path(config, det_path)
         reason = results_stale_reason(model, det_path, results, detections.n_records)
         if reason is not None:
             return "fit", reason
-        if (config["fit"]["plot"] if plot is None else plot) and _older(
-                default_plot_path(results), results):
+        if wanted and _older(default_plot_path(results), results):
             return "plot", "no plot of the current results"
         return "up to date", ""
 
@@ -475,9 +638,10 @@ def load_fresh_detections(config, path: str | os.PathLike):
     with open_videos(videos) as opened:
         try:
             check_fresh(detections, opened, settings_from_config(config))
-        except VideoTrackError as err:
-            raise VideoTrackError(f"stale detections: {err.message}; run 'videotrack detect' "
-                                  "again", file=path) from None
+        except VideoTrackError as err:  # said once: "stale detections: <why>; <what to do>"
+            why = err.message.removeprefix("stale detections: ").split("; run ")[0]
+            raise VideoTrackError(f"stale detections: {why}; run 'videotrack detect' again "
+                                  "(or 'videotrack run')", file=path) from None
     return detections
 
 
@@ -492,9 +656,10 @@ def _reporter(progress, cancel) -> Callable[..., None]:
 
 
 @contextlib.contextmanager
-def _recorded_warnings():
+def _recorded_warnings(pass_on: bool = False):
     """Collect the messages of VideoTrack's warnings into the yielded list (once the block
-    has ended); other warnings, and all of a block that raises, are passed on."""
+    has ended); other warnings, and all of a block that raises, are passed on (with
+    ``pass_on`` VideoTrack's too, after being collected)."""
     kept: list[str] = []
     caught: list = []
     ok = False
@@ -505,9 +670,10 @@ def _recorded_warnings():
             ok = True
     finally:
         for w in caught:
-            if ok and issubclass(w.category, VideoTrackWarning):
+            mine = issubclass(w.category, VideoTrackWarning)
+            if ok and mine:
                 kept.append(str(w.message))
-            else:
+            if not (ok and mine) or pass_on:
                 warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
 
 
@@ -527,7 +693,7 @@ def _detections(config, detect: bool, force: bool, report, log):
 
 
 def _fit(run: ProjectRun, model: ProjectModel, frames: slice | None, force: bool,
-         threads: int, report, log) -> ProjectRun:
+         threads: int, report, log, notes: Sequence[str] = ()) -> ProjectRun:
     """The fit step: results read when up to date, else fitted and written."""
     import numba
 
@@ -554,11 +720,21 @@ def _fit(run: ProjectRun, model: ProjectModel, frames: slice | None, force: bool
         counts["bad"] += not r.ok
         report(FIT, counts["done"], total, counts["bad"])
 
+    kept = []
+
+    def resumed(n: int, of: int) -> None:
+        kept.append(n)
+        if log is not None:
+            log(f"resumed an interrupted fit: {n} of {of} records kept from "
+                f"{checkpoint_paths(out)[0].name}")
+
     t0 = time.perf_counter()
     report(FIT, 0, total)
-    table = fit_project(model, detections, run.detections_path, out, idx, fitted)
+    table = fit_project(model, detections, run.detections_path, out, idx, fitted,
+                        notes=notes, resumed=resumed)
     return _with_results(replace(run, model=model, steps=(*run.steps, FIT), fit_reason=why,
-                                 fit_seconds=time.perf_counter() - t0), table)
+                                 fit_seconds=time.perf_counter() - t0,
+                                 resumed=sum(kept)), table)
 
 
 def _with_results(run: ProjectRun, table: Results) -> ProjectRun:

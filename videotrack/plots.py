@@ -19,7 +19,8 @@ def plot_angles(results: Results, path: str | os.PathLike, locked=None, truth=No
     bad = ~results.ok_mask()
     t = results.times
     fig, axes = plt.subplots(len(free) + 1, 1, figsize=(10, 1.6 * (len(free) + 1) + 0.6),
-                             sharex=True)
+                             sharex=True, squeeze=False)
+    axes = axes[:, 0]
     for ax, i in zip(axes, free, strict=False):
         ax.plot(t, results.angles_deg[:, i], lw=1.2, color="tab:blue", label="fitted")
         if truth is not None:
@@ -28,7 +29,8 @@ def plot_angles(results: Results, path: str | os.PathLike, locked=None, truth=No
             ax.plot(t[bad], results.angles_deg[bad, i], "x", color="tab:red", label="bad")
         ax.set_ylabel(f"{results.axis_labels[i]} (°)", fontsize=8)
         ax.grid(alpha=0.3)
-    axes[0].legend(loc="upper right", fontsize=7, ncol=3)
+    if free:
+        axes[0].legend(loc="upper right", fontsize=7, ncol=3)
     ax = axes[-1]
     ax.plot(t, results.error, lw=1, color="k")
     if bad.any():
@@ -38,8 +40,16 @@ def plot_angles(results: Results, path: str | os.PathLike, locked=None, truth=No
     ax.grid(alpha=0.3)
     n_bad = int(bad.sum())
     fig.suptitle(f"{len(results)} frames, {n_bad} bad ({100 * n_bad / max(len(results), 1):.1f} %)"
-                 f", median E {np.nanmedian(results.error):.2f} px")
+                 f", median E {median_text(results.error)}")
     return _save_png(fig, path, dpi=90)
+
+
+def median_text(values, unit: str = "px") -> str:
+    """``"1.23 px"``: the median of the finite values, or ``"n/a (no fitted frame)"`` (not
+    numpy's "All-NaN slice" warning) when there are none."""
+    v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v)]
+    return f"{np.median(v):.2f} {unit}" if v.size else "n/a (no fitted frame)"
 
 
 def plot_histograms(items, path: str | os.PathLike) -> Path:

@@ -269,8 +269,9 @@ def _find_videos(folder: Path, patterns: Sequence[str]) -> list[Path]:
 
 
 def _claim_outputs(trials: list[Trial]) -> tuple[Trial, ...]:
-    """Trials whose outputs would overwrite another trial's fail instead (e.g. an
-    ``[output] detections`` set in a shared config.toml)."""
+    """Trials whose outputs would overwrite another trial's (e.g. an ``[output] detections``
+    set in a shared config.toml), or a file some trial reads (its video, a config, the
+    chain, ...), fail instead."""
     owners: dict[Path, list[int]] = {}
     outputs = {}
     for i, trial in enumerate(trials):
@@ -283,7 +284,16 @@ def _claim_outputs(trials: list[Trial]) -> tuple[Trial, ...]:
             continue
         for path in (outputs[i].detections, outputs[i].results):
             owners.setdefault(path, []).append(i)
+    read = _inputs_of(trials)
     for path, claim in owners.items():
+        plain = Path(os.path.normpath(path.absolute()))
+        if plain in read:
+            for i in claim:
+                t = trials[i]
+                trials[i] = Trial(t.name, t.folder, None, str(VideoTrackError(
+                    f"is {read[plain]} of the project: an output never replaces an input; "
+                    "set [output] detections / [fit] results to another path", file=plain)))
+            continue
         if len(claim) < 2:
             continue
         names = ", ".join(trials[i].name for i in claim)
@@ -294,6 +304,15 @@ def _claim_outputs(trials: list[Trial]) -> tuple[Trial, ...]:
                 "[fit] results empty in shared config files (outputs then go beside each "
                 "trial's video)", file=path)))
     return tuple(trials)
+
+
+def _inputs_of(trials: list[Trial]) -> dict[Path, str]:
+    """Every file the trials read (configs, videos, chains, cameras), absolute, by what it
+    is."""
+    from videotrack.batch import project_inputs
+
+    return {Path(os.path.normpath(Path(p).absolute())): what
+            for p, what in project_inputs(trials).items()}
 
 
 def load_trial_config(project: str | os.PathLike, name: str) -> Config:

@@ -12,8 +12,10 @@ detection. They show which marker of a frame is off (a swapped or missing marker
 
 ``status`` is ``ok``, ``reanalysed``, ``failed``, ``no-detections`` or ``corrected`` (set by
 hand in the GUI). Empty cells are NaN. The sidecar ``<results>.json`` records the seed, every
-fitting parameter, the chain, cameras and detections used (with content hashes) so any run
-can be replayed and stale results recognised. Both are written atomically.
+fitting parameter, the chain, cameras and detections used (paths relative to the results
+file's folder, and content hashes) so any run can be replayed and stale results recognised,
+and the warnings of the run that made the results (``warnings``). Both are written
+atomically.
 """
 
 from __future__ import annotations
@@ -269,9 +271,8 @@ def frame_results(table: Results, seed: int) -> dict:
 
 
 def file_sha256(path: str | os.PathLike) -> str:
-    """Content hash recorded in sidecars (which inputs produced a result)."""
-    digest = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
+    """Content hash recorded in sidecars (which inputs produced a result): the SHA-256 of
+    the file, cached while the file is unchanged (:func:`videotrack.identity.content_hash`)."""
+    from videotrack.identity import content_hash
+
+    return content_hash(path)

@@ -18,13 +18,14 @@ The flip maps pixel centres onto pixel centres, so it is exact and its own inver
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import warnings
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from videotrack.deinterlace import Deinterlace
-from videotrack.errors import VideoTrackError
+from videotrack.errors import VideoTrackError, VideoTrackWarning
 
 
 @dataclass(frozen=True)
@@ -137,6 +138,12 @@ class View:
                 "flip_x": self.flip_x, "flip_y": self.flip_y, "camera": self.camera,
                 "video": self.video}
 
+    @classmethod
+    def from_dict(cls, d: Mapping) -> View:
+        """The view :meth:`to_dict` wrote (e.g. from a detections file's settings)."""
+        return cls(d["name"], tuple(d.get("roi") or ()) or None, bool(d.get("flip_x")),
+                   bool(d.get("flip_y")), d.get("camera") or None, int(d.get("video", 0)))
+
     def _need_roi(self) -> None:
         if self.roi is None:
             raise ValueError(f"view {self.name!r} has no ROI yet; call resolved(width, height)")
@@ -145,12 +152,26 @@ class View:
 def check_views(views: Sequence[View], sizes: Sequence[tuple[int, int]]) -> tuple[View, ...]:
     """Resolve every view against the frame sizes ``(width, height)`` of its video.
 
+    Warns (:class:`~videotrack.errors.VideoTrackWarning`) when a video looks like a scaled
+    copy of the one the views were drawn on (:func:`scaled_video_problem`).
+
     Raises
     ------
     VideoTrackError
         No views, duplicate names, a view of a video that is not there, an ROI outside the
-        frame; the field is ``views[i]...`` as in the project file.
+        frame (saying which frame size the views need); the field is ``views[i]...`` as in
+        the project file.
     """
+    out = _resolve(views, sizes)
+    for video, (width, height) in enumerate(sizes):
+        problem = scaled_video_problem(views, video, width, height)
+        if problem:
+            warnings.warn(problem, VideoTrackWarning, stacklevel=2)
+    return out
+
+
+def _resolve(views: Sequence[View], sizes: Sequence[tuple[int, int]]) -> tuple[View, ...]:
+    """:func:`check_views` without its warnings."""
     if not views:
         raise VideoTrackError("no views", field="views")
     names = [v.name for v in views]
@@ -165,8 +186,73 @@ def check_views(views: Sequence[View], sizes: Sequence[tuple[int, int]]) -> tupl
                 f"view {view.name!r} is cut from video {view.video}, but there are "
                 f"{len(sizes)} video(s) (0-based)", field=f"views[{i}].video")
         width, height = sizes[view.video]
-        out.append(view.resolved(width, height, field=f"views[{i}].roi"))
+        try:
+            out.append(view.resolved(width, height, field=f"views[{i}].roi"))
+        except VideoTrackError as err:
+            need = _needed_size(views, view.video)
+            if need is not None and (need[0] > width or need[1] > height):
+                err.message += (f"; the views need a frame of at least {need[0]}x{need[1]}: "
+                                "is this the video they were set up for?")
+            raise
     return tuple(out)
+
+
+def _needed_size(views: Sequence[View], video: int) -> tuple[int, int] | None:
+    """The frame size the explicit ROIs of one video's views reach, or None without any."""
+    rois = [v.roi for v in views if v.video == video and v.roi is not None]
+    if not rois:
+        return None
+    return max(x + w for x, _, w, _ in rois), max(y + h for _, y, _, h in rois)
+
+
+def scaled_video_problem(views: Sequence[View], video: int, width: int, height: int
+                         ) -> str | None:
+    """A message when video ``video`` (``width`` x ``height``) looks like a scaled copy of
+    the one its views were drawn on, else None.
+
+    The views' ROIs then reach only a top-left part of the frame that has the frame's own
+    proportions (e.g. ROIs up to 720x288 in a 1440x576 frame): markers appear at other
+    positions, and every fit would fail. Views of the whole frame (no ROI) are not judged.
+    """
+    if any(v.roi is None for v in views if v.video == video):
+        return None
+    need = _needed_size(views, video)
+    if need is None:
+        return None
+    sx, sy = width / need[0], height / need[1]
+    if sx < 1.1 or sy < 1.1 or abs(sx / sy - 1.0) > 0.01:
+        return None
+    return (f"video {video} is {width}x{height} pixels, but its views' ROIs reach only the "
+            f"top-left {need[0]}x{need[1]} (the frame is {sx:.3g} times larger in both "
+            "directions): is this the video the views were set up for? If it was recorded "
+            "at another resolution, scale the ROIs and the cameras")
+
+
+def check_camera_sizes(views: Sequence[View], sizes: Sequence[tuple[int, int]],
+                       cameras: Mapping[str, object]) -> None:
+    """Refuse views whose size differs from the image size their camera declares.
+
+    ``cameras`` maps view names to cameras (as a project's model does); a camera without an
+    ``image_size`` is not judged. A camera projects to the view image's pixels, so a view
+    of another size (a video larger or smaller than the calibration's, a changed ROI) puts
+    every projected marker in the wrong place and every fit would fail.
+
+    Raises
+    ------
+    VideoTrackError
+        Naming the view, both sizes and what to do; field ``views[i]``.
+    """
+    for i, view in enumerate(_resolve(views, sizes)):
+        camera = cameras.get(view.name)
+        size = getattr(camera, "image_size", None)
+        if size is None or tuple(int(v) for v in size) == view.size:
+            continue
+        what = "the whole frame" if views[i].roi is None else "its ROI"
+        raise VideoTrackError(
+            f"view {view.name!r} is {view.size[0]}x{view.size[1]} pixels ({what}), but its "
+            f"camera {view.camera!r} is calibrated for {size[0]}x{size[1]} images: is this "
+            "the video the views and cameras were set up for? (set the view's roi, or the "
+            "camera's size, to match)", field=f"views[{i}]")
 
 
 @dataclass(frozen=True)

@@ -76,9 +76,15 @@ def test_bad_input_is_one_line_and_writes_nothing(project, capsys, edit, message
 
 def test_other_files_are_not_overwritten_unasked(project, capsys):
     config, _, _ = project
-    code, _, err = run(capsys, config, "-o", config)
-    assert code == 1 and "not a detections file" in err and "--force" in err
+    code, _, err = run(capsys, config, "-o", config)  # an input: never, not even --force
+    assert code == 1 and "--output: is a config file of this run" in err
+    assert run(capsys, config, "-o", config, "--force")[0] == 1
     assert config.read_text().startswith("[video]")
+    other = config.parent / "notes.txt"
+    other.write_text("my notes\n")
+    code, _, err = run(capsys, config, "-o", other)
+    assert code == 1 and "not a detections file" in err and "(--force does)" in err
+    assert other.read_text() == "my notes\n"
 
 
 def test_missing_config_and_bad_frames_option(tmp_path, project, capsys):

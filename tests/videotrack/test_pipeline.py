@@ -2,6 +2,7 @@
 skip what is up to date, force, plot, cancel; and ``fit``, ``run``, ``batch`` and ``demo``
 write the same results file as calling it directly."""
 
+import re
 import shutil
 import warnings
 from pathlib import Path
@@ -132,8 +133,14 @@ def test_cancel_and_warnings(project):
         warnings.simplefilter("always")
         run = run_project(load_config(project), anneal=SHORT)
     assert not [w for w in shown if issubclass(w.category, VideoTrackWarning)]
-    assert len(run.warnings) == 2 and "no markers in any of the 16 records" in run.warnings[0]
+    assert len(run.warnings) == 3 and "no markers in any of the 16 records" in run.warnings[0]
+    assert run.warnings[2].startswith("16 of 16 frames (100.0 %) were not fitted")
     assert run.n_ok == 0 and run.n_bad == N_FRAMES
+    assert run.incomplete == "not one of the 16 frames was fitted"
+    # the warnings are kept with the detections and results, and travel to the next run
+    again = run_project(load_config(project), anneal=SHORT)
+    assert again.up_to_date and again.warnings == run.warnings
+    assert again.incomplete == run.incomplete
 
 
 def test_fit_and_run_write_what_run_project_writes(project, capsys):
@@ -181,3 +188,26 @@ def test_demo_writes_what_run_project_writes(tmp_path, capsys):
                       results=out / "direct.csv")
     assert run.steps == ("fit",)  # the demo's detections are up to date
     assert run.results_path.read_bytes() == (out / "detections.results.csv").read_bytes()
+
+
+def test_fit_says_when_it_resumed(project, capsys, monkeypatch):
+    # issue 16: 'fit' did not say when it resumed from a checkpoint
+    import videotrack.pipeline as pipeline
+
+    config = load_config(project)
+    run_project(config, fit=False)
+    monkeypatch.setattr(pipeline, "CHECKPOINT_SECONDS", 0.0)
+    seen = []
+
+    def enough() -> bool:
+        return len([e for e in seen if e.step == "fit"]) > 6
+
+    with pytest.raises(Cancelled):
+        run_project(config, anneal={"n_end": 2000}, progress=seen.append, cancel=enough)
+    assert main(["fit", str(project), "--n-end", "2000"]) == 0
+    out, err = capsys.readouterr()
+    kept = re.search(rf"resumed an interrupted fit: (\d+) of {N_FRAMES} frames kept from its "
+                     "checkpoint", out)
+    assert kept and int(kept[1]) >= 5, out
+    assert (f"resumed an interrupted fit: {kept[1]} of {N_FRAMES} records kept from "
+            "detections.results.csv.partial") in err

@@ -7,6 +7,10 @@ import contextlib
 import sys
 from collections.abc import Iterator
 
+#: Exit status of fit, run and batch when a run is incomplete (its video could not be read to
+#: the end, or not one frame was fitted) and --allow-incomplete was not given; 1 is an error.
+EXIT_INCOMPLETE = 3
+
 #: The bar of each step of a run.
 BAR_NAMES = {"detect": "detecting", "fit": "fitting"}
 
@@ -50,3 +54,13 @@ def print_warnings(run) -> None:
     """The warnings a run collected, one line each on stderr (as the CLI prints warnings)."""
     for message in run.warnings:
         note(f"warning: {message}")
+
+
+def incomplete_status(run, allowed: bool) -> int:
+    """Exit status of a finished run: :data:`EXIT_INCOMPLETE` (said on stderr) when the run
+    is incomplete and that is not ``allowed``, else 0."""
+    if not run.incomplete:
+        return 0
+    note(f"incomplete: {run.incomplete}" + ("" if allowed else
+                                             " (exit status 3; --allow-incomplete accepts it)"))
+    return 0 if allowed else EXIT_INCOMPLETE

@@ -28,10 +28,16 @@ a project (see docs/batch.md):
   myproject/session1/trial01/config.toml  optional: keys that differ in this trial
 
 Outputs go beside each video (walk.detections.npz, walk.results.csv + .json, .png with
-[fit] plot); myproject/summary.csv lists every trial (frames, median error, % bad frames,
-time) and myproject/logs/ holds one log per run. Trials whose outputs are up to date
-(same videos, files and parameters) are skipped; an interrupted fit resumes where it
-stopped. Exit status 1 when a trial failed (the others still ran).
+[fit] plot); myproject/summary.csv lists every trial (state, frames, median error, % bad
+frames, time, message, warnings) and myproject/logs/ holds one log per run that did
+something. Trials whose outputs are up to date (same content of the videos and files, same
+parameters) are skipped; an interrupted fit resumes where it stopped. Outputs never replace
+an input, nor (without --force) an existing file of another kind.
+
+exit status: 0 every trial is done or up to date (warnings are listed, not errors);
+1 a trial failed (the others still ran), or bad arguments; 3 no trial failed but one is
+incomplete (a video or image could not be read to the end, or not one frame was fitted),
+unless --allow-incomplete.
 """
 
 
@@ -64,6 +70,9 @@ def add_parser(subparsers) -> None:
     p.add_argument("--scheduler", metavar="ADDRESS",
                    help="run the trials on this Dask cluster: tcp://host:port or a "
                         "scheduler file (JSON)")
+    p.add_argument("--allow-incomplete", action="store_true",
+                   help="exit 0 although a trial is incomplete (its video could not be read "
+                        "to the end, or no frame was fitted); it is still listed")
     p.set_defaults(func=run)
 
 
@@ -72,16 +81,21 @@ def run(args) -> int:
 
     from videotrack.batch import (
         FAILED,
+        INCOMPLETE,
         RunLog,
         available_cores,
         count_states,
         format_summary,
+        nothing_ran,
         plan_trial,
+        project_inputs,
         project_lock,
         run_batch,
         write_summary,
     )
+    from videotrack.commands._common import EXIT_INCOMPLETE
     from videotrack.errors import VideoTrackError
+    from videotrack.outputs import guard_outputs
     from videotrack.project import open_project
     from videotrack.tables import text_table
 
@@ -97,7 +111,8 @@ def run(args) -> int:
         for trial in tqdm(trials, desc="checking", unit="trial", leave=False, file=sys.stderr,
                           disable=None):
             rows.append((trial.name, *plan_trial(trial, args.force)))
-        print(text_table(("trial", "action", "why"), rows, left=3))
+        table = text_table(("trial", "action", "why"), rows, left=3)
+        print("\n".join(line.rstrip() for line in table.splitlines()))
         work = sum(r[1] not in ("up to date", "fails") for r in rows)
         print(f"{len(rows)} trials: {work} to process, "
               f"{sum(r[1] == 'up to date' for r in rows)} up to date, "
@@ -106,6 +121,8 @@ def run(args) -> int:
             print(f"not a trial: {folder.relative_to(project.root).as_posix()} ({why})")
         return 0
 
+    guard_outputs({project.summary_path: "summary"}, project_inputs(project.trials),
+                  force=args.force, field="batch.summary")
     with project_lock(project):
         log = RunLog(project)
         try:
@@ -140,13 +157,31 @@ def run(args) -> int:
                 reports = run_batch(trials, force=args.force, jobs=jobs,
                                     scheduler=args.scheduler, on_report=on_report,
                                     progress=on_frames)
-            summary = write_summary(reports, project.summary_path)
+            names = [t.name for t in project.trials]  # --trial: the others' rows stay
+            summary = write_summary(reports, project.summary_path, keep=names, order=names)
             log.write(f"finished: {count_states(reports)}; summary {summary}")
         except KeyboardInterrupt:
             log.write("interrupted: run the same command again to go on")
-            raise
-        finally:
             log.close()
+            raise
+        except BaseException:
+            log.close()
+            raise
+        if nothing_ran(reports):  # nothing happened: no log to keep
+            log.discard()
+            where = "no log (nothing to do)"
+        else:
+            log.close()
+            where = f"log {log.path}"
     print(format_summary(reports))
-    print(f"{len(reports)} trials: {count_states(reports)}; wrote {summary}; log {log.path}")
-    return 1 if any(r.state == FAILED for r in reports) else 0
+    print(f"{len(reports)} trials: {count_states(reports)}; wrote {summary}; {where}")
+    if log.failed is not None:
+        print(f"videotrack: warning: {log.path}: the log is incomplete: {log.failed}",
+              file=sys.stderr)
+    if any(r.state == FAILED for r in reports):
+        return 1
+    if any(r.state == INCOMPLETE for r in reports) and not args.allow_incomplete:
+        print(f"videotrack: {sum(r.state == INCOMPLETE for r in reports)} trial(s) "
+              "incomplete (exit status 3; --allow-incomplete accepts them)", file=sys.stderr)
+        return EXIT_INCOMPLETE
+    return 0

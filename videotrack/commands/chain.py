@@ -54,7 +54,9 @@ def add_parser(subparsers) -> None:
     check = sub.add_parser(
         "check", help="validate chain files",
         description="Validate chain files: XML safety limits, the schema, and the model rules "
-                    "(unique names, y/x/z axes, finite numbers, min <= max, root marker). "
+                    "(unique names, y/x/z axes, finite numbers, min <= max, root marker, "
+                    "histogram values and their mass inside each axis's range), then build "
+                    "the fitting problem as a fit would (markers to fit, a free axis). "
                     "Prints 'FILE: ok (...)' per valid file and 'FILE:LINE: message' per "
                     "invalid one; exits 1 if any file is invalid.",
         epilog="example:\n  videotrack chain check chains/*.xml",
@@ -75,12 +77,23 @@ def run_check(args: argparse.Namespace) -> int:
     for path in args.files:
         try:
             body = load_body(path)
+            check_fittable(body)
         except KinematicsError as err:
+            err.located(file=path)
             print(err, file=sys.stderr)
             failed += 1
         else:
             print(f"{path}: ok ({summary(body)})")
     return 1 if failed else 0
+
+
+def check_fittable(body: Body) -> None:
+    """Build the fitting problem of ``body`` as a fit does (with a stand-in camera per chain),
+    so that ``chain check`` refuses what a fit would (no markers, no free axis, ...)."""
+    from kinematics.cameras import OrthographicCamera
+    from kinematics.problem import FitProblem
+
+    FitProblem.build(body, [OrthographicCamera.from_axes("check", 1.0, ("x", "-y"), (0, 0))])
 
 
 def _plural(n: int, word: str, words: str | None = None) -> str:

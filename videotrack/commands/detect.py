@@ -40,8 +40,10 @@ a minimal project file (paths relative to it):
   max_area = 200
 
 The detections file (default: <video>.detections.npz beside the project file) holds the
-centroids in each view's image coordinates, the settings and the video's identity; when it is
-up to date for the same video and settings, detect says so and does nothing. See
+centroids in each view's image coordinates, the settings, the video's identity (with the
+SHA-256 of its content) and the warnings of the detection; when it is up to date for the same
+video and settings, detect says so, repeats those warnings and does nothing. It never
+replaces the video or a config file, nor without --force a file of another kind. See
 docs/detection.md for every filter, the coordinate convention and the file format.
 """
 
@@ -72,15 +74,20 @@ def add_parser(subparsers) -> None:
                    help="detections file (default: [output] detections, else "
                         "<video>.detections.npz beside the project file)")
     p.add_argument("--force", action="store_true",
-                   help="detect again even if the detections file is up to date")
+                   help="detect again even if the detections file is up to date; replace "
+                        "an existing file of another kind at --output (never an input)")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
+    import warnings
+
     from tqdm import tqdm
 
-    from videotrack.detect import detect_project
-    from videotrack.errors import VideoTrackError
+    from videotrack.commands._common import note
+    from videotrack.detect import detect_project, incomplete_reason
+    from videotrack.errors import VideoTrackError, VideoTrackWarning
+    from videotrack.identity import relative_message
     from videotrack.project import command_config
     from videotrack.video import parse_frame_range
 
@@ -91,15 +98,28 @@ def run(args) -> int:
         except ValueError as err:
             raise VideoTrackError(str(err), field="--frames") from None
     with tqdm(unit="frame", desc="detecting", file=sys.stderr, leave=False,
-              disable=None) as bar:
+              disable=None) as bar, warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", VideoTrackWarning)
+
         def progress(done: int, total: int) -> None:
             bar.total = total
             bar.update(done - bar.n)
 
         detections, output, up_to_date = detect_project(
             config, args.frames, args.force, progress, output=args.output,
-            log=lambda note: print(f"videotrack: {note}", file=sys.stderr),
+            log=lambda line: print(f"videotrack: {line}", file=sys.stderr),
             frames_field="--frames")
+    # this run's warnings, and those the detections file keeps from when it was made
+    base = output.absolute().parent
+    found = [relative_message(str(w.message), base) for w in caught
+             if issubclass(w.category, VideoTrackWarning)]
+    for w in caught:
+        if not issubclass(w.category, VideoTrackWarning):
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    for message in dict.fromkeys([*found, *detections.metadata.get("warnings", [])]):
+        note(f"warning: {message}")
+    if incomplete_reason(detections):
+        note(f"incomplete: {incomplete_reason(detections)}")
     if up_to_date:
         print(f"{output} is up to date (--force detects again)")
         return 0

@@ -40,6 +40,8 @@ def add_parser(subparsers) -> None:
                    help="a frame is off when an axis errs by more than this (default 5)")
     p.add_argument("--csv", type=Path, metavar="OUT",
                    help="also write the scores as CSV")
+    p.add_argument("--force", action="store_true",
+                   help="let --csv replace an existing file that is not a CSV (never an input)")
     p.set_defaults(func=run)
 
 
@@ -50,6 +52,11 @@ def run(args) -> int:
     if not args.threshold >= 0:
         raise VideoTrackError(f"must be a number >= 0, got {args.threshold}",
                               field="--threshold")
+    if args.csv is not None:  # never over an input; over another kind of file with --force
+        from videotrack.outputs import guard_outputs
+
+        guard_outputs({args.csv: "csv"}, {args.results: "the results", args.truth: "the truth"},
+                      force=args.force, field="--csv")
     ev = evaluate_files(args.results, args.truth, args.sum, args.threshold)
     print(format_evaluation(ev))
     if args.csv is not None:

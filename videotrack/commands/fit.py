@@ -24,8 +24,14 @@ the project file needs, besides [video], [[views]] and [[filters.steps]]:
   seed = 0
 
 Results: a CSV per video (frame, joint.axis angles in degrees, error, error per view, runs,
-iterations, status, 3D positions of markers and joints) and a .json sidecar with the seed and
-every parameter. An interrupted fit resumes where it stopped when run again.
+iterations, status, 3D positions of markers and joints) and a .json sidecar with the seed,
+every parameter and the run's warnings. An interrupted fit resumes where it stopped when run
+again (and says so). The results never replace an input (chain, cameras, video, config,
+detections), nor without --force an existing file of another kind.
+
+exit status: 0 done (warnings are printed, not errors); 1 an error; 3 the results are
+incomplete (the video could not be read to the end, or not one frame was fitted), unless
+--allow-incomplete.
 """
 
 
@@ -51,7 +57,11 @@ def _add_common(p) -> None:
     tune.add_argument("--start", choices=("mean", "previous"),
                       help="start posture: histogram means or the previous frame")
     p.add_argument("--force", action="store_true",
-                   help="recompute even if the outputs are up to date")
+                   help="recompute even if the outputs are up to date; replace an existing "
+                        "file of another kind at an output path (never an input)")
+    p.add_argument("--allow-incomplete", action="store_true",
+                   help="exit 0 although the results are incomplete (the video could not be "
+                        "read to the end, or no frame was fitted)")
 
 
 def add_parser(subparsers) -> None:
@@ -82,7 +92,12 @@ def run_fit(args, detect: bool = False) -> int:
     import numba
     import numpy as np
 
-    from videotrack.commands._common import note, print_warnings, step_bars
+    from videotrack.commands._common import (
+        incomplete_status,
+        note,
+        print_warnings,
+        step_bars,
+    )
     from videotrack.errors import VideoTrackError
     from videotrack.pipeline import run_project
     from videotrack.project import command_config
@@ -112,13 +127,17 @@ def run_fit(args, detect: bool = False) -> int:
     if run.fitted:
         results, seconds, n = run.results, run.fit_seconds, run.n_frames
         counts = {s: results.status.count(s) for s in dict.fromkeys(results.status)}
+        if run.resumed:
+            print(f"resumed an interrupted fit: {run.resumed} of {n} frames kept from its "
+                  "checkpoint")
+        finite = results.error[np.isfinite(results.error)]
         print(f"fitted {n} frames in {seconds:.1f} s ({n / max(seconds, 1e-9):.1f} frames/s, "
               f"{numba.get_num_threads()} threads); median error "
-              f"{np.nanmedian(results.error) if n else float('nan'):.2f} px")
+              f"{np.median(finite) if finite.size else float('nan'):.2f} px")
         print("status: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
         print(f"wrote {run.results_path} (+ .json sidecar)")
     else:
         print(f"{run.results_path} is up to date (--force fits again)")
     if run.plot_path is not None:
         print(f"wrote {run.plot_path}")
-    return 0
+    return incomplete_status(run, args.allow_incomplete)

@@ -13,8 +13,11 @@ examples:
   videotrack histograms update chain.xml walk*.results.csv --as-chain -o chain-learned.xml
   # combine archives of several experiments (weighted by their trial counts N)
   videotrack histograms merge labA.xml labB.xml -o combined.xml
-  # look at them: a table per axis, and bar plots
+  # look at them: a table per free axis, and bar plots
   videotrack histograms show chain-learned.xml --plot histograms.png
+
+An output never replaces one of the command's inputs (e.g. -o chain.xml when learning from
+chain.xml); an existing file of another kind is replaced only with --force.
 
 Use a learned archive in a project with [chain] histograms = "learned.xml"; the annealing
 then steps by the learned spreads s(H) and stays where the movement was seen (Sect. 2.2).
@@ -42,6 +45,7 @@ def add_parser(subparsers) -> None:
     up.add_argument("--as-chain", action="store_true",
                     help="write a chain file with the histograms inside, not an archive")
     up.add_argument("-o", "--output", type=Path, required=True, help="file to write")
+    up.add_argument("--force", action="store_true", help=FORCE_HELP)
     up.set_defaults(func=run_update)
 
     mg = sub.add_parser("merge", help="combine archives weighted by their trial counts",
@@ -49,29 +53,60 @@ def add_parser(subparsers) -> None:
                         "H = sum(N_i H_i) / sum(N_i).")
     mg.add_argument("archives", type=Path, nargs="+", help="archive or chain XML files")
     mg.add_argument("-o", "--output", type=Path, required=True, help="archive to write")
+    mg.add_argument("--force", action="store_true", help=FORCE_HELP)
     mg.set_defaults(func=run_merge)
 
     sh = sub.add_parser("show", help="print (and plot) the histograms of a file",
-                        description="Per axis: trial count N, mean, s(H) and the support.")
+                        description="Per free axis: trial count N, mean, s(H) and the "
+                        "support. Locked axes (a chain's locked axes; in an archive, "
+                        "single-bin histograms never learned, N = 1) are only listed by name, "
+                        "unless named with --axis.")
     sh.add_argument("file", type=Path, help="chain or archive XML")
     sh.add_argument("--axis", action="append", metavar="JOINT.AXIS",
                     help="only this axis (repeatable)")
     sh.add_argument("--plot", type=Path, metavar="PNG", help="write bar plots to this PNG")
+    sh.add_argument("--force", action="store_true", help=FORCE_HELP)
     sh.set_defaults(func=run_show)
+
+
+FORCE_HELP = "replace an existing output file of another kind (never one of the inputs)"
+
+
+def guard_output(output: Path, inputs, kind: str, force: bool, field: str) -> None:
+    """Refuse ``output`` when it is one of ``inputs``, or (unless ``force``) an existing file
+    of another kind (:func:`videotrack.outputs.guard_outputs`)."""
+    from videotrack.outputs import guard_outputs
+
+    guard_outputs({output: kind}, inputs, force=force, field=field)
 
 
 def _load_any(path: Path):
     """An archive from an archive file or from a chain file's histograms."""
+    return _load_with_locked(path)[0]
+
+
+def _load_with_locked(path: Path):
+    """``(archive, locked)``: the histograms of an archive or chain file, and the keys of
+    locked axes (a chain's locked axes; in an archive, single-bin histograms with N = 1, which
+    is what a locked axis carries and learning never leaves)."""
+    import numpy as np
+
     from kinematics.chain_xml import load_body
     from kinematics.errors import KinematicsError
     from kinematics.histogram_xml import archive_from_body, load_archive
 
     try:
-        return load_archive(path)
+        archive = load_archive(path)
     except KinematicsError as err:
         if "root element is <body>" not in err.message:
             raise
-    return archive_from_body(load_body(path))
+    else:
+        locked = {k for k, h in archive.items()
+                  if h.n_trials == 1 and np.count_nonzero(h.values) == 1}
+        return archive, locked
+    body = load_body(path)
+    locked = {(r.chain, r.joint, r.axis.name) for r in body.axis_refs() if r.axis.locked}
+    return archive_from_body(body), locked
 
 
 def _angles_for(body, results_paths, all_frames: bool):
@@ -103,6 +138,10 @@ def run_update(args) -> int:
         update_archive,
     )
 
+    inputs = {args.chain: "the chain", **{p: "a results file" for p in args.results}}
+    if args.archive:
+        inputs[args.archive] = "the archive"
+    guard_output(args.output, inputs, "xml", args.force, "-o")
     body = load_body(args.chain)
     archive = load_archive(args.archive) if args.archive else archive_from_body(body)
     angles = _angles_for(body, args.results, args.all_frames)
@@ -121,6 +160,8 @@ def run_update(args) -> int:
 def run_merge(args) -> int:
     from kinematics.histogram_xml import merge_archives, save_archive
 
+    guard_output(args.output, {p: "an input archive" for p in args.archives}, "xml",
+                 args.force, "-o")
     merged = merge_archives([_load_any(p) for p in args.archives])
     args.output.parent.mkdir(parents=True, exist_ok=True)
     save_archive(args.output, merged)
@@ -131,21 +172,33 @@ def run_merge(args) -> int:
 def run_show(args) -> int:
     from videotrack.errors import VideoTrackError
 
-    archive = _load_any(args.file)
+    if args.plot:
+        guard_output(args.plot, {args.file: "the histogram file"}, "png", args.force,
+                     "--plot")
+    archive, locked = _load_with_locked(args.file)
     items = [(f"{joint}.{axis}", h) for (_, joint, axis), h in archive.items()]
+    locked_names = [f"{key[1]}.{key[2]}" for key in archive if key in locked]
     if args.axis:
         unknown = [a for a in args.axis if a not in dict(items)]
         if unknown:
             raise VideoTrackError(f"no axis {unknown[0]} (have {', '.join(n for n, _ in items)})",
                                   field="--axis")
         items = [(n, h) for n, h in items if n in args.axis]
+        locked_names = []
+    else:
+        items = [(n, h) for n, h in items if n not in locked_names]
     print(f"{'axis':<20} {'N':>7} {'mean':>8} {'s(H)':>7}  support")
     for name, h in items:
         lo, hi = h.support_deg()
         mean = lo + (h.mean_deg() - lo) % 360.0  # within the support, e.g. 182 not -178
         print(f"{name:<20} {h.n_trials:>7} {mean:>8.1f} {h.std_deg():>7.2f}  "
               f"[{lo:g}, {hi:g}]")
+    if locked_names:
+        print(f"locked (not shown): {', '.join(locked_names)}")
     if args.plot:
+        if not items:
+            raise VideoTrackError("no histogram to plot (every axis is locked)",
+                                  field="--plot")
         from videotrack.plots import plot_histograms
 
         print(f"wrote {plot_histograms(items, args.plot)}")

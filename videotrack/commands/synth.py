@@ -30,6 +30,9 @@ is no chain and truth.csv holds the given points and their projections.
 --points: a CSV (or NPZ, one 1-D array per column) with one row per image and columns
 NAME.x, NAME.y, NAME.z per marker in the cameras' world units; an empty cell (NaN) is a
 marker absent in that image, not drawn; other columns (frame) are ignored.
+
+synth never writes over its own inputs (--chain, --cameras, --angles, --points) and, without
+--force, never over an existing file of another kind (a video.avi that is no video, ...).
 """
 
 
@@ -91,6 +94,9 @@ def add_parser(subparsers) -> None:
                       help="lossless FFV1 AVI or a PNG folder")
     look.add_argument("--fps", type=float, default=50.0, help="frame rate written (50)")
     look.add_argument("--seed", type=int, default=0, help="seed of noise, ghosts, occlusions")
+    p.add_argument("--force", action="store_true",
+                   help="replace existing files of another kind at the output paths (never "
+                        "an input)")
     p.set_defaults(func=run)
 
 
@@ -122,6 +128,7 @@ def run(args) -> int:
     options = _options(args)
     if args.angles is None and args.frames < 1:
         raise VideoTrackError(f"must be at least 1, got {args.frames}", field="--frames")
+    _guard(args, list(cameras), chain=True)
 
     def trajectory(k: int = 0):
         if args.angles is not None:
@@ -190,6 +197,7 @@ def _write_points(args) -> int:
     camera_file = load_camera_file(args.cameras)
     names, points = read_points(args.points)
     options = _options(args)
+    _guard(args, list(camera_file.cameras), chain=False)
     n_frames = points.shape[0] // (2 if args.interlaced else 1)
     with tqdm(total=n_frames, unit="frame", desc="rendering", leave=False) as bar:
         project = write_points_project(args.out_dir, names, points, camera_file.cameras,
@@ -202,3 +210,37 @@ def _write_points(args) -> int:
         print(f"  {path}")
     print(f"next: videotrack detect {project.config}")
     return 0
+
+
+def _guard(args, camera_names: list[str], chain: bool) -> None:
+    """Refuse to write over an input, or over an existing file of another kind unless
+    --force (:func:`videotrack.outputs.guard_outputs`), before rendering anything."""
+    from videotrack.outputs import guard_outputs
+    from videotrack.synth import CODECS, trial_names
+
+    ext = CODECS[args.codec][1]
+    videos = ([f"video_{name}{ext}" for name in camera_names] if args.layout == "separate"
+              else [f"video{ext}"])
+    if args.codec == "png":
+        videos = [n if n.endswith("_png") else f"{n}_png" for n in videos]
+    video_kind = "folder" if args.codec == "png" else "video"
+
+    def scene(folder: Path) -> dict:
+        found = {folder / n: video_kind for n in videos}
+        found.update({folder / "truth.csv": "csv", folder / "cameras.toml": "toml",
+                      folder / "project.toml": "toml"})
+        if chain:
+            found[folder / "chain.xml"] = "xml"
+        return found
+
+    out = args.out_dir
+    if args.trials is not None and args.trials >= 1:
+        outputs = {out / "config.toml": "toml", out / "chain.xml": "xml",
+                   out / "cameras.toml": "toml"}
+        for name in trial_names(args.trials):
+            outputs.update({**scene(out / name), out / name / "config.toml": "toml"})
+    else:
+        outputs = scene(out)
+    inputs = {getattr(args, key): f"the --{key} file"
+              for key in ("chain", "cameras", "angles", "points") if getattr(args, key)}
+    guard_outputs(outputs, inputs, force=args.force)
