@@ -465,13 +465,17 @@ def evaluate(objective, proj, mk, points, conf, view_off, obs3, bidirectional, w
 
 
 @njit(cache=True, nogil=True)
-def partition_error(objective, proj, mk, points, conf, view_off, obs3, cap, m0, m1, claimed):
+def partition_error(objective, proj, mk, points, conf, view_off, obs3, cap, m0, m1, claimed,
+                    penalty, penalty_cap, nearest):
     """E of the markers ``m0:m1`` only (one partition; the rest is constant while it moves).
 
     Unlabelled points: each marker's nearest detection among those not ``claimed`` by the
     markers of other partitions (:func:`claim_detections`), capped: a leg cannot take a
-    neighbour's marker. Labelled keypoints and 3D points: each marker against its own, as
-    :func:`labelled_error` and :func:`points3d_error`.
+    neighbour's marker. With ``penalty > 0`` (the bidirectional modes) each unclaimed
+    detection that none of these markers takes adds ``penalty · min(distance to the nearest
+    of them, penalty_cap)``: a leg is pulled to explain the blobs left over, not to share
+    another's. Labelled keypoints and 3D points: each marker against its own, as
+    :func:`labelled_error` and :func:`points3d_error`. ``nearest`` (n_markers,) is scratch.
     """
     missing = cap if cap < np.inf else NAN_MARKER_COST
     total = 0.0
@@ -504,13 +508,28 @@ def partition_error(objective, proj, mk, points, conf, view_off, obs3, cap, m0, 
             px = proj[v, i, 0]
             py = proj[v, i, 1]
             best = np.inf
+            arg = -1
             for c in range(a, b):
                 dx = px - points[c, 0]
                 dy = py - points[c, 1]
                 d2 = dx * dx + dy * dy
-                best = d2 if d2 < best and not claimed[c] else best
+                if d2 < best and not claimed[c]:
+                    best = d2
+                    arg = c
+            nearest[i] = arg
             d = np.sqrt(best) if best < np.inf else missing
             total += min(d, cap)
+        if penalty > 0.0:
+            for c in range(a, b):
+                taken = claimed[c]
+                best = np.inf
+                for i in range(m0, m1):
+                    taken = taken or nearest[i] == c
+                    dx = proj[v, i, 0] - points[c, 0]
+                    dy = proj[v, i, 1] - points[c, 1]
+                    best = min(best, dx * dx + dy * dy)
+                if not taken:
+                    total += penalty * min(np.sqrt(best), penalty_cap)
     return total
 
 
@@ -619,12 +638,13 @@ def anneal_chain(start, free_idx, step, hist, nbins, th, dof_kind, lo, hi, max_r
         sn[k], cs[k] = sincos(start[k])
     whole = j0 == 0 and j1 == parent.shape[0] and m0 == 0 and m1 == marker_joint.shape[0]
     span = (j0, j1, m0, m1)
+    unexplained = weight if bidirectional else 0.0  # the partition's unexplained-blob weight
     _project_cs(cand, cs, sn, root_pos, root_rot, parent, chain, pre_rot, pre_trans,
                 post_trans, elem_axis, elem_index, joint_flags, marker_joint, marker_local,
                 slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj, any_pinhole, span)
     if not whole:
         e_cur = partition_error(objective, proj, mk, points, conf, view_off, obs3, cap, m0,
-                                m1, claimed)
+                                m1, claimed, unexplained, penalty_cap, nearest)
     else:
         e_cur = evaluate(objective, proj, mk, points, conf, view_off, obs3, bidirectional,
                          weight, cap, penalty_cap, per_view, nearest)
@@ -676,7 +696,7 @@ def anneal_chain(start, free_idx, step, hist, nbins, th, dof_kind, lo, hi, max_r
                     slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj, any_pinhole, span)
         if not whole:
             e = partition_error(objective, proj, mk, points, conf, view_off, obs3, cap, m0,
-                                m1, claimed)
+                                m1, claimed, unexplained, penalty_cap, nearest)
         elif objective == OBJ_NEAREST and not bidirectional:
             e = _paper_error(proj, points, view_off, cap)
         else:

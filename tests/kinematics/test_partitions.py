@@ -88,7 +88,8 @@ def test_partition_cost_equals_the_twin_on_its_markers():
         for m0, m1 in ((0, 7), (2, 5), (6, 7)):
             got = ak.partition_error(0, proj, np.zeros((nm, 3)), pts, np.ones(len(pts)), off,
                                      np.zeros((nm, 4)), cap, m0, m1,
-                                     np.zeros(len(pts), np.bool_))
+                                     np.zeros(len(pts), np.bool_), 0.0, 3.0,
+                                     np.empty(nm, np.int64))
             want = 0.0
             for v in range(nv):
                 d = np.linalg.norm(proj[v, m0:m1, None] - pts[off[v]:off[v + 1]][None], axis=2)
@@ -106,7 +107,7 @@ def test_claimed_detections_are_not_shared():
     ak.claim_detections(proj, pts, off, 1, 2, 3.0, claimed)  # markers outside B claim
     assert claimed.tolist() == [True, False]
     e = ak.partition_error(0, proj, np.zeros((2, 3)), pts, np.ones(2), off, np.zeros((2, 4)),
-                           np.inf, 1, 2, claimed)
+                           np.inf, 1, 2, claimed, 0.0, 3.0, np.empty(2, np.int64))
     assert e == pytest.approx(5.0)
     ak.claim_detections(proj, pts, off, 1, 2, 0.5, claimed)
     assert claimed.tolist() == [True, False]
@@ -163,3 +164,19 @@ def test_auto_threshold_is_measured_on_the_video():
     status = [r.status for r in res]
     assert status[7] == "failed"
     assert sum(s == "failed" for s in status) <= 2, status
+
+
+def test_partition_pays_for_blobs_it_leaves_unexplained():
+    """Bidirectional modes: an unclaimed detection none of the partition's markers takes
+    costs penalty · min(distance, penalty_cap); a claimed one costs nothing."""
+    proj = np.array([[[0.0, 0.0], [10.0, 0.0], [50.0, 0.0]]])  # partition = markers 0, 1
+    pts = np.array([[0.0, 0.0], [12.0, 0.0], [14.0, 0.0], [50.0, 0.0]])
+    off = np.array([0, 4], np.int64)
+    claimed = np.zeros(4, np.bool_)
+    ak.claim_detections(proj, pts, off, 0, 2, 3.0, claimed)  # marker 2 claims (50, 0)
+    args = (0, proj, np.zeros((3, 3)), pts, np.ones(4), off, np.zeros((3, 4)), np.inf, 0, 2,
+            claimed)
+    plain = ak.partition_error(*args, 0.0, 3.0, np.empty(3, np.int64))
+    assert plain == pytest.approx(0.0 + 2.0)
+    bounded = ak.partition_error(*args, 2.0, 3.0, np.empty(3, np.int64))
+    assert bounded == pytest.approx(2.0 + 2.0 * min(4.0, 3.0))  # (14, 0) is left over
