@@ -3,8 +3,12 @@
 The CSV has one row per analysed image (frame, or field when de-interlaced)::
 
     frame, video_frame, field, time, <joint>.<axis> ... (degrees), error, error.<view> ...,
-    runs, iterations, status, <chain>.root.x/y/z ..., <marker>.x/y/z ..., <joint>.x/y/z ...,
-    <marker>.res.<view> ...
+    runs, iterations, matched, unexplained, worst_px, status, <chain>.root.x/y/z ...,
+    <marker>.x/y/z ..., <joint>.x/y/z ..., <marker>.res.<view> ...
+
+``matched`` counts the marker images within ``claim_gate_px`` of a detection, ``unexplained``
+the detections farther than that from every model marker, ``worst_px`` is the largest marker
+residual: sort by them to find frames to look at.
 
 The ``.res.`` columns are per-marker residuals: how far, in pixels, each fitted model marker
 is from the detection it matched (its nearest) in each view; empty where the view had no
@@ -39,6 +43,9 @@ from videotrack.errors import VideoTrackError
 from videotrack.tables import format_cell
 
 STATUSES = ("ok", "reanalysed", "failed", "no-detections", "corrected")
+#: Per-frame match counts (FrameResult.matched, .unexplained, .worst_px), between iterations
+#: and status; files written before they existed lack them.
+QUALITY_COLUMNS = ("matched", "unexplained", "worst_px")
 RESULTS_FORMAT = 1
 
 
@@ -68,6 +75,7 @@ class Results:
     markers: np.ndarray  # (n, m, 3)
     joints: np.ndarray  # (n, j, 3)
     residuals: np.ndarray | None = None  # (n, m, v) pixels, or None (older files)
+    quality: np.ndarray | None = None  # (n, 3) matched, unexplained, worst_px; None: older
 
     def __len__(self) -> int:
         return self.frames.size
@@ -80,7 +88,10 @@ class Results:
     def columns(self) -> list[str]:
         cols = ["frame", "video_frame", "field", "time", *self.axis_labels, "error"]
         cols += [f"error.{v}" for v in self.view_names]
-        cols += ["runs", "iterations", "status"]
+        cols += ["runs", "iterations"]
+        if self.quality is not None:
+            cols += list(QUALITY_COLUMNS)
+        cols += ["status"]
         cols += [f"{c}.root.{a}" for c in self.chain_names for a in "xyz"]
         cols += [f"{p}.{a}" for p in (*self.marker_names, *self.joint_names) for a in "xyz"]
         if self.residuals is not None:
@@ -111,6 +122,10 @@ def results_from_fit(body: Body, fit_results: Sequence, view_names: Sequence[str
         # (n, v, m) from the fitter -> (n, m, v): one marker's views side by side
         residuals = np.array([r.marker_residuals for r in fit_results], dtype=float).reshape(
             n, len(view_names), len(body.marker_names)).transpose(0, 2, 1)
+    quality = None
+    if n and all(hasattr(r, "worst_px") for r in fit_results):
+        quality = np.array([(r.matched, r.unexplained, r.worst_px) for r in fit_results],
+                           dtype=float).reshape(n, 3)
     if detections is not None:
         video_frames = np.asarray(detections.video_frames)[frames]
         fields = np.asarray(detections.parities)[frames]
@@ -129,7 +144,7 @@ def results_from_fit(body: Body, fit_results: Sequence, view_names: Sequence[str
         runs=np.array([r.runs for r in fit_results], dtype=np.int64),
         iterations=np.array([r.iterations for r in fit_results], dtype=np.int64),
         status=tuple(r.status for r in fit_results), roots=roots, markers=markers,
-        joints=joints, residuals=residuals,
+        joints=joints, residuals=residuals, quality=quality,
     )
 
 
@@ -142,6 +157,8 @@ def format_results(results: Results) -> str:
         numbers = [results.frames[i], results.video_frames[i], results.fields[i],
                    results.times[i], *results.angles_deg[i], results.error[i],
                    *results.error_per_view[i], results.runs[i], results.iterations[i]]
+        if results.quality is not None:
+            numbers += [*results.quality[i]]
         points = [*results.roots[i].ravel(), *results.markers[i].ravel(),
                   *results.joints[i].ravel()]
         if results.residuals is not None:
@@ -232,6 +249,9 @@ def read_results(path: str | os.PathLike) -> Results:
                                           field=header[c]) from None
     n = data.shape[0]
     points = data[:, i_status + 1:i_res].reshape(n, -1, 3)
+    quality = None
+    if tuple(header[i_runs + 2:i_status]) == QUALITY_COLUMNS:
+        quality = data[:, i_runs + 2:i_status]
     residuals = None
     if res_cols:
         res_views = tuple(dict.fromkeys(h.rsplit(".res.", 1)[1] for h in header[i_res:]))
@@ -249,7 +269,7 @@ def read_results(path: str | os.PathLike) -> Results:
         error_per_view=data[:, i_err + 1:i_runs], runs=data[:, i_runs].astype(np.int64),
         iterations=data[:, i_runs + 1].astype(np.int64), status=tuple(status),
         roots=points[:, :nc], markers=points[:, nc:nc + n_markers],
-        joints=points[:, nc + n_markers:], residuals=residuals,
+        joints=points[:, nc + n_markers:], residuals=residuals, quality=quality,
     )
 
 
@@ -265,7 +285,13 @@ def frame_results(table: Results, seed: int) -> dict:
             runs=int(table.runs[i]), iterations=int(table.iterations[i]), seed=int(seed),
             status=table.status[i], root_positions=np.array(table.roots[i]),
             marker_residuals=(None if table.residuals is None
-                              else np.array(table.residuals[i]).T))
+                              else np.array(table.residuals[i]).T),
+            **({} if table.quality is None else {
+                "matched": int(table.quality[i, 0]) if np.isfinite(table.quality[i, 0])
+                else 0,
+                "unexplained": int(table.quality[i, 1]) if np.isfinite(table.quality[i, 1])
+                else 0,
+                "worst_px": float(table.quality[i, 2])}))
         for i in range(len(table))
     }
 
