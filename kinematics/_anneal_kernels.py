@@ -534,6 +534,22 @@ def partition_error(objective, proj, mk, points, conf, view_off, obs3, cap, m0, 
 
 
 @njit(cache=True, nogil=True)
+def count_unexplained(proj, points, view_off, gate):
+    """Detections farther than ``gate`` pixels from every projected model marker."""
+    g2 = gate * gate
+    n = 0
+    for v in range(proj.shape[0]):
+        for c in range(view_off[v], view_off[v + 1]):
+            near = False
+            for i in range(proj.shape[1]):
+                dx = proj[v, i, 0] - points[c, 0]
+                dy = proj[v, i, 1] - points[c, 1]
+                near = near or dx * dx + dy * dy <= g2
+            n += 0 if near else 1
+    return n
+
+
+@njit(cache=True, nogil=True)
 def claim_detections(proj, points, view_off, m0, m1, gate, claimed):
     """Mark the detections that markers outside ``m0:m1`` explain: each such marker's
     nearest detection in each view, if within ``gate`` pixels (a marker far from every
@@ -744,7 +760,7 @@ def anneal_partitions(origin, state, rp, rr, body, cams, dofs, schedule, error, 
      marker_joint, marker_local, slide_index) = body
     kind, P, K, dist, R, t = cams
     _, step, hist, nbins, dof_kind, lo, hi = dofs
-    (th, max_redraws, n_end, n_l, n_tau, tau0, l0, c_l, c_tau, eps, _, _, _, _, _,
+    (th, max_redraws, n_end, n_l, n_tau, tau0, l0, c_l, c_tau, eps, _, _, _, _, _, _,
      _) = schedule
     bidirectional, weight, cap, penalty_cap = error
     bounds, part_off, part_dofs, rounds, claim_gate = parts
@@ -826,7 +842,9 @@ def fit_frames(seg_off, frame_ids, root_pos, root_rot, start, body, cams, dofs, 
     kind, P, K, dist, R, t = cams
     free_idx, step, hist, nbins, dof_kind, lo, hi = dofs
     (th, max_redraws, n_end, n_l, n_tau, tau0, l0, c_l, c_tau, eps, seed,
-     reanalysis_threshold, max_runs, refine_steps, refine_gate, start_previous) = schedule
+     reanalysis_threshold, max_runs, refine_steps, refine_gate, start_previous,
+     max_unexplained) = schedule
+    claim_gate = parts[4]
     bidirectional, weight, cap, penalty_cap = error
     objective, det_points, det_conf, det_off, obs3 = obs
     out_angles, out_error, out_view_error, out_runs, out_iterations, out_pairs = out
@@ -870,7 +888,10 @@ def fit_frames(seg_off, frame_ids, root_pos, root_rot, start, body, cams, dofs, 
             if has:  # else no observation at all: nothing to fit
                 e_keep = np.inf
                 run = 0
-                while run < max_runs and not e_keep <= reanalysis_threshold:
+                u_keep = 1 << 30  # with max_unexplained < 0 only E decides (u stays 0)
+                u_limit = max_unexplained if max_unexplained >= 0 else 1 << 30
+                while run < max_runs and not (e_keep <= reanalysis_threshold
+                                              and u_keep <= u_limit):
                     state = stream_state(seed, frame_ids[f], run)
                     origin = first if run == 0 else start
                     if n_parts > 1:
@@ -915,8 +936,19 @@ def fit_frames(seg_off, frame_ids, root_pos, root_rot, start, body, cams, dofs, 
                         else:
                             best[:] = annealed
                             pairs = 0
-                    if e < e_keep:
+                    u = 0
+                    if max_unexplained >= 0 and objective == OBJ_NEAREST:
+                        # Detections far from every model marker: a limb on another's blobs
+                        # leaves its own unexplained, a fused blob does not.
+                        project_posture(best, rp, rr, parent, chain, pre_rot, pre_trans,
+                                        post_trans, elem_axis, elem_index, joint_flags,
+                                        marker_joint, marker_local, slide_index, kind, P, K,
+                                        dist, R, t, cs, sn, rot, pos, mk, proj)
+                        u = count_unexplained(proj, det_points, vo, claim_gate)
+                    better = u < u_keep or (u == u_keep and e < e_keep)
+                    if (max_unexplained < 0 and e < e_keep) or (max_unexplained >= 0 and better):
                         e_keep = e
+                        u_keep = u
                         keep[:] = best
                         out_pairs[f] = pairs
                     run += 1

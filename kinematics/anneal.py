@@ -613,12 +613,6 @@ class Fitter:
         counts = obs.view_counts(sel)
         results = []
         for k in range(n):
-            if runs[k] == 0:
-                status = "no-detections"
-            elif err[k] > p.reanalysis_threshold:
-                status = "failed"
-            else:
-                status = "ok" if runs[k] == 1 else "reanalysed"
             missing = tuple(self.view_names[v] for v in range(nv) if counts[k, v] == 0)
             angles, fitted_roots = pr.posture(state[k], roots[k], rots[k])
             residuals = np.full((nv, pr.folded.marker_joint.size), np.nan)
@@ -627,6 +621,14 @@ class Fitter:
                 residuals, unexplained = self._residuals(obs, state[k], roots[k], rots[k],
                                                          pts, off[k * nv: k * nv + nv + 1],
                                                          p.claim_gate_px)
+            too_many = (p.max_unexplained is not None and obs.kind == "points"
+                        and unexplained > p.max_unexplained)
+            if runs[k] == 0:
+                status = "no-detections"
+            elif err[k] > p.reanalysis_threshold or too_many:
+                status = "failed"
+            else:
+                status = "ok" if runs[k] == 1 else "reanalysed"
             results.append(FrameResult(
                 frame=int(frame_ids[k]),
                 angles_deg=self._to_range_deg(angles),

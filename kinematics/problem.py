@@ -102,6 +102,7 @@ class Schedule(NamedTuple):
     refine_steps: int
     refine_gate: float
     start_previous: bool
+    max_unexplained: int  # -1: not used
 
 
 class ErrorArgs(NamedTuple):
@@ -137,7 +138,8 @@ def schedule_of(params) -> Schedule:
                     int(p.n_tau), float(p.tau0), float(p.l0), float(p.c_l), float(p.c_tau),
                     float(p.epsilon), int(p.seed), float(p.reanalysis_threshold),
                     int(p.max_runs), int(p.refine_steps) if p.refine else 0,
-                    float(p.refine_gate_px), p.start == "previous")
+                    float(p.refine_gate_px), p.start == "previous",
+                    -1 if p.max_unexplained is None else int(p.max_unexplained))
 
 
 def error_args(options) -> ErrorArgs:

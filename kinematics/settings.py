@@ -176,6 +176,12 @@ class AnnealParams:
                                    "per marker image (pixels); > 0.", min=1e-6, max=1e6)
     auto_sample: int = setting(64, "With threshold_mode 'auto': frames fitted to measure the "
                                "video (evenly spaced; all if fewer).", min=3, max=10**6)
+    max_unexplained: int | None = setting(
+        None, "A frame is re-analysed (and failed) also when more detections than this lie "
+        "farther than claim_gate_px from every model marker: a limb on another limb's blobs "
+        "leaves its own unexplained. None, written -1 in a project file: not used (ghost "
+        "markers are unexplained too; set it above the ghosts a view shows).",
+        min=-1, max=10**6, none=-1)
     partitions: str = setting(
         "auto", "How a body is annealed: 'auto' anneals each limb in turn (every chain, and "
         "every subtree below a joint with several children, after its trunk), 'none' moves "
@@ -236,6 +242,11 @@ class AnnealParams:
         if not _is_real(self.auto_k) or not (math.isfinite(self.auto_k) and self.auto_k >= 0):
             raise KinematicsError(f"must be a finite number >= 0, got {self.auto_k!r}",
                                   field="auto_k")
+        mu = self.max_unexplained
+        if mu is not None and (isinstance(mu, bool) or not isinstance(mu, int | np.integer)
+                               or mu < 0):
+            raise KinematicsError(f"must be None or an integer >= 0, got {mu!r}",
+                                  field="max_unexplained")
         if self.threshold_mode not in THRESHOLD_MODES:
             raise KinematicsError(f"must be one of {', '.join(THRESHOLD_MODES)}, got "
                                   f"{self.threshold_mode!r}", field="threshold_mode")

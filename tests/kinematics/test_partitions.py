@@ -3,6 +3,8 @@ that may not share a detection, and a three-legged body fitted limb by limb."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -10,6 +12,7 @@ from kinematics import _anneal_kernels as ak
 from kinematics.anneal import AnnealParams, Fitter
 from kinematics.cameras import OrthographicCamera
 from kinematics.chain_xml import load_body
+from kinematics.errors import KinematicsError
 from kinematics.fk import forward_kinematics_reference
 from kinematics.model import Axis, Body, Chain, Joint, Marker, Root, Segment
 from kinematics.problem import FitProblem, partitions_of
@@ -180,3 +183,21 @@ def test_partition_pays_for_blobs_it_leaves_unexplained():
     assert plain == pytest.approx(0.0 + 2.0)
     bounded = ak.partition_error(*args, 2.0, 3.0, np.empty(3, np.int64))
     assert bounded == pytest.approx(2.0 + 2.0 * min(4.0, 3.0))  # (14, 0) is left over
+
+
+def test_unexplained_detections_trigger_reanalysis_and_the_flag():
+    """max_unexplained: a fit that leaves a detection far from every marker is re-run, and
+    flagged if it still does; a detection every fit must leave (a ghost) flags the frame."""
+    body = three_legs()
+    cams = top_and_side()
+    _, frames = planted(body, cams, 6, seed=8)
+    frames[2][0] = np.vstack([frames[2][0], [[5.0, 5.0]]])  # a ghost far from the body
+    params = AnnealParams(refine=True, max_unexplained=0, reanalysis_threshold=2.0
+                          ).with_schedule(3000)
+    res = Fitter(body, cams, params).fit(frames)
+    assert res[2].unexplained == 1 and res[2].status == "failed" and res[2].runs == 5
+    assert all(r.unexplained == 0 for k, r in enumerate(res) if k != 2)
+    off = Fitter(body, cams, replace(params, max_unexplained=None)).fit(frames)
+    assert off[2].status != "failed" and off[2].unexplained == 1
+    with pytest.raises(KinematicsError, match="max_unexplained"):
+        AnnealParams(max_unexplained=-2)
