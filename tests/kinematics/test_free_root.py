@@ -186,12 +186,14 @@ def test_default_windows():
     assert root_windows(mouse_like(translation_window=2.5))[0, 0] == 2.5
 
 
-def joint_errors(body, results, angles, roots):
+def joint_errors(body, results, angles, roots, points: str = "markers"):
+    """Per frame, the largest distance of fitted to true ``points`` ("markers" or
+    "joints")."""
     errs = []
     for r, a, rt in zip(results, angles, roots, strict=True):
         fit = forward_kinematics_reference(body, r.angles_deg, r.root_positions)
         true = forward_kinematics_reference(body, a, rt)
-        errs.append(np.linalg.norm(fit.markers - true.markers, axis=1).max())
+        errs.append(np.linalg.norm(getattr(fit, points) - getattr(true, points), axis=1).max())
     return np.array(errs)
 
 

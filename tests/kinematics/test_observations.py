@@ -13,7 +13,12 @@ from kinematics.errors import KinematicsError
 from kinematics.fk import forward_kinematics_reference
 from kinematics.observations import Observations
 from kinematics.settings import ErrorOptions
-from tests.kinematics.test_free_root import mouse_like, planted_frames, three_pinholes
+from tests.kinematics.test_free_root import (
+    joint_errors,
+    mouse_like,
+    planted_frames,
+    three_pinholes,
+)
 
 CAPS = [ErrorOptions(), ErrorOptions(cap_px=2.0)]
 
@@ -66,15 +71,6 @@ def test_keypoints_packing_and_errors():
         Observations.keypoints(kp[..., :1], ["a", "b"], names[:3], names)
 
 
-def joint_errors(body, results, angles, roots):
-    errs = []
-    for r, a, rt in zip(results, angles, roots, strict=True):
-        fit = forward_kinematics_reference(body, r.angles_deg, r.root_positions)
-        true = forward_kinematics_reference(body, a, rt)
-        errs.append(np.linalg.norm(fit.joints - true.joints, axis=1).max())
-    return np.array(errs)
-
-
 def test_free_body_from_labelled_keypoints():
     body = mouse_like()
     cams = three_pinholes()
@@ -86,7 +82,7 @@ def test_free_body_from_labelled_keypoints():
                                  body.marker_names)
     params = AnnealParams(refine=True, reanalysis_threshold=30.0).with_schedule(5000)
     res = Fitter(body, cams, params).fit(obs)
-    err = joint_errors(body, res, angles, roots)
+    err = joint_errors(body, res, angles, roots, "joints")
     assert np.median(err) < 0.3, err
     assert res[0].marker_residuals.shape == (3, len(body.marker_names))
 
@@ -103,6 +99,6 @@ def test_free_body_from_3d_points_without_cameras():
     params = AnnealParams(refine=True, tau0=5.0, reanalysis_threshold=3.0,
                           refine_gate_px=5.0).with_schedule(5000)
     res = Fitter(body, {}, params).fit(obs)
-    err = joint_errors(body, res, angles, roots)
+    err = joint_errors(body, res, angles, roots, "joints")
     assert np.median(err) < 0.3, err
     assert all(r.status in ("ok", "reanalysed") for r in res)
