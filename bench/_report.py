@@ -5,6 +5,9 @@ from __future__ import annotations
 import os
 import platform
 import subprocess
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
 
 
 def machine() -> str:
@@ -26,3 +29,13 @@ def print_table(rows, target: str = "goal", results=("result",)) -> None:
     print(f"| {'-' * width} |{' --- |' * len(results)} --- |")
     for name, *values, goal in rows:
         print(f"| {name.ljust(width)} | {' | '.join(str(v) for v in values)} | {goal} |")
+
+
+def in_out_folder(out: Path | None, prefix: str, run: Callable[[Path, bool], int]) -> int:
+    """``run(folder, keep)`` in ``out`` (created) or, without one, in a temporary folder that
+    is removed afterwards (``keep`` False)."""
+    if out is None:
+        with tempfile.TemporaryDirectory(prefix=prefix) as tmp:
+            return run(Path(tmp), False)
+    out.mkdir(parents=True, exist_ok=True)
+    return run(out, True)

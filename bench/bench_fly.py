@@ -71,7 +71,6 @@ import ast
 import dataclasses
 import os
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -82,7 +81,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _report import machine, print_table  # noqa: E402
+from _report import in_out_folder, machine, print_table  # noqa: E402
 
 DATA = ROOT.parent / "shared" / "data" / "flygym_fly_kinematics" / "spotlight_behavior_clip.npz"
 CHAIN = ROOT / "chains" / "fly_six_legs.xml"
@@ -508,15 +507,12 @@ def main() -> int:
         print(f"skipped: no flygym clip at {args.data} (../shared/data is absent)")
         return 0
     build_params(args, 1.0)  # a bad --param fails before anything runs
-    if args.out is None:
-        with tempfile.TemporaryDirectory(prefix="bench_fly_") as tmp:
-            return run(args, Path(tmp), keep=False)
-    args.out.mkdir(parents=True, exist_ok=True)
-    return run(args, args.out, keep=True)
+    return in_out_folder(args.out, "bench_fly_", lambda folder, keep: run(args, folder, keep))
 
 
 def run(args, out: Path, keep: bool) -> int:
     from kinematics.chain_xml import load_body, save_body
+    from kinematics.model import Body
 
     numba.set_num_threads(max(1, min(args.threads, numba.config.NUMBA_NUM_THREADS)))
     pts = load_clip(args.data)
@@ -536,7 +532,8 @@ def run(args, out: Path, keep: bool) -> int:
     leg = args.leg
     li = LEGS.index(leg)
     leg_cols = slice(5 * li, 5 * li + 5)
-    lengths = {c.name: [s.length for _, s in _segments(c)] for c in body.chains}
+    lengths = {c.name: [s.length for _, s in Body(body.name, (c,), body.units).segments()]
+               for c in body.chains}
     print(f"Fly, flygym spotlight clip: {n} of {len(pts)} frames ({args.frames}) at 330 Hz; "
           f"chain {CHAIN.name} adapted (segment lengths mm, coxa/femur/tibia/tarsus: "
           + "; ".join(f"{k[:2].upper()} " + "/".join(f"{v:.3f}" for v in ls)
@@ -619,15 +616,6 @@ def run(args, out: Path, keep: bool) -> int:
     png = plot(series, frames, leg, out / "fly.png")
     print(f"\nFigure: {png}" + ("" if keep else " (temporary; give --out to keep it)"))
     return 0
-
-
-def _segments(chain):
-    stack = [chain.root_joint]
-    while stack:
-        j = stack.pop()
-        for s in j.segments:
-            yield j, s
-            stack.extend(reversed(s.joints))
 
 
 def leg_series(s, col):

@@ -52,7 +52,6 @@ import argparse
 import glob
 import os
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -63,7 +62,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _report import machine, print_table  # noqa: E402
+from _report import in_out_folder, machine, print_table  # noqa: E402
 
 DATA = ROOT.parent / "shared" / "data" / "mouse_marker_mocap_oist"
 PELVIS = ("left_hip", "right_hip", "left_coord", "right_coord")
@@ -401,11 +400,7 @@ def main() -> int:
     if not glob.glob(str(args.data / "*.mat")):
         print(f"skipped: no mouse mocap data in {args.data} (../shared/data is absent)")
         return 0
-    if args.out is None:
-        with tempfile.TemporaryDirectory(prefix="bench_mouse_") as tmp:
-            return run(args, Path(tmp), keep=False)
-    args.out.mkdir(parents=True, exist_ok=True)
-    return run(args, args.out, keep=True)
+    return in_out_folder(args.out, "bench_mouse_", lambda folder, keep: run(args, folder, keep))
 
 
 def run(args, out: Path, keep: bool) -> int:

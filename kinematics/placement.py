@@ -194,7 +194,7 @@ def root_windows(body: Body) -> np.ndarray:
     for chain in body.chains:
         if not chain.root.free:
             continue
-        segs = [s.length for _, s in _chain_segments(chain)]
+        segs = [s.length for _, s in Body(body.name, (chain,), body.units).segments()]
         reach = 0.25 * max(segs, default=1.0) or 1.0
         tmp = RootModel(body, body.chains.index(chain), reach)
         w_t, w_r = (2.0 * tmp.tol, 20.0) if tmp.rigid else (reach, 180.0)
@@ -206,16 +206,7 @@ def root_windows(body: Body) -> np.ndarray:
     return np.array(out, dtype=float).reshape(-1, 2)
 
 
-def _chain_segments(chain):
-    stack = [chain.root_joint]
-    while stack:
-        j = stack.pop()
-        for s in j.segments:
-            yield j, s
-            stack.extend(s.joints)
-
-
-def register_root(model: RootModel, candidates: np.ndarray, prediction=None
+def register_root(model: RootModel, candidates: np.ndarray, prediction=None, resolve=None
                   ) -> tuple[np.ndarray, np.ndarray, int] | None:
     """Seed pose of one root from a frame's 3D candidates.
 
@@ -225,18 +216,25 @@ def register_root(model: RootModel, candidates: np.ndarray, prediction=None
     candidates : (k, 3)
     prediction : (R (3, 3), t (3,)) or None
         The previous frame's seed.
+    resolve : callable(poses) -> index, optional
+        Picks among several poses that explain the constellation (:func:`ambiguous`);
+        without it, the best residual wins.
 
     Returns
     -------
     (R, t, n_matched) or None when the root cannot be placed in this frame.
     """
-    if len(candidates) == 0:
+    if candidates is None or len(candidates) == 0:
         return None
     seed = _predicted(model, candidates, prediction)
     if seed is not None:
         return seed
     if model.rigid:
-        return _search(model, candidates)
+        poses = search_poses(model, candidates)
+        if not poses:
+            return None
+        pick = resolve(poses) if resolve is not None and ambiguous(model, poses) else 0
+        return poses[pick][:3]
     r = np.eye(3) if prediction is None else prediction[0]
     ref = model.hint if prediction is None else prediction[1] + r @ model.local[model.anchor]
     k = int(np.argmin(np.linalg.norm(candidates - ref, axis=1)))
@@ -274,13 +272,6 @@ def _match(predicted: np.ndarray, candidates: np.ndarray, tol: float) -> np.ndar
             keep = who[np.argmin(near[who])]
             hit[who[who != keep]] = -1
     return hit
-
-
-def _search(model: RootModel, candidates: np.ndarray):
-    """The best pose over every candidate triple matching the model's widest triangle
-    (re-acquisition), or None."""
-    found = search_poses(model, candidates)
-    return found[0][:3] if found else None
 
 
 def search_poses(model: RootModel, candidates: np.ndarray, keep: int = 8) -> list:
@@ -369,15 +360,9 @@ def place_roots(body: Body, cameras, frames_views, windows: np.ndarray,
     for f, views in enumerate(frames):
         cands, _ = triangulate_candidates(cameras, views, gate_px) if nq else (None, None)
         for q, model in enumerate(models):
-            seed = _predicted(model, cands, prediction[q])
-            if seed is None and model.rigid and len(cands):
-                poses = search_poses(model, cands)
-                if resolve is not None and ambiguous(model, poses):
-                    seed = poses[resolve(f, q, poses)][:3]
-                elif poses:
-                    seed = poses[0][:3]
-            elif seed is None:
-                seed = register_root(model, cands, None)
+            pick = None if resolve is None else (
+                lambda poses, f=f, q=q: resolve(f, q, poses))
+            seed = register_root(model, cands, prediction[q], pick)
             if seed is not None:
                 rot[f, q], pos[f, q] = seed[0], seed[1]
                 placed[f, q] = True
