@@ -151,7 +151,10 @@ class Observations:
         full = np.full((n, len(body_markers), 4), np.nan)
         full[:, index, :3] = p[..., :3]
         full[:, index, 3] = p[..., 3] if p.shape[2] == 4 else 1.0
-        missing = ~np.isfinite(full[..., :3]).all(axis=2)
+        w = full[..., 3]
+        if np.any(w[np.isfinite(w)] < 0):
+            raise KinematicsError("weights must be >= 0", field="points3d")
+        missing = ~np.isfinite(full[..., :3]).all(axis=2) | ~np.isfinite(w)
         full[missing, 3] = 0.0
         return cls("points3d", (), n, np.empty((0, 2)), np.empty(0),
                    np.zeros(1, np.int64), np.ascontiguousarray(full),

@@ -69,6 +69,14 @@ def test_keypoints_packing_and_errors():
         Observations.keypoints(kp, ["a", "b"], ["nose", names[0], names[1]], names)
     with pytest.raises(KinematicsError, match="shape"):
         Observations.keypoints(kp[..., :1], ["a", "b"], names[:3], names)
+    bad = kp.copy()
+    bad[0, 0, 0, 2] = -1.0
+    with pytest.raises(KinematicsError, match="confidences"):
+        Observations.keypoints(bad, ["a", "b"], names[:3], names)
+    p3 = np.ones((2, 3, 4))
+    p3[1, 2, 3] = -0.5
+    with pytest.raises(KinematicsError, match="weights"):
+        Observations.points_3d(p3, names[:3], names)
 
 
 def test_free_body_from_labelled_keypoints():
