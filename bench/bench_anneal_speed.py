@@ -95,7 +95,7 @@ def main() -> int:
     rows = []
 
     # (a) ns per iteration, one thread, one frame, the whole schedule.
-    one = Fitter(body, cams, AnnealParams(epsilon=0.0, max_runs=1))
+    one = Fitter(body, cams, AnnealParams.paper(epsilon=0.0, max_runs=1))
     one.fit_frame(dets[0])  # compile or load the cache
     numba.set_num_threads(1)
     t_frame = min(best_time(lambda k=k: one.fit_frame(dets[k], frame=k), args.repeats)
@@ -106,7 +106,8 @@ def main() -> int:
                  "<= 200 ns"))
 
     # (d) the NumPy reference, same loop, same stream.
-    ref_params = AnnealParams(epsilon=0.0, max_runs=1).with_schedule(args.reference_iterations)
+    ref_params = AnnealParams.paper(epsilon=0.0, max_runs=1).with_schedule(
+        args.reference_iterations)
     t_ref = best_time(lambda: anneal_reference(body, cams, dets[0], ref_params), 1)
     ns_ref = t_ref / args.reference_iterations * 1e9
     rows.append(("NumPy reference iteration (anneal_reference)", f"{ns_ref / 1000:.0f} µs",
@@ -126,9 +127,9 @@ def main() -> int:
                          f"{fps / PAPER_FPS:.0f}x", ""))
         return fitter
 
-    table1 = schedule_rows("Table 1 schedule", Fitter(body, cams, AnnealParams()),
+    table1 = schedule_rows("Table 1 schedule", Fitter(body, cams, AnnealParams.paper()),
                   ">= 100 frames/s on 2 cores")
-    schedule_rows(f"refine + N_end {args.short}", Fitter(body, cams, AnnealParams(
+    schedule_rows(f"refine + N_end {args.short}", Fitter(body, cams, AnnealParams.paper(
         refine=True, reanalysis_threshold=1.0).with_schedule(args.short)))
 
     # (e) the refinement kernel against scipy's least_squares, per frame, one thread.

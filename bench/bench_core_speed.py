@@ -53,7 +53,9 @@ def dets(body, cams, angles, roots=None):
 def time_it(body, cams):
     truth = smooth_random_motion(body, n_frames, 1, seed=0)
     d = dets(body, cams, truth)
-    f = Fitter(body, cams, AnnealParams(epsilon=0.0, max_runs=1))
+    # the paper's settings (the old tree's defaults; newer trees name them paper())
+    paper = getattr(AnnealParams, "paper", AnnealParams)
+    f = Fitter(body, cams, paper(epsilon=0.0, max_runs=1))
     f.fit_frame(d[0])
     best = np.inf
     for _ in range(3):

@@ -381,7 +381,7 @@ def build_params(args, threshold_px: float):
         else:
             kw[name] = value
     try:
-        params = AnnealParams(error=ErrorOptions(**error), **kw)
+        params = AnnealParams.paper(error=ErrorOptions(**error), **kw)
         params = params.with_schedule(kw.get("n_end", args.n_end))
         return dataclasses.replace(params, **scheduled)
     except (KinematicsError, TypeError) as err:
@@ -572,7 +572,7 @@ def run(args, out: Path, keep: bool) -> int:
         det_leg, _, _ = render_and_detect(out / f"{leg}_alone", names[leg_cols],
                                           truth[:, leg_cols], cams, args.diameter, args.seed)
     p = build_params(args, args.threshold * 30 * args.cameras)
-    print(f"Fit: AnnealParams(refine=True, n_end={p.n_end}, n_l={p.n_l}, n_tau={p.n_tau}, "
+    print(f"Fit: AnnealParams.paper(refine=True, n_end={p.n_end}, n_l={p.n_l}, n_tau={p.n_tau}, "
           f"max_runs={p.max_runs}, error={p.error.mode!r}, cap_px={p.error.cap_px}, "
           f"reanalysis_threshold={args.threshold:g} px x markers x views"
           + (f"; --param {' '.join(args.param)}" if args.param else "") + ").\n")

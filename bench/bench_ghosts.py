@@ -75,11 +75,11 @@ def main() -> int:
             for name, error in VARIANTS.items():
                 # A good frame's E: the noise floor of 8 marker images plus, for the
                 # penalised variants, what the ghosts cost at the right posture.
-                probe = Fitter(body, cams, AnnealParams(error=error))
+                probe = Fitter(body, cams, AnnealParams.paper(error=error))
                 good = np.median([probe.error(truth[k], [det.points_of(k, v) for v in
                                                          range(det.n_views)])[0]
                                   for k in range(0, len(truth), 10)])
-                params = AnnealParams(refine=True, error=error, seed=seed,
+                params = AnnealParams.paper(refine=True, error=error, seed=seed,
                                       reanalysis_threshold=float(good) + args.threshold
                                       ).with_schedule(args.n_end)
                 res = Fitter(body, cams, params).fit(det)

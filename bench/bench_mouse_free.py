@@ -470,9 +470,9 @@ def run(args, out: Path, keep: bool) -> int:
           f"{int(vis.sum())} drawn marker images ({int((counts < vis.sum(axis=2)).sum())} view "
           f"images with fused markers); {len(frames)} frames with every marker in >= 2 views.")
 
-    params = AnnealParams(refine=True, reanalysis_threshold=args.threshold, seed=args.seed,
+    params = AnnealParams.paper(refine=True, reanalysis_threshold=args.threshold, seed=args.seed,
                           error=ErrorOptions(cap_px=args.cap)).with_schedule(args.n_end)
-    print(f"Fit: AnnealParams(refine=True, n_end={params.n_end}, n_l={params.n_l}, "
+    print(f"Fit: AnnealParams.paper(refine=True, n_end={params.n_end}, n_l={params.n_l}, "
           f"n_tau={params.n_tau}, reanalysis_threshold={args.threshold:g} px, cap_px="
           f"{args.cap:g}, max_runs={params.max_runs}).\n")
 

@@ -57,7 +57,7 @@ def frame(body, cams, n_det: int, rng) -> list:
 
 
 def ns_per_iteration(body, cams, det, iterations: int, partitions: str) -> float:
-    params = AnnealParams(epsilon=0.0, max_runs=1, partitions=partitions, partition_rounds=1
+    params = AnnealParams.paper(epsilon=0.0, max_runs=1, partitions=partitions, partition_rounds=1
                           ).with_schedule(iterations)
     fitter = Fitter(body, cams, params)
     fitter.fit_frame(det)

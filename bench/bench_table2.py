@@ -257,8 +257,8 @@ def main() -> int:
         body = load_body(path)
     cams = locust_cameras()
     truth = smooth_random_motion(body, args.frames, 10, seed=args.seed)
-    table1 = AnnealParams()
-    refined = AnnealParams(refine=True, reanalysis_threshold=args.threshold)
+    table1 = AnnealParams.paper()
+    refined = AnnealParams.paper(refine=True, reanalysis_threshold=args.threshold)
     robust = replace(refined, error=ErrorOptions(cap_px=args.cap))
     clean = SynthOptions(marker_diameter=4.0, seed=args.seed)
     scenarios = [  # label, video, centroid rule, full analysis

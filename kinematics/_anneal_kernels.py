@@ -761,7 +761,7 @@ def anneal_partitions(origin, state, rp, rr, body, cams, dofs, schedule, error, 
     kind, P, K, dist, R, t = cams
     _, step, hist, nbins, dof_kind, lo, hi = dofs
     (th, max_redraws, n_end, n_l, n_tau, tau0, l0, c_l, c_tau, eps, _, _, _, _, _, _,
-     _) = schedule
+     _, _) = schedule
     bidirectional, weight, cap, penalty_cap = error
     bounds, part_off, part_dofs, rounds, claim_gate = parts
     work[:] = origin
@@ -833,7 +833,10 @@ def fit_frames(seg_off, frame_ids, root_pos, root_rot, start, body, cams, dofs, 
         (:func:`anneal_partitions`).
     out : FitOutputs: angles (n, n_state), NaN for frames without any observation; error
         (n,); view_error (n, n_views); runs, iterations (n,) int64 (iterations summed over
-        runs); pairs (n,) int64 refinement pairs of the kept run (0 without).
+        runs); pairs (n,) int64 refinement pairs of the kept run (0 without); run_angles
+        (n, R, n_state) and run_error (n, R) every run's result and E (NaN for runs not
+        made; R >= max_runs), the candidate postures of :mod:`kinematics.temporal`. At least
+        ``min_runs`` runs are made on frames with observations.
     """
     # Unpacked once here; the loops below pass plain arrays (a tuple passed to a
     # non-inlined call costs reference counting on every call).
@@ -843,11 +846,12 @@ def fit_frames(seg_off, frame_ids, root_pos, root_rot, start, body, cams, dofs, 
     free_idx, step, hist, nbins, dof_kind, lo, hi = dofs
     (th, max_redraws, n_end, n_l, n_tau, tau0, l0, c_l, c_tau, eps, seed,
      reanalysis_threshold, max_runs, refine_steps, refine_gate, start_previous,
-     max_unexplained) = schedule
+     max_unexplained, min_runs) = schedule
     claim_gate = parts[4]
     bidirectional, weight, cap, penalty_cap = error
     objective, det_points, det_conf, det_off, obs3 = obs
-    out_angles, out_error, out_view_error, out_runs, out_iterations, out_pairs = out
+    (out_angles, out_error, out_view_error, out_runs, out_iterations, out_pairs,
+     out_run_angles, out_run_error) = out
     n_parts = parts[0].shape[0]
     nv = kind.shape[0]
     nj = parent.shape[0]
@@ -880,6 +884,8 @@ def fit_frames(seg_off, frame_ids, root_pos, root_rot, start, body, cams, dofs, 
             out_error[f] = np.nan
             out_angles[f, :] = np.nan
             out_view_error[f, :] = np.nan
+            out_run_angles[f, :, :] = np.nan
+            out_run_error[f, :] = np.nan
             has = vo[nv] > vo[0]
             if objective == OBJ_POINTS3D:
                 has = False
@@ -890,8 +896,8 @@ def fit_frames(seg_off, frame_ids, root_pos, root_rot, start, body, cams, dofs, 
                 run = 0
                 u_keep = 1 << 30  # with max_unexplained < 0 only E decides (u stays 0)
                 u_limit = max_unexplained if max_unexplained >= 0 else 1 << 30
-                while run < max_runs and not (e_keep <= reanalysis_threshold
-                                              and u_keep <= u_limit):
+                while run < max_runs and (run < min_runs or not (
+                        e_keep <= reanalysis_threshold and u_keep <= u_limit)):
                     state = stream_state(seed, frame_ids[f], run)
                     origin = first if run == 0 else start
                     if n_parts > 1:
@@ -945,6 +951,8 @@ def fit_frames(seg_off, frame_ids, root_pos, root_rot, start, body, cams, dofs, 
                                         marker_joint, marker_local, slide_index, kind, P, K,
                                         dist, R, t, cs, sn, rot, pos, mk, proj)
                         u = count_unexplained(proj, det_points, vo, claim_gate)
+                    out_run_angles[f, run, :] = best
+                    out_run_error[f, run] = e
                     better = u < u_keep or (u == u_keep and e < e_keep)
                     if (max_unexplained < 0 and e < e_keep) or (max_unexplained >= 0 and better):
                         e_keep = e

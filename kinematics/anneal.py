@@ -40,12 +40,13 @@ import copy
 import math
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, replace
+from typing import NamedTuple
 
 import numba
 import numpy as np
 
 from kinematics import _anneal_kernels as _ak
-from kinematics import placement
+from kinematics import placement, temporal
 from kinematics.error_function import projection_error
 from kinematics.errors import KinematicsError
 from kinematics.fk import forward_kinematics_reference
@@ -61,9 +62,21 @@ from kinematics.problem import (  # noqa: F401 (re-exported: the packing lived h
     partitions_of,
     schedule_of,
 )
+from kinematics.rotations import euler_yxz
 from kinematics.settings import START_MODES, AnnealParams, ErrorOptions  # noqa: F401 (re-exported)
 
-STATUSES = ("ok", "reanalysed", "failed", "no-detections")
+STATUSES = ("ok", "reanalysed", "ambiguous", "failed", "no-detections")
+
+
+class Candidate(NamedTuple):
+    """One distinct posture a frame's runs found (``AnnealParams.candidates`` > 1)."""
+
+    angles_deg: np.ndarray  # (n_axes,)
+    root_positions: np.ndarray  # (n_chains, 3)
+    error: float
+    state: np.ndarray  # (n_state,) the kernels' state (for re-scoring) ...
+    seed_pos: np.ndarray  # (n_chains, 3) ... relative to these root seeds
+    seed_rot: np.ndarray  # (n_chains, 3, 3)
 
 
 
@@ -91,7 +104,9 @@ class FrameResult:
         The seed; run r drew from the stream of (seed, frame, r).
     status : str
         ``"ok"`` (E within the threshold at the first run), ``"reanalysed"`` (within it after
-        re-runs), ``"failed"`` (above it after ``max_runs``), ``"no-detections"``.
+        re-runs), ``"ambiguous"`` (within it, but another candidate posture far from this
+        one fits about as well: see ``candidates``), ``"failed"`` (above it after
+        ``max_runs``), ``"no-detections"``.
     root_positions : ndarray, shape (n_chains, 3)
         Root of each chain used for this frame (configured or tracked).
     missing_views : tuple of str
@@ -110,6 +125,9 @@ class FrameResult:
         markers the fit left out).
     worst_px : float
         The largest marker residual (NaN without one).
+    candidates : tuple of Candidate
+        With ``candidates`` > 1: the frame's distinct postures, lowest E first (this
+        result's posture among them); empty otherwise.
     """
 
     frame: int
@@ -128,6 +146,7 @@ class FrameResult:
     matched: int = 0
     unexplained: int = 0
     worst_px: float = float("nan")
+    candidates: tuple = ()
 
     @property
     def ok(self) -> bool:
@@ -519,7 +538,8 @@ class Fitter:
         return self._fit_block(obs, np.zeros(1, np.int64), np.array([int(frame)], np.int64),
                                roots, rots, start, np.array([0, 1], np.int64))[0]
 
-    def iter_fit(self, detections, frames=None, *, chunk_size: int | None = None
+    def iter_fit(self, detections, frames=None, *, chunk_size: int | None = None,
+                 sequence_starts: Iterable[int] = (), previous: FrameResult | None = None
                  ) -> Iterator[FrameResult]:
         """Fit frames of a video; yields one :class:`FrameResult` per frame, in order.
 
@@ -536,6 +556,13 @@ class Fitter:
             Frames computed per parallel batch (default 8 per thread, or 2 segments per
             thread with ``start="previous"``; rounded up to whole segments); closing the
             generator takes effect between batches.
+        sequence_starts : iterable of int
+            Frames where a new, independent sequence starts (concatenated recordings): the
+            path through time (``candidates`` > 1) never links across them. Gaps in
+            ``frames`` and jumps of the movement itself are found without help.
+        previous : FrameResult, optional
+            The result chosen just before the first of ``frames`` (a resumed fit): the path
+            continues from it, so a fit resumed where it stopped chooses as the whole would.
 
         Raises
         ------
@@ -544,10 +571,13 @@ class Fitter:
         """
         obs = self.observations(detections)
         idx = self._frame_indices(frames, obs.n_frames)
-        return self._iter(obs, idx, chunk_size)
+        starts = np.asarray(list(sequence_starts), np.int64)
+        return self._iter(obs, idx, chunk_size, starts, previous)
 
-    def _iter(self, obs: Observations, idx: np.ndarray, chunk_size: int | None
+    def _iter(self, obs: Observations, idx: np.ndarray, chunk_size: int | None,
+              starts: np.ndarray | None = None, previous: FrameResult | None = None
               ) -> Iterator[FrameResult]:
+        starts = np.zeros(0, np.int64) if starts is None else starts
         roots, rots = self._place(obs, idx)
         params = self.params
         if params.threshold_mode == "auto" and len(idx):
@@ -563,13 +593,26 @@ class Fitter:
             raise KinematicsError(f"chunk_size must be an integer >= 1, got {chunk!r}",
                                   field="chunk_size")
         chunk = -(-chunk // seg) * seg
-        for a in range(0, len(idx), chunk):
-            sel = idx[a: a + chunk]
-            n = len(sel)
-            seg_off = np.unique(np.r_[np.arange(0, n, seg), n]).astype(np.int64)
-            yield from self._fit_block(obs, sel, sel, np.ascontiguousarray(roots[a: a + chunk]),
-                                       np.ascontiguousarray(rots[a: a + chunk]),
-                                       self.problem.start, seg_off, params)
+
+        def chunks():
+            for a in range(0, len(idx), chunk):
+                sel = idx[a: a + chunk]
+                n = len(sel)
+                seg_off = np.unique(np.r_[np.arange(0, n, seg), n]).astype(np.int64)
+                yield self._fit_block(obs, sel, sel, np.ascontiguousarray(roots[a: a + chunk]),
+                                      np.ascontiguousarray(rots[a: a + chunk]),
+                                      self.problem.start, seg_off, params)
+
+        if params.candidates > 1:
+            anchor = None
+            if previous is not None and len(idx) and previous.frame == idx[0] - 1 and (
+                    previous.runs or previous.candidates):
+                anchor = self._posture_vector(previous)
+            yield from self._over_time(obs, idx, roots, rots, chunks(), starts, anchor,
+                                       params)
+        else:
+            for block in chunks():
+                yield from block
 
     def _video_threshold(self, obs: Observations, idx, roots, rots) -> float:
         """The re-analysis threshold on E measured on the video itself (threshold_mode
@@ -578,7 +621,7 @@ class Fitter:
         times the marker images of a frame seen in every view."""
         p = self.params
         pick = np.unique(np.linspace(0, len(idx) - 1, min(p.auto_sample, len(idx))).astype(int))
-        once = replace(p, max_runs=1, threshold_mode="absolute")
+        once = replace(p, max_runs=1, candidates=1, threshold_mode="absolute")
         res = self._fit_block(obs, idx[pick], idx[pick], np.ascontiguousarray(roots[pick]),
                               np.ascontiguousarray(rots[pick]), self.problem.start,
                               np.arange(len(pick) + 1, dtype=np.int64), once)
@@ -593,62 +636,281 @@ class Fitter:
         full = len(self.body.marker_names) * max(obs.n_views, 1)
         return per_image * full
 
-    def fit(self, detections, frames=None) -> list[FrameResult]:
+    def fit(self, detections, frames=None, **kwargs) -> list[FrameResult]:
         """All results of :meth:`iter_fit` as a list."""
-        return list(self.iter_fit(detections, frames))
+        return list(self.iter_fit(detections, frames, **kwargs))
 
     def _fit_block(self, obs: Observations, sel, frame_ids, roots, rots, start, seg_off,
                    params: AnnealParams | None = None) -> list[FrameResult]:
         """Fit frames ``sel`` of ``obs`` (``frame_ids`` key their random streams)."""
         p, pr = params or self.params, self.problem
         arrays = obs.arrays(sel)
-        pts, off = arrays.points, arrays.offsets
-        dropped = obs.dropped[sel]
         n, ns, nv = len(frame_ids), pr.n_state, self.n_views
-        out = FitOutputs.empty(n, ns, nv)
+        out = FitOutputs.empty(n, ns, nv, max(p.max_runs, p.candidates))
         parts = partitions_of(pr, p.partitions, p.partition_rounds, p.claim_gate_px)
         _ak.fit_frames(seg_off, frame_ids, roots, rots, start, pr.folded, pr.cams, pr.dofs,
                        schedule_of(p), error_args(p.error), arrays, parts, out)
-        state, err, view_err, runs, its, pairs = out
-        counts = obs.view_counts(sel)
         results = []
         for k in range(n):
-            missing = tuple(self.view_names[v] for v in range(nv) if counts[k, v] == 0)
-            angles, fitted_roots = pr.posture(state[k], roots[k], rots[k])
-            residuals = np.full((nv, pr.folded.marker_joint.size), np.nan)
-            unexplained = 0
-            if runs[k]:
-                residuals, unexplained = self._residuals(obs, state[k], roots[k], rots[k],
-                                                         pts, off[k * nv: k * nv + nv + 1],
-                                                         p.claim_gate_px)
-            too_many = (p.max_unexplained is not None and obs.kind == "points"
-                        and unexplained > p.max_unexplained)
-            if runs[k] == 0:
-                status = "no-detections"
-            elif err[k] > p.reanalysis_threshold or too_many:
-                status = "failed"
-            else:
-                status = "ok" if runs[k] == 1 else "reanalysed"
-            results.append(FrameResult(
-                frame=int(frame_ids[k]),
-                angles_deg=self._to_range_deg(angles),
-                error=float(err[k]),
-                error_per_view=view_err[k].copy(),
-                runs=int(runs[k]),
-                iterations=int(its[k]),
-                seed=p.seed,
-                status=status,
-                root_positions=(fitted_roots if runs[k] else roots[k].copy()),
-                missing_views=missing,
-                dropped=int(dropped[k]),
-                refined_pairs=int(pairs[k]) if p.refine else None,
-                marker_residuals=residuals,
-                matched=int((residuals <= p.claim_gate_px).sum()),
-                unexplained=int(unexplained),
-                worst_px=float(np.nanmax(residuals)) if np.isfinite(residuals).any()
-                else float("nan"),
-            ))
+            cands = ()
+            if p.candidates > 1 and out.runs[k]:
+                cands = self._candidates(out.run_angles[k], out.run_error[k], roots[k],
+                                         rots[k], p)
+            results.append(self._frame_result(
+                obs, int(sel[k]), int(frame_ids[k]), out.angles[k], roots[k], rots[k], p,
+                runs=int(out.runs[k]), iterations=int(out.iterations[k]),
+                pairs=int(out.pairs[k]), error=(float(out.error[k]), out.view_error[k].copy()),
+                candidates=cands))
         return results
+
+    def _frame_result(self, obs: Observations, position: int, frame_id: int, state, root_pos,
+                      root_rot, p: AnnealParams, *, runs: int, iterations: int, pairs: int,
+                      error=None, candidates=(), ambiguous: bool = False) -> FrameResult:
+        """The :class:`FrameResult` of ``state`` fitted to frame ``position`` of ``obs``;
+        ``error`` (E, E per view) is computed unless given."""
+        pr, nv = self.problem, self.n_views
+        arrays = obs.arrays(np.array([position], np.int64))
+        counts = obs.view_counts(np.array([position], np.int64))[0]
+        missing = tuple(self.view_names[v] for v in range(nv) if counts[v] == 0)
+        angles, fitted_roots = pr.posture(state, root_pos, root_rot)
+        residuals = np.full((nv, pr.folded.marker_joint.size), np.nan)
+        unexplained = 0
+        if runs:
+            residuals, unexplained = self._residuals(obs, state, root_pos, root_rot,
+                                                     arrays.points, arrays.offsets,
+                                                     p.claim_gate_px)
+            if error is None:
+                error = self._state_error(arrays, state, root_pos, root_rot, p)
+        err, view_err = error if error is not None else (np.nan, np.full(nv, np.nan))
+        too_many = (p.max_unexplained is not None and obs.kind == "points"
+                    and unexplained > p.max_unexplained)
+        if runs == 0:
+            status = "no-detections"
+        elif err > p.reanalysis_threshold or too_many:
+            status = "failed"
+        elif ambiguous:
+            status = "ambiguous"
+        else:  # the runs made for candidates are not re-analyses
+            status = "ok" if runs <= p.candidates else "reanalysed"
+        return FrameResult(
+            frame=frame_id,
+            angles_deg=self._to_range_deg(angles),
+            error=float(err),
+            error_per_view=np.asarray(view_err, float).copy(),
+            runs=runs,
+            iterations=iterations,
+            seed=p.seed,
+            status=status,
+            root_positions=(fitted_roots if runs else np.array(root_pos, float, copy=True)),
+            missing_views=missing,
+            dropped=int(obs.dropped[position]),
+            refined_pairs=pairs if p.refine else None,
+            marker_residuals=residuals,
+            matched=int((residuals <= p.claim_gate_px).sum()),
+            unexplained=int(unexplained),
+            worst_px=float(np.nanmax(residuals)) if np.isfinite(residuals).any()
+            else float("nan"),
+            candidates=candidates,
+        )
+
+    def _state_error(self, arrays, state, root_pos, root_rot, p: AnnealParams):
+        """(E, E per view) of a kernel state for one frame's observation arrays."""
+        per_view = np.empty(self.n_views)
+        opts = p.error
+        obs3 = (arrays.points3d[0] if arrays.points3d.shape[1]
+                else np.zeros((self.problem.folded.marker_joint.size, 4)))
+        e = _ak.posture_error(np.ascontiguousarray(state), root_pos, root_rot,
+                              *self.problem.folded, *self.problem.cams, arrays.objective,
+                              arrays.points, arrays.conf, arrays.offsets, obs3,
+                              opts.bidirectional, float(opts.penalty_weight), opts.cap,
+                              opts.penalty_cap, per_view)
+        return float(e), per_view
+
+    # -- candidates and the path through time ----------------------------------------------
+    def _candidates(self, run_states, run_errors, root_pos, root_rot, p: AnnealParams
+                    ) -> tuple[Candidate, ...]:
+        """The distinct postures among one frame's runs, lowest E first."""
+        made = np.flatnonzero(np.isfinite(run_errors))
+        found = []
+        for r in made:
+            angles, fitted = self.problem.posture(run_states[r], root_pos, root_rot)
+            found.append(Candidate(self._to_range_deg(angles), fitted, float(run_errors[r]),
+                                   run_states[r].copy(), np.array(root_pos, copy=True),
+                                   np.array(root_rot, copy=True)))
+        return self._distinct(found, p)
+
+    def _distinct(self, found: Sequence[Candidate], p: AnnealParams) -> tuple[Candidate, ...]:
+        if not found:
+            return ()
+        vectors = np.array([self._posture_vector(c) for c in found])
+        tol = np.full(vectors.shape[1], p.ambiguous_deg)
+        keep = temporal.distinct(vectors, [c.error for c in found], tol,
+                                 self._n_wrapped, p.candidates)
+        return tuple(found[i] for i in keep)
+
+    @property
+    def _n_wrapped(self) -> int:
+        """Leading entries of a posture vector that are angles (compared modulo 360)."""
+        return self.problem.n_axes - 3 * len(self.problem.free_chains)
+
+    def _joint_axes(self) -> np.ndarray:
+        """Posture indices of the angles that are not free-root rotations."""
+        root = set(self.problem.root_axes.ravel().tolist())
+        return np.array([i for i in range(self.problem.n_axes) if i not in root], np.int64)
+
+    def _posture_vector(self, c) -> np.ndarray:
+        """A candidate's (or result's) posture as one flat vector for comparisons: joint
+        angles (degrees), then each free root's rotation matrix (x 180/π, so a small turn by
+        1° moves it by about 1: Euler triplets that name the same rotation compare equal),
+        then root positions."""
+        a = np.asarray(c.angles_deg, float)
+        rots = [np.rad2deg(euler_yxz(*np.deg2rad(a[ix]))).ravel()
+                for ix in self.problem.root_axes]
+        return np.r_[a[self._joint_axes()], *rots, np.ravel(c.root_positions)]
+
+    def _posture_scale(self) -> np.ndarray:
+        """Per posture entry, the size of a change that costs 1 on the path: each axis's
+        histogram spread s(H) (at least 1°), each root coordinate a quarter of the body's
+        longest segment."""
+        spread = np.array([max(h.std_deg(), 1.0) for h in self.body.histograms()])
+        length = max((abs(float(seg.length))
+                      for _, seg in self.body.segments()), default=1.0) or 1.0
+        # a free root's rotation: 30° (about a uniform histogram's spread over 100°) per unit
+        turn = np.full(9 * len(self.problem.free_chains), 30.0)
+        return np.r_[spread[self._joint_axes()], turn,
+                     np.full(3 * self.problem.n_chains, length / 4.0)]
+
+    def _over_time(self, obs: Observations, idx, roots, rots, chunks, starts, anchor,
+                   p: AnnealParams) -> Iterator[FrameResult]:
+        """Choose one candidate per frame by the path through time (fixed-lag: a frame is
+        decided once ``LAG`` later frames are fitted), re-fit implausible frames from their
+        neighbours' postures, and flag ambiguous ones."""
+        lag = 32
+        scale = self._posture_scale()
+        images = marker_images(obs, idx, len(self.body.marker_names))
+        pending: list[FrameResult] = []
+        done = 0  # frames of idx already yielded
+        for chunk in chunks:
+            pending.extend(chunk)
+            while len(pending) > 2 * lag:
+                decided = self._decide(obs, idx, roots, rots, pending, done, images, scale,
+                                       anchor, starts, p)
+                out, pending = decided[:lag], pending[lag:]
+                done += lag
+                anchor = self._posture_vector(out[-1]) if out[-1].candidates else None
+                yield from out
+        if pending:
+            yield from self._decide(obs, idx, roots, rots, pending, done, images, scale,
+                                    anchor, starts, p)
+
+    def _decide(self, obs, idx, roots, rots, window: list, first: int, images, scale, anchor,
+                starts, p: AnnealParams) -> list[FrameResult]:
+        """The window's results with the path's choice applied (module :mod:`temporal`)."""
+        n_angles = self._n_wrapped
+        window = list(window)
+
+        def path():
+            k = max((len(r.candidates) for r in window), default=0)
+            if k == 0:  # no frame of the window had observations
+                return (np.full(len(window), -1), np.zeros((len(window), 0)),
+                        np.zeros((len(window), 0, len(scale))))
+            unary = np.full((len(window), k), np.inf)
+            post = np.zeros((len(window), k, len(scale)))
+            for i, r in enumerate(window):
+                if r.candidates:
+                    e = np.array([c.error for c in r.candidates])
+                    unary[i, : len(e)] = (e - e.min()) / max(images[first + i], 1)
+                    post[i, : len(e)] = [self._posture_vector(c) for c in r.candidates]
+            return temporal.choose_path(unary, post, scale, n_angles, p.path_weight,
+                                        breaks, anchor), unary, post
+
+        frames = np.array([r.frame for r in window])
+        breaks = np.r_[False, np.diff(frames) != 1] | np.isin(frames, starts)
+        best = np.array([self._posture_vector(r.candidates[0]) if r.candidates
+                         else np.full(len(scale), np.nan) for r in window])
+        breaks |= temporal.cuts(best, scale, n_angles)
+
+        choice, unary, post = path()
+        # Re-analysis seeded by neighbours: a frame where the chosen path jumps (to or from
+        # it) is fitted again, cold and locally, from every candidate of both neighbours;
+        # two rounds, so a run of a few wrong frames is entered from both ends.
+        tried: set[tuple[int, int]] = set()
+        for _ in range(2):
+            jumps = np.full(len(window), np.nan)
+            for i in range(1, len(window)):
+                if choice[i] >= 0 and choice[i - 1] >= 0 and not breaks[i]:
+                    jumps[i] = temporal.transition_costs(post[i - 1, choice[i - 1]][None],
+                                                         post[i, choice[i]][None], scale,
+                                                         n_angles)[0, 0]
+            typical = np.nanmedian(jumps) if np.isfinite(jumps).any() else 0.0
+            limit = min(REDO_JUMP, max(REDO_JUMP_MIN, REDO_JUMP_RATIO * typical))
+            redo = set()
+            for i in np.flatnonzero(jumps > limit):
+                redo.update((int(i) - 1, int(i)))
+            grown = False
+            for i in sorted(redo):
+                extra = []
+                for j in (i - 1, i + 1):
+                    if not (0 <= j < len(window)) or breaks[max(i, j)]:
+                        continue
+                    for cand in window[j].candidates:
+                        if (i, id(cand)) in tried:
+                            continue
+                        tried.add((i, id(cand)))
+                        extra.append(self._refit_from(obs, int(idx[first + i]), cand, p))
+                # a re-fit joins the candidates only when it fits about as well as the best
+                e_min = min(c.error for c in window[i].candidates)
+                worst = e_min + REFIT_KEEP_PX * max(images[first + i], 1)
+                extra = [c for c in extra if c is not None and c.error <= worst]
+                if extra:
+                    before = len(window[i].candidates)
+                    merged = self._distinct(list(window[i].candidates) + extra,
+                                            replace(p, candidates=p.candidates + len(extra)))
+                    window[i] = replace(window[i], candidates=merged)
+                    grown = grown or len(merged) > before
+            if not grown:
+                break
+            choice, unary, post = path()
+        # "about as well": within ambiguous_px per marker image, and within half the typical
+        # E per image of the window (on a clean video a posture 60x worse than the chosen
+        # one is a poor local minimum, not an ambiguity)
+        typical = np.median([min(c.error for c in r.candidates) / max(images[first + i], 1)
+                             for i, r in enumerate(window) if r.candidates] or [0.0])
+        margin = min(p.ambiguous_px, max(AMBIGUOUS_FLOOR_PX, 0.5 * typical))
+        results = []
+        for i, r in enumerate(window):
+            if choice[i] < 0:
+                results.append(r)
+                continue
+            chosen = r.candidates[choice[i]]
+            near = np.abs(unary[i] - unary[i, choice[i]]) <= margin
+            ambiguous = int(near.sum()) > 1
+            cands = (chosen, *(c for k, c in enumerate(r.candidates) if k != choice[i]))
+            results.append(self._frame_result(
+                obs, int(idx[first + i]), r.frame, chosen.state, chosen.seed_pos,
+                chosen.seed_rot, p,
+                runs=r.runs, iterations=r.iterations, pairs=r.refined_pairs or 0,
+                candidates=cands, ambiguous=ambiguous))
+        return results
+
+    def _refit_from(self, obs: Observations, position: int, neighbour: Candidate,
+                    p: AnnealParams) -> Candidate | None:
+        """Anneal frame ``position`` again, cold and locally, from a neighbour's posture."""
+        state, pos, rot = self.problem.state(neighbour.angles_deg, neighbour.root_positions)
+        local = replace(p, candidates=1, max_runs=1, tau0=p.tau0 * 0.01, l0=p.l0 * 0.1,
+                        n_end=max(1, p.n_end // 4), n_l=max(1, p.n_l // 4),
+                        n_tau=max(1, p.n_tau // 4), start="mean")
+        sel = np.array([position], np.int64)
+        out = FitOutputs.empty(1, self.problem.n_state, self.n_views, 1)
+        parts = partitions_of(self.problem, p.partitions, p.partition_rounds, p.claim_gate_px)
+        # the run index 1_000_003 keeps this stream apart from the frame's own runs
+        _ak.fit_frames(np.array([0, 1], np.int64), np.array([position + 1_000_003], np.int64),
+                       np.ascontiguousarray(pos[None]), np.ascontiguousarray(rot[None]),
+                       state, self.problem.folded, self.problem.cams, self.problem.dofs,
+                       schedule_of(local), error_args(p.error), obs.arrays(sel), parts, out)
+        if not out.runs[0]:
+            return None
+        return self._candidates(out.run_angles[0], out.run_error[0], pos, rot, local)[0]
 
     def _residuals(self, obs: Observations, state, root_pos, root_rot, pts, view_off,
                    gate: float) -> tuple[np.ndarray, int]:
@@ -667,6 +929,18 @@ class Fitter:
                 out[v] = dist.min(axis=1)
                 unexplained += int((dist.min(axis=0) > gate).sum())
         return out, unexplained
+
+
+#: A chosen posture change between consecutive frames larger than this (in squared
+#: histogram spreads, :mod:`kinematics.temporal`) re-fits both frames from their neighbours.
+REDO_JUMP = 1.0
+#: ... or larger than this many times the window's median change (at least REDO_JUMP_MIN).
+REDO_JUMP_RATIO, REDO_JUMP_MIN = 16.0, 0.02
+#: A re-fit from a neighbour becomes a candidate only within this E per marker image (px)
+#: of the frame's best.
+REFIT_KEEP_PX = 1.0
+#: The least difference in E per marker image (px) that still counts as "about as well".
+AMBIGUOUS_FLOOR_PX = 1e-3
 
 
 def marker_images(obs: Observations, frames, n_markers: int) -> np.ndarray:

@@ -103,6 +103,7 @@ class Schedule(NamedTuple):
     refine_gate: float
     start_previous: bool
     max_unexplained: int  # -1: not used
+    min_runs: int  # runs made even when the first is good (candidate postures)
 
 
 class ErrorArgs(NamedTuple):
@@ -123,11 +124,14 @@ class FitOutputs(NamedTuple):
     runs: np.ndarray  # (n,) int64
     iterations: np.ndarray  # (n,) int64
     pairs: np.ndarray  # (n,) int64
+    run_angles: np.ndarray  # (n, max_runs, n_state) every run's result (refined)
+    run_error: np.ndarray  # (n, max_runs) its E; NaN for runs not made
 
     @classmethod
-    def empty(cls, n: int, n_state: int, n_views: int) -> FitOutputs:
+    def empty(cls, n: int, n_state: int, n_views: int, max_runs: int = 1) -> FitOutputs:
         return cls(np.empty((n, n_state)), np.empty(n), np.empty((n, n_views)),
-                   np.empty(n, np.int64), np.empty(n, np.int64), np.empty(n, np.int64))
+                   np.empty(n, np.int64), np.empty(n, np.int64), np.empty(n, np.int64),
+                   np.empty((n, max_runs, n_state)), np.empty((n, max_runs)))
 
 
 def schedule_of(params) -> Schedule:
@@ -137,9 +141,11 @@ def schedule_of(params) -> Schedule:
     return Schedule(float(p.threshold), int(p.max_redraws), int(p.n_end), int(p.n_l),
                     int(p.n_tau), float(p.tau0), float(p.l0), float(p.c_l), float(p.c_tau),
                     float(p.epsilon), int(p.seed), float(p.reanalysis_threshold),
-                    int(p.max_runs), int(p.refine_steps) if p.refine else 0,
+                    max(int(p.max_runs), int(p.candidates)),
+                    int(p.refine_steps) if p.refine else 0,
                     float(p.refine_gate_px), p.start == "previous",
-                    -1 if p.max_unexplained is None else int(p.max_unexplained))
+                    -1 if p.max_unexplained is None else int(p.max_unexplained),
+                    int(p.candidates))
 
 
 def error_args(options) -> ErrorArgs:

@@ -111,7 +111,11 @@ class ErrorOptions:
 # -- parameters -----------------------------------------------------------------------------
 @dataclass(frozen=True)
 class AnnealParams:
-    """Parameters of the fit; the defaults are the paper's Table 1 and its note.
+    """Parameters of the fit. The defaults are the best measured settings (Table 1's
+    schedule, refinement, the bounded error with a 10-px marker cap, the status threshold
+    measured on the video, two candidate postures per frame and the path through time:
+    docs/benchmarks.md, "Defaults"); :meth:`paper` gives the paper's own (Table 1 and its
+    note, Eq. 5), which reproduce Table 2.
 
     The fields' metadata (:func:`setting`) say what each means; docs/fitting.md says how to
     tune them.
@@ -150,9 +154,8 @@ class AnnealParams:
     segment_length: int = setting(32, "Frames per independent segment with start = "
                                   "'previous' (each segment starts from the means).",
                                   min=1, max=10**8)
-    refine: bool = setting(False, "Polish every fitted posture by Levenberg-Marquardt (see "
-                           "docs/fitting.md); off by default so the defaults reproduce the "
-                           "paper.")
+    refine: bool = setting(True, "Polish every fitted posture by Levenberg-Marquardt (see "
+                           "docs/fitting.md); off in the paper profile.")
     refine_steps: int = setting(10, "Accepted Levenberg-Marquardt steps at most (refine).",
                                 min=0, max=10**6)
     refine_gate_px: float = setting(5.0, "Refinement ignores marker/detection pairs farther "
@@ -162,7 +165,7 @@ class AnnealParams:
         "this (pixels) from the predicted root marker; None, written 0 in a project file: no "
         "gate (the paper's nearest neighbour).", min=0.0, max=1e9, none=0.0)
     threshold_mode: str = setting(
-        "absolute", "How the re-analysis threshold is set: 'absolute' uses "
+        "auto", "How the re-analysis threshold is set: 'absolute' uses "
         "reanalysis_threshold (E in pixels, the paper's Table 1 note); 'auto' measures the "
         "video first — a sample of frames is fitted once and the threshold per marker image "
         "is median + auto_k MADs of their E per marker image (at least auto_floor_px) — so "
@@ -194,8 +197,25 @@ class AnnealParams:
     claim_gate_px: float = setting(
         10.0, "A marker of another partition claims its nearest detection only within this "
         "distance (pixels): an occluded marker claims nothing.", min=1e-6, max=1e9)
-    error: ErrorOptions = field(default_factory=ErrorOptions, metadata={
-        "doc": "The error function: Eq. 5 (default) or a variant.",
+    candidates: int = setting(
+        2, "Candidate postures kept per frame: every frame is annealed at least this many "
+        "times (on its own random streams), distinct results are kept, and a path through "
+        "time chooses one per frame (see docs/fitting.md, 'Candidates and the path'); 1: one "
+        "answer per frame (the paper).", min=1, max=64)
+    path_weight: float = setting(
+        1.0, "With candidates > 1: weight of the movement's continuity against E when the "
+        "path chooses; 0 keeps the lowest E of every frame.", min=0.0, max=1e6)
+    ambiguous_px: float = setting(
+        0.5, "With candidates > 1: a frame is ambiguous when another candidate's E per "
+        "marker image is within this many pixels of the chosen one's (and within half the "
+        "typical E per marker image of the video) while its posture is far from it (more "
+        "than ambiguous_deg on some axis).", min=0.0, max=1e6)
+    ambiguous_deg: float = setting(
+        5.0, "With candidates > 1: candidates nearer than this on every axis (degrees, or "
+        "length units for translations) are the same posture.", min=1e-6, max=360.0)
+    error: ErrorOptions = field(default_factory=lambda: ErrorOptions(**BEST_ERROR), metadata={
+        "doc": "The error function: the bounded bidirectional variant with a 10-px marker "
+        "cap (default), or the paper's Eq. 5 or another variant.",
         "flatten": {"mode": "error"}})
     seed: int = setting(0, "Seed of the random streams; written into every result.",
                         min=0, max=2**62)
@@ -207,7 +227,7 @@ class AnnealParams:
         """Raise :class:`KinematicsError` naming the first invalid field."""
         ints = {"n_end": 1, "n_l": 1, "n_tau": 1, "max_redraws": 0, "max_runs": 1,
                 "segment_length": 1, "refine_steps": 0, "seed": 0, "partition_rounds": 1,
-                "auto_sample": 3}
+                "auto_sample": 3, "candidates": 1}
         for name, least in ints.items():
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int | np.integer) or (
@@ -239,9 +259,14 @@ class AnnealParams:
         if g is not None and not (_is_real(g) and g > 0):
             raise KinematicsError(f"must be None or a number > 0, got {g!r}",
                                   field="root_gate_px")
-        if not _is_real(self.auto_k) or not (math.isfinite(self.auto_k) and self.auto_k >= 0):
-            raise KinematicsError(f"must be a finite number >= 0, got {self.auto_k!r}",
-                                  field="auto_k")
+        for name in ("auto_k", "path_weight", "ambiguous_px"):
+            value = getattr(self, name)
+            if not _is_real(value) or not (math.isfinite(value) and value >= 0):
+                raise KinematicsError(f"must be a finite number >= 0, got {value!r}",
+                                      field=name)
+        if not _is_real(self.ambiguous_deg) or not 0 < self.ambiguous_deg <= 360:
+            raise KinematicsError(f"must be in (0, 360], got {self.ambiguous_deg!r}",
+                                  field="ambiguous_deg")
         mu = self.max_unexplained
         if mu is not None and (isinstance(mu, bool) or not isinstance(mu, int | np.integer)
                                or mu < 0):
@@ -269,6 +294,20 @@ class AnnealParams:
         th = self.plausibility_threshold
         return float(np.nextafter(0.0, 1.0)) if th is None else float(th)
 
+    @classmethod
+    def paper(cls, **overrides) -> AnnealParams:
+        """The paper's settings (Table 1 and its note, Eq. 5, one answer per frame), with
+        ``overrides``: they reproduce Table 2."""
+        return cls(**{**PAPER, **overrides})
+
+    @classmethod
+    def profile(cls, name: str, **overrides) -> AnnealParams:
+        """The settings of a profile (:data:`PROFILES`: 'best', the defaults, or 'paper')."""
+        if name not in PROFILES:
+            raise KinematicsError(f"must be one of {', '.join(PROFILES)}, got {name!r}",
+                                  field="profile")
+        return cls.paper(**overrides) if name == "paper" else cls(**overrides)
+
     def with_schedule(self, n_end: int) -> AnnealParams:
         """The same cooling schedule compressed or stretched to ``n_end`` iterations: N_l and
         N_τ scale linearly, as in the paper's sensitivity analysis (Sect. 3.2)."""
@@ -294,6 +333,15 @@ class AnnealParams:
         if isinstance(kw.get("error"), Mapping):
             kw["error"] = ErrorOptions(**kw["error"])
         return cls(**kw)
+
+
+#: The error function of the defaults (bench/bench_temporal.py, docs/benchmarks.md).
+BEST_ERROR = {"mode": "bounded", "cap_px": 10.0}
+
+#: Profiles: 'best' (the defaults) and 'paper' (what differs from them in the paper's).
+PROFILES = ("best", "paper")
+PAPER = {"refine": False, "threshold_mode": "absolute", "candidates": 1,
+         "error": ErrorOptions()}
 
 
 def _is_real(value) -> bool:

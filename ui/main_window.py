@@ -117,7 +117,11 @@ class MainWindow(QMainWindow):
         self.act_prev = a("Previous frame", lambda: s.step(-1), "Left")
         self.act_next_bad = a("Next bad frame", self.next_bad, "Ctrl+Right",
                               "Jump to the next frame above the threshold")
-        for act in (self.act_play, self.act_next, self.act_prev, self.act_next_bad):
+        self.act_swap = a("&Alternative posture", lambda: s.swap_candidate(), "A",
+                          "Replace this frame's posture by the next candidate the fit kept "
+                          "(an ambiguous frame's mirror posture); again to cycle")
+        for act in (self.act_play, self.act_next, self.act_prev, self.act_next_bad,
+                    self.act_swap):
             act.setShortcutContext(Qt.ShortcutContext.WindowShortcut)
             self.addAction(act)
 
@@ -132,6 +136,7 @@ class MainWindow(QMainWindow):
                           self.act_fit_range, self.act_fit_selected, self.act_fit_bad, None,
                           self.act_cancel, None, self.act_histograms),
             "&View": (self.act_play, self.act_prev, self.act_next, self.act_next_bad),
+            "&Correct": (self.act_swap,),
         }
         for title, actions in menus.items():
             menu = bar.addMenu(title)

@@ -226,6 +226,7 @@ class Session(QObject):
             try:
                 self.results = backend.read_project_results(self.results_path, self.body,
                                                             self.view_names)
+                self.results = backend.with_candidates_file(self.results, self.results_path)
             except LocatedError as err:
                 self.error.emit(str(err))
 
@@ -694,6 +695,35 @@ class Session(QObject):
             self.error.emit(str(err))
             return False
         finish(backend.manual_result(frame, angles, roots, error, per_view, seed))
+        return True
+
+    def swap_candidate(self, frame: int | None = None) -> bool:
+        """Replace the frame's posture by its next candidate posture (the alternatives the
+        fit kept: an ``ambiguous`` frame's mirror posture); again cycles through them. The
+        result is ``corrected`` (the user chose it) and undo restores the frame."""
+        frame = self.frame if frame is None else int(frame)
+        current = self.results.get(frame)
+        if current is None or len(current.candidates) < 2 or self.model is None:
+            self.status.emit(f"frame {frame} has no alternative posture")
+            return False
+        cycled = (*current.candidates[1:], current.candidates[0])
+        chosen = cycled[0]
+        try:
+            error, per_view = self._fitter().error(chosen.angles_deg,
+                                                   self.frame_detections(frame),
+                                                   chosen.root_positions)
+        except LocatedError as err:
+            self.error.emit(str(err))
+            return False
+        result = backend.replace_result(backend.manual_result(
+            frame, chosen.angles_deg, chosen.root_positions, error, per_view,
+            self.params.seed if self.params else 0), candidates=cycled)
+        edit = Edit(f"frame {frame}: alternative posture")
+        edit.record_result(frame, current, result)
+        self._apply(edit, 1)
+        self._push(edit)
+        self.status.emit(f"frame {frame}: alternative posture {len(current.candidates) - 1} "
+                         f"of {len(current.candidates)}, error {error:.2f} px")
         return True
 
     def drag_marker(self, view: int, marker: int, target_xy, refit: bool = True) -> bool:

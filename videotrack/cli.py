@@ -33,6 +33,7 @@ COMMAND_MODULES = (
     "videotrack.commands.chain",
     "videotrack.commands.synth",
     "videotrack.commands.detect",
+    "videotrack.commands.keypoints",
     "videotrack.commands.fit",
     "videotrack.commands.histograms",
     "videotrack.commands.gui",
@@ -69,7 +70,8 @@ def _version() -> str:
 
 
 #: Optional dependencies by top-level module: the extra of ``pip install 'videotrack[EXTRA]'``.
-OPTIONAL_EXTRAS = {"dask": "dask", "distributed": "dask"}
+OPTIONAL_EXTRAS = {"dask": "dask", "distributed": "dask", "sleap_io": "markerless",
+                   "ezc3d": "markerless", "pynwb": "markerless", "ndx_pose": "markerless"}
 
 
 def _debug() -> bool:

@@ -45,7 +45,7 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 from kinematics.errors import LocatedError
-from kinematics.settings import AnnealParams
+from kinematics.settings import PROFILES, AnnealParams
 from videotrack.errors import VideoTrackError
 
 #: Marks a key without a default: it must be given.
@@ -181,7 +181,8 @@ class Config:
     """A validated project file: ``config["video"]`` is the checked dict of that section.
 
     An absent section holds its defaults (an absent array of tables is an empty list);
-    ``given`` lists the sections the file itself has. A config merged from several files
+    ``given`` lists the sections the file itself has, ``keys_given`` the keys it sets in each
+    (table) section. A config merged from several files
     (:func:`config_from_layers`) lists them in ``sources``, top first; ``base``, when set, is
     its :attr:`folder` instead of the folder of ``path`` (a trial folder of a project).
     """
@@ -191,6 +192,7 @@ class Config:
     given: tuple[str, ...] = ()
     sources: tuple[Path, ...] = ()
     base: Path | None = None
+    keys_given: Mapping[str, tuple[str, ...]] = dataclasses.field(default_factory=dict)
 
     @property
     def folder(self) -> Path:
@@ -329,9 +331,11 @@ def config_from_layers(
         else:
             sections[name] = section.validate(value or {}, file=path, base=path.parent)
     given = tuple(dict.fromkeys(name for layer in layers for name in layer))
+    keys_given = {name: tuple(value) for name, value in merged.items()
+                  if isinstance(value, Mapping)}
     return Config(path=path, sections=sections, given=given,
                   sources=tuple(Path(s) for s in sources) or (path,),
-                  base=Path(base) if base is not None else None)
+                  base=Path(base) if base is not None else None, keys_given=keys_given)
 
 
 def describe_section(section: Section | Variants, level: int = 3) -> str:
@@ -752,9 +756,27 @@ CAMERAS = register_section(Section("cameras", (
 
 # Every field of AnnealParams (and of its ErrorOptions, flattened: ``error`` is the mode) is a
 # key, with the type, default, bounds and doc declared in kinematics/settings.py.
-ANNEAL = register_section(record_section(
-    "anneal", AnnealParams, "Simulated annealing (Eq. 6) and the error function (Eq. 5); "
-    "defaults are Table 1."))
+_ANNEAL_DOC = ("Simulated annealing (Eq. 6), the error function (Eq. 5 or a variant) and the "
+               "choice among candidate postures; defaults are the best measured settings, "
+               "profile = \"paper\" gives the paper's (Table 1, Eq. 5).")
+ANNEAL = register_section(Section("anneal", (
+    Key("profile", "str", "best", "Settings every other key of this section starts from: "
+        "'best' (the best measured, the defaults listed here) or 'paper' (the paper's Table 1 "
+        "and Eq. 5, no refinement, one answer per frame: reproduces Table 2). Keys you set "
+        "yourself override the profile.", choices=PROFILES),
+    *record_section("anneal", AnnealParams).keys), _ANNEAL_DOC))
+
+
+def anneal_from_table(table: Mapping, given=None, *, file=None) -> AnnealParams:
+    """The :class:`AnnealParams` of a checked ``[anneal]`` table: its profile's settings,
+    with the keys the file sets (``given``; default every key) on top."""
+    profile = table.get("profile", "best")
+    base = {k.key.name: k.key.default for k in record_keys(AnnealParams,
+                                                           AnnealParams.profile(profile))}
+    given = set(table if given is None else given)
+    values = {name: (table[name] if name in given else default)
+              for name, default in base.items()}
+    return record_from_table(AnnealParams, values, file=file, where="anneal")
 
 FIT = register_section(Section("fit", (
     Key("results", "path", "", "Results CSV; empty: '<detections>.results.csv' beside the "

@@ -60,7 +60,7 @@ def smooth_random_motion(
     span = hi - lo
     locked = body.locked_mask()
     fixed = np.where(locked, lo, 0.0)
-    bounds = np.linspace(0, n_frames, n_sequences + 1).round().astype(int)
+    bounds = np.r_[sequence_starts(n_frames, n_sequences), n_frames]
     out = np.empty((n_frames, body.n_axes))
     for start, stop in itertools.pairwise(bounds):
         length = stop - start
@@ -73,6 +73,11 @@ def smooth_random_motion(
         out[start:stop] = np.clip(spline(np.arange(length)), lo, hi)
     out[:, locked] = fixed[locked]
     return out
+
+
+def sequence_starts(n_frames: int, n_sequences: int) -> np.ndarray:
+    """First frame of each of the concatenated sequences of :func:`smooth_random_motion`."""
+    return np.linspace(0, n_frames, n_sequences + 1).round().astype(int)[:-1]
 
 
 def read_angles_csv(path: str | os.PathLike, body: Body) -> np.ndarray:

@@ -34,6 +34,13 @@ KINDS = {
     "csv": "CSV table",
     "toml": "TOML file",
     "xml": "XML file",
+    "corners": "calibration corner cache (.npz)",
+    "npz": "NumPy archive (.npz)",
+    "h5": "HDF5 file (.h5, .nwb)",
+    "trc": "OpenSim marker file (.trc)",
+    "mot": "OpenSim motion file (.mot)",
+    "c3d": "C3D file",
+    "pose3d": "pose-3d CSV (Anipose)",
 }
 
 
@@ -59,6 +66,9 @@ def is_kind(path: str | os.PathLike, kind: str) -> bool:
     head = _head(path)
     if kind == "results":
         return _first_line(path).startswith("frame,video_frame,field,time")
+    if kind == "pose3d":
+        from videotrack.io.pose3d import is_pose3d
+        return is_pose3d(path)
     if kind == "summary":
         return _first_line(path).startswith("trial,state,")
     if kind == "csv":
@@ -72,9 +82,25 @@ def is_kind(path: str | os.PathLike, kind: str) -> bool:
                 return "metadata.npy" in z.namelist()
         except (OSError, zipfile.BadZipFile):
             return False
+    if kind == "corners":  # videotrack.calibration.detect.CACHE_MARK
+        try:
+            with zipfile.ZipFile(path) as z:
+                return "calibration_corners.npy" in z.namelist()
+        except (OSError, zipfile.BadZipFile):
+            return False
     if kind == "video":
         return ((head[:4] == b"RIFF" and head[8:12] == b"AVI ") or head[4:8] == b"ftyp"
                 or head[:4] == b"\x1aE\xdf\xa3")
+    if kind == "npz":
+        return head.startswith(b"PK")
+    if kind == "h5":
+        return head.startswith(b"\x89HDF\r\n\x1a\n")
+    if kind == "trc":
+        return head.startswith(b"PathFileType")
+    if kind == "mot":
+        return b"endheader" in _head(path, 4096)
+    if kind == "c3d":
+        return len(head) > 1 and head[1] == 0x50  # the C3D header's key byte
     if kind == "xml":
         return head.lstrip(b"\xef\xbb\xbf \t\r\n").startswith(b"<")
     if kind in ("sidecar", "toml"):

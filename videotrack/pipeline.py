@@ -43,16 +43,19 @@ import numpy as np
 
 from kinematics.anneal import AnnealParams, Fitter, FrameResult
 from kinematics.model import Body
-from videotrack.config import record_from_table
+from videotrack.config import anneal_from_table
 from videotrack.errors import VideoTrackError, VideoTrackWarning
 from videotrack.identity import relative_message, relative_path
 from videotrack.results import (
     Results,
+    attach_candidates,
+    candidates_path,
     file_sha256,
     frame_results,
     read_results,
     read_sidecar,
     results_from_fit,
+    write_candidates,
     write_results,
 )
 
@@ -126,10 +129,13 @@ def _jsonable(value):
 
 
 def anneal_params(config, **overrides) -> AnnealParams:
-    """:class:`AnnealParams` from the ``[anneal]`` section, with overrides (None: keep)."""
-    params = record_from_table(AnnealParams, config["anneal"], file=config.path,
-                               where="anneal")
+    """:class:`AnnealParams` from the ``[anneal]`` section, with overrides (None: keep;
+    ``profile`` replaces the section's profile)."""
     given = {k: v for k, v in overrides.items() if v is not None}
+    table = dict(config["anneal"])
+    if "profile" in given:
+        table["profile"] = given.pop("profile")
+    params = anneal_from_table(table, config.keys_given.get("anneal", ()), file=config.path)
     if "n_end" in given and "n_l" not in given and "n_tau" not in given:
         # a shorter schedule keeps the paper's proportions (Sect. 3.2 sensitivity analysis)
         params = params.with_schedule(given.pop("n_end"))
@@ -187,10 +193,10 @@ def _partial_path(results_path: Path) -> Path:
     return results_path.with_name(results_path.name + ".partial")
 
 
-def checkpoint_paths(results_path: Path) -> tuple[Path, Path]:
-    """The checkpoint of an unfinished fit and its sidecar."""
+def checkpoint_paths(results_path: Path) -> tuple[Path, ...]:
+    """The checkpoint of an unfinished fit, its sidecar and its candidates file."""
     partial = _partial_path(Path(results_path))
-    return partial, partial.with_name(partial.name + ".json")
+    return partial, partial.with_name(partial.name + ".json"), candidates_path(partial)
 
 
 def discard_checkpoint(results_path: Path) -> None:
@@ -294,7 +300,11 @@ def fit_project(
     todo = np.array([f for f in idx if int(f) not in done], dtype=np.int64)
     results: dict[int, FrameResult] = dict(done)
     last = time.monotonic()
-    gen = fitter.iter_fit(detections, todo) if todo.size else iter(())
+    # the path through time continues from the last frame kept from the checkpoint
+    before = [int(f) for f in idx[: len(idx) - len(todo)]]
+    previous = results.get(before[-1]) if before and len(todo) and all(
+        int(f) in done for f in before) else None
+    gen = fitter.iter_fit(detections, todo, previous=previous) if todo.size else iter(())
     with contextlib.closing(gen):
         for r in gen:
             results[r.frame] = r
@@ -308,6 +318,9 @@ def fit_project(
     base = results_path.absolute().parent
     found = [relative_message(w, base) for w in (*notes, *fit_warnings(table, detections))]
     write_results(results_path, table, {**sidecar, "warnings": list(dict.fromkeys(found))})
+    stale = candidates_path(results_path)
+    if write_candidates(results_path, model.body, ordered) is None and stale.exists():
+        stale.unlink()  # an earlier run's candidates would not match these results
     discard_checkpoint(results_path)
     return table
 
@@ -334,6 +347,12 @@ def fit_warnings(table: Results, detections=None) -> list[str]:
             what = ", ".join(f"{v} {k}" for k, v in kinds.items())
             found.append(f"{failed.size} of {n} frames ({100 * failed.size / n:.1f} %) were "
                          f"not fitted ({what}): video frames {_listing(frames)}")
+        unsure = [i for i, s in enumerate(table.status) if s == "ambiguous"]
+        if len(unsure) > BAD_SHARE_WARNING * n:
+            frames = [int(table.video_frames[i]) for i in unsure]
+            found.append(f"{len(unsure)} of {n} frames ({100 * len(unsure) / n:.1f} %) are "
+                         "ambiguous (another posture fits about as well; see the candidates "
+                         f"file): video frames {_listing(frames)}")
     return found
 
 
@@ -344,6 +363,8 @@ def _listing(values: Sequence[int], most: int = 8) -> str:
 
 def _checkpoint(partial: Path, model: ProjectModel, results: dict, detections, sidecar):
     ordered = [results[k] for k in sorted(results)]
+    # candidates first: a checkpoint's results never go without them
+    write_candidates(partial, model.body, ordered)
     write_results(partial, results_from_fit(model.body, ordered, model.view_names, detections),
                   sidecar)
 
@@ -357,9 +378,9 @@ def _resume(partial: Path, sidecar: dict) -> dict[int, FrameResult]:
         if changed_inputs(meta, sidecar):
             return {}
         table = read_results(partial)
+        return attach_candidates(frame_results(table, int(meta["seed"])), partial)
     except VideoTrackError:
         return {}
-    return frame_results(table, int(meta["seed"]))
 
 
 # -- the workflow -----------------------------------------------------------------------------
@@ -555,9 +576,10 @@ def _guard(config, model, det_out: Path, results_path: Path, *, detect: bool, fi
                       field="output.detections" if config["output"]["detections"] else None)
     if not fit:
         return
-    outputs = {results_path: "results", sidecar_path(results_path): "sidecar"}
-    partial, partial_side = checkpoint_paths(results_path)
-    outputs.update({partial: "results", partial_side: "sidecar"})
+    outputs = {results_path: "results", sidecar_path(results_path): "sidecar",
+               candidates_path(results_path): "csv"}
+    partial, partial_side, partial_candidates = checkpoint_paths(results_path)
+    outputs.update({partial: "results", partial_side: "sidecar", partial_candidates: "csv"})
     if plot:
         outputs[default_plot_path(results_path)] = "png"
     field = "--results" if results_given else "fit.results" if config["fit"]["results"] else None

@@ -14,12 +14,19 @@ The ``.res.`` columns are per-marker residuals: how far, in pixels, each fitted 
 is from the detection it matched (its nearest) in each view; empty where the view had no
 detection. They show which marker of a frame is off (a swapped or missing marker).
 
-``status`` is ``ok``, ``reanalysed``, ``failed``, ``no-detections`` or ``corrected`` (set by
-hand in the GUI). Empty cells are NaN. The sidecar ``<results>.json`` records the seed, every
+``status`` is ``ok``, ``reanalysed``, ``ambiguous`` (another candidate posture far from this
+one fits about as well), ``failed``, ``no-detections`` or ``corrected`` (set by hand in the
+GUI). Empty cells are NaN. The sidecar ``<results>.json`` records the seed, every
 fitting parameter, the chain, cameras and detections used (paths relative to the results
 file's folder, and content hashes) so any run can be replayed and stale results recognised,
 and the warnings of the run that made the results (``warnings``). Both are written
 atomically.
+
+With candidate postures (``[anneal] candidates`` > 1) a third file,
+``<results stem>.candidates.csv``, holds every frame's distinct postures: ``frame, rank,
+chosen, error, <joint>.<axis> ..., <chain>.root.x/y/z ...``, rank 0 the lowest E, ``chosen``
+1 for the posture in the results. The path through time can be chosen again from it without
+refitting (:func:`read_candidates`, :func:`kinematics.temporal.choose_path`).
 """
 
 from __future__ import annotations
@@ -42,7 +49,7 @@ from kinematics.packing import pack_body
 from videotrack.errors import VideoTrackError
 from videotrack.tables import format_cell
 
-STATUSES = ("ok", "reanalysed", "failed", "no-detections", "corrected")
+STATUSES = ("ok", "reanalysed", "ambiguous", "failed", "no-detections", "corrected")
 #: Per-frame match counts (FrameResult.matched, .unexplained, .worst_px), between iterations
 #: and status; files written before they existed lack them.
 QUALITY_COLUMNS = ("matched", "unexplained", "worst_px")
@@ -80,9 +87,11 @@ class Results:
     def __len__(self) -> int:
         return self.frames.size
 
-    def ok_mask(self) -> np.ndarray:
-        """Rows whose fit met the error threshold (ok, re-analysed or corrected by hand)."""
-        return np.isin(np.array(self.status), ("ok", "reanalysed", "corrected"))
+    def ok_mask(self, ambiguous: bool = True) -> np.ndarray:
+        """Rows whose fit met the error threshold (ok, re-analysed, corrected by hand and,
+        unless ``ambiguous`` is False, ambiguous)."""
+        good = ("ok", "reanalysed", "corrected") + (("ambiguous",) if ambiguous else ())
+        return np.isin(np.array(self.status), good)
 
     @property
     def columns(self) -> list[str]:
@@ -184,6 +193,92 @@ def write_results(path: str | os.PathLike, results: Results, sidecar: Mapping) -
     atomic_write_text(side, json.dumps(meta, indent=2, sort_keys=True) + "\n")
     atomic_write_text(path, text)
     return path
+
+
+def candidates_path(path: str | os.PathLike) -> Path:
+    """The candidates file beside a results file (``x.csv`` -> ``x.candidates.csv``)."""
+    path = Path(path)
+    stem = path.name[:-4] if path.name.lower().endswith(".csv") else path.name
+    return path.with_name(stem + ".candidates.csv")
+
+
+def format_candidates(body: Body, fit_results: Sequence) -> str:
+    """CSV text of the candidate postures of ``fit_results`` (module docstring)."""
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    chains = [c.name for c in body.chains]
+    writer.writerow(["frame", "rank", "chosen", "error", *body.axis_labels,
+                     *(f"{c}.root.{a}" for c in chains for a in "xyz")])
+    for r in fit_results:
+        ranked = sorted(r.candidates, key=lambda c: c.error)
+        for rank, c in enumerate(ranked):
+            chosen = int(np.array_equal(c.angles_deg, r.angles_deg))
+            writer.writerow([r.frame, rank, chosen, format_cell(float(c.error)),
+                             *(format_cell(float(v)) for v in c.angles_deg),
+                             *(format_cell(float(v)) for v in np.ravel(c.root_positions))])
+    return buf.getvalue()
+
+
+def write_candidates(path: str | os.PathLike, body: Body, fit_results: Sequence) -> Path | None:
+    """Write the candidates file beside results ``path`` (atomically); None (and nothing
+    written) when no frame has candidates."""
+    if not any(getattr(r, "candidates", ()) for r in fit_results):
+        return None
+    out = candidates_path(path)
+    atomic_write_text(out, format_candidates(body, fit_results))
+    return out
+
+
+def read_candidates(path: str | os.PathLike) -> dict[int, list[dict]]:
+    """The candidates of a candidates file by frame: a list (by rank) of dicts with
+    ``rank``, ``chosen``, ``error``, ``angles_deg`` (n_axes,) and ``root_positions``
+    (n_chains, 3)."""
+    path = Path(path)
+    try:
+        rows = list(csv.reader(io.StringIO(path.read_text(encoding="utf-8"))))
+    except OSError as err:
+        raise VideoTrackError(f"cannot read: {err.strerror or err}", file=path) from None
+    if not rows or rows[0][:4] != ["frame", "rank", "chosen", "error"]:
+        raise VideoTrackError("not a candidates file (its header must start with frame, "
+                              "rank, chosen, error)", file=path, line=1)
+    header = rows[0]
+    n_roots = sum(1 for h in header if ".root." in h)
+    n_axes = len(header) - 4 - n_roots
+    out: dict[int, list[dict]] = {}
+    for line, row in enumerate(rows[1:], start=2):
+        try:
+            if len(row) != len(header):
+                raise ValueError(f"{len(row)} cells, the header has {len(header)}")
+            values = np.array([float(v) if v else np.nan for v in row[3:]])
+            frame, rank, chosen = int(row[0]), int(row[1]), int(row[2])
+        except ValueError as err:
+            raise VideoTrackError(f"bad row: {err}", file=path, line=line) from None
+        out.setdefault(frame, []).append({
+            "rank": rank, "chosen": bool(chosen), "error": float(values[0]),
+            "angles_deg": values[1: 1 + n_axes],
+            "root_positions": values[1 + n_axes:].reshape(-1, 3)})
+    return out
+
+
+def attach_candidates(results: Mapping[int, object], path: str | os.PathLike) -> dict:
+    """``results`` (frame -> FrameResult) with the candidate postures of the candidates file
+    beside results ``path`` (when there is one): the chosen posture first, then the others
+    by rank, as the fitter gives them."""
+    from dataclasses import replace
+
+    from kinematics.anneal import Candidate
+
+    out = dict(results)
+    found_path = candidates_path(path)
+    if not found_path.exists():
+        return out
+    for frame, rows in read_candidates(found_path).items():
+        if frame in out:
+            rows = sorted(rows, key=lambda c: (not c["chosen"], c["rank"]))
+            out[frame] = replace(out[frame], candidates=tuple(
+                Candidate(c["angles_deg"], c["root_positions"], c["error"], None, None, None)
+                for c in rows))
+    return out
 
 
 def sidecar_path(path: str | os.PathLike) -> Path:

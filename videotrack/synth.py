@@ -452,7 +452,8 @@ def project_config_text(video_names: Sequence[str], cameras: Mapping, options: S
         *(["[chain]", f'path = "{chain_name}"', ""] if chain_name is not None else
           ["# [chain] path = \"...\": a chain XML to fit these markers with", ""]),
         "[cameras]", f'path = "{cameras_name}"', "",
-        "# [anneal] keys override the paper's Table 1; ground truth is in truth.csv",
+        "# [anneal] keys override the best measured settings (profile = \"paper\": the",
+        "# paper's Table 1 and Eq. 5); ground truth is in truth.csv",
         "",
     ]
     return "\n".join(lines)

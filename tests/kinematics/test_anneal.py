@@ -93,7 +93,7 @@ def test_histogram_lookup_equals_histogram_at():
 
 
 def test_defaults_are_table_1():
-    p = AnnealParams()
+    p = AnnealParams.paper()
     assert (p.n_end, p.n_l, p.n_tau, p.tau0, p.l0, p.c_l, p.c_tau, p.epsilon) == (
         35000, 3500, 1500, 200, 1, 0.75, 0.75, 1)
     assert (p.reanalysis_threshold, p.max_runs, p.start, p.refine) == (10, 5, "mean", False)
@@ -126,7 +126,7 @@ def test_defaults_are_table_1():
 ])
 def test_params_reject(kwargs, field):
     with pytest.raises(KinematicsError) as err:
-        AnnealParams(**kwargs)
+        AnnealParams.paper(**kwargs)
     assert err.value.field == field
     assert field in str(err.value)
 
@@ -142,7 +142,7 @@ def test_kernel_equals_reference_twin(locust):
     cams = locust_cameras()
     truth = np.array([160.0, 12.0, 4.0, 0, 0, 25.0, 0, 0, 95.0])
     frame = planted(locust, cams, [truth], seed=4, ghosts=1)[0]
-    params = AnnealParams(seed=11, max_runs=1, epsilon=0.0).with_schedule(300)
+    params = AnnealParams.paper(seed=11, max_runs=1, epsilon=0.0).with_schedule(300)
     got = Fitter(locust, cams, params).fit_frame(frame, frame=7)
     best, e, its = anneal_reference(locust, cams, frame, params, frame=7)
     assert its == got.iterations == 300
@@ -155,7 +155,7 @@ def test_locust_planted_postures_table_1(locust):
     alpha and beta, whose errors cancel in alpha + beta)."""
     cams = locust_cameras()
     truth = smooth_random_motion(locust, 10, 10, seed=1)
-    results = Fitter(locust, cams).fit(planted(locust, cams, truth, seed=1))
+    results = Fitter(locust, cams, AnnealParams.paper()).fit(planted(locust, cams, truth, seed=1))
     err = angle_errors(locust, results, truth)  # phi, psi, alpha, beta, gamma
     assert err[:, [0, 1, 4]].max() < 2.0
     assert err[:, [2, 3]].max() < 8.0
@@ -168,7 +168,7 @@ def test_locust_planted_postures_table_1(locust):
 def test_locust_short_schedule(locust):
     cams = locust_cameras()
     truth = smooth_random_motion(locust, 30, 30, seed=2)
-    params = AnnealParams().with_schedule(8000)
+    params = AnnealParams.paper().with_schedule(8000)
     results = Fitter(locust, cams, params).fit(planted(locust, cams, truth, seed=2, ghosts=2))
     err = angle_errors(locust, results, truth)
     assert np.median(err[:, [0, 1, 4]]) < 1.0
@@ -180,7 +180,7 @@ def test_stick_insect_planted_postures(stick_insect):
     re-runs frames caught in the femur-tibia ambiguity of the paper's Fig. 9."""
     cams = stick_cameras()
     truth = smooth_random_motion(stick_insect, 30, 30, seed=3)
-    params = AnnealParams(reanalysis_threshold=5.0)
+    params = AnnealParams.paper(reanalysis_threshold=5.0)
     results = Fitter(stick_insect, cams, params).fit(planted(stick_insect, cams, truth, seed=3))
     err = angle_errors(stick_insect, results, truth)  # pi, rho, alpha, psi, beta, gamma
     assert np.sqrt((err**2).mean(axis=0)).max() < 2.0
@@ -194,7 +194,7 @@ def test_same_seed_same_result_on_1_and_2_threads(locust):
     cams = locust_cameras()
     truth = smooth_random_motion(locust, 12, 3, seed=4)
     dets = planted(locust, cams, truth, seed=4, ghosts=2)
-    params = AnnealParams(seed=5, reanalysis_threshold=3.0).with_schedule(3000)
+    params = AnnealParams.paper(seed=5, reanalysis_threshold=3.0).with_schedule(3000)
     fitter = Fitter(locust, cams, params)
     before = numba.get_num_threads()
     try:
@@ -222,7 +222,7 @@ def test_same_seed_same_result_on_1_and_2_threads(locust):
 def test_locked_axes_never_move(locust, stick_insect):
     for body, cams in [(locust, locust_cameras()), (stick_insect, stick_cameras())]:
         truth = smooth_random_motion(body, 4, 4, seed=5)
-        params = AnnealParams().with_schedule(2000)
+        params = AnnealParams.paper().with_schedule(2000)
         results = Fitter(body, cams, params).fit(planted(body, cams, truth, seed=5))
         locked = body.locked_mask()
         for r in results:
@@ -240,7 +240,7 @@ def test_start_from_previous_tracks_with_a_cold_short_schedule(locust):
     dets = planted(locust, cams, truth, seed=6)
     # Refined E is about 1.5 px here; a frame stuck in a wrong basin is re-run (from the
     # means) above 3 px.
-    params = AnnealParams(start="previous", tau0=10.0, l0=0.5, segment_length=10,
+    params = AnnealParams.paper(start="previous", tau0=10.0, l0=0.5, segment_length=10,
                           refine=True, reanalysis_threshold=3.0).with_schedule(1500)
     results = Fitter(locust, cams, params).fit(dets)
     err = angle_errors(locust, results, truth)
@@ -257,7 +257,7 @@ def test_reanalysis_keeps_the_best_of_at_most_max_runs(locust):
     cams = locust_cameras()
     truth = np.array([175.0, -8.0, 2.0, 0, 0, 10.0, 0, 0, 70.0])
     frame = planted(locust, cams, [truth], seed=8, ghosts=2)[0]
-    params = AnnealParams(reanalysis_threshold=0.5, epsilon=0.0).with_schedule(40)
+    params = AnnealParams.paper(reanalysis_threshold=0.5, epsilon=0.0).with_schedule(40)
     r = Fitter(locust, cams, params).fit_frame(frame, frame=3)
     assert (r.status, r.runs, r.iterations) == ("failed", 5, 200)
     per_run = [anneal_reference(locust, cams, frame, params, frame=3, run=k)[1]
@@ -271,7 +271,7 @@ def test_reanalysis_statuses(locust):
     cams = locust_cameras()
     truth = smooth_random_motion(locust, 30, 30, seed=3)
     dets = planted(locust, cams, truth, seed=5)
-    params = AnnealParams(reanalysis_threshold=4.0).with_schedule(1000)
+    params = AnnealParams.paper(reanalysis_threshold=4.0).with_schedule(1000)
     results = Fitter(locust, cams, params).fit(dets)
     counts = Counter(r.status for r in results)
     assert counts["reanalysed"] >= 3 and counts["ok"] >= 1 and counts["failed"] >= 1
@@ -298,7 +298,7 @@ def test_root_follows_the_root_marker(stick_insect):
     truth = smooth_random_motion(stick_insect, n, 1, seed=9)
     roots = moving_roots(n)
     dets = planted(stick_insect, cams, truth, seed=9, roots=roots, noise=0.1)
-    fitter = Fitter(stick_insect, cams, AnnealParams().with_schedule(8000))
+    fitter = Fitter(stick_insect, cams, AnnealParams.paper().with_schedule(8000))
     tracked = fitter.track_roots(dets)
     np.testing.assert_allclose(tracked, roots, atol=0.05)  # 0.5 px at 10 px/mm
     results = fitter.fit(dets)
@@ -315,7 +315,7 @@ def test_root_tracking_with_a_gate_skips_a_view_that_lost_the_marker(stick_insec
     roots = moving_roots(n)
     dets = planted(stick_insect, cams, truth, seed=10, roots=roots, noise=0.0)
     dets[3][1] = dets[3][1][1:]  # M0 (the root marker) occluded in the side view
-    params = AnnealParams(root_gate_px=30.0)  # moves 8 px per frame; M1 is 90 px away
+    params = AnnealParams.paper(root_gate_px=30.0)  # moves 8 px per frame; M1 is 90 px away
     tracked = Fitter(stick_insect, cams, params).track_roots(dets)
     np.testing.assert_allclose(tracked[3, 0, [0, 2]], roots[3, 0, [0, 2]], atol=1e-6)
     assert tracked[3, 0, 1] == pytest.approx(roots[2, 0, 1])  # height: not seen, kept
@@ -332,7 +332,7 @@ def test_root_marker_is_reacquired_after_a_gap(stick_insect):
     dets = planted(stick_insect, cams, truth, seed=12, roots=roots, noise=0.0)
     for f in (3, 4, 5):  # the root marker M0 is hidden in both views
         dets[f] = [d[1:] for d in dets[f]]
-    tracked = Fitter(stick_insect, cams, AnnealParams(root_gate_px=40.0)).track_roots(dets)
+    tracked = Fitter(stick_insect, cams, AnnealParams.paper(root_gate_px=40.0)).track_roots(dets)
     np.testing.assert_allclose(tracked[7:], roots[7:], atol=1e-6)
 
 
@@ -366,7 +366,7 @@ def test_views_without_detections(locust):
     dets = planted(locust, cams, truth, seed=12)
     dets[0] = [dets[0][0], np.empty((0, 2))]
     dets[1] = [np.empty((0, 2)), np.empty((0, 2))]
-    r0, r1 = Fitter(locust, cams, AnnealParams().with_schedule(5000)).fit(dets)
+    r0, r1 = Fitter(locust, cams, AnnealParams.paper().with_schedule(5000)).fit(dets)
     assert r0.status == "ok" and r0.missing_views == ("top",)
     assert r0.error_per_view[1] == 0.0 and r0.error == r0.error_per_view[0] > 0
     assert r1.status == "no-detections" and r1.runs == 0 and r1.iterations == 0
@@ -380,7 +380,7 @@ def test_nan_detections_are_dropped_and_counted(locust):
     clean = planted(locust, cams, truth, seed=13, ghosts=1)[0]
     dirty = [np.insert(clean[0], 2, [[np.nan, 5.0], [np.inf, np.nan]], axis=0),
              np.insert(clean[1], 0, [[1.0, np.nan]], axis=0)]
-    fitter = Fitter(locust, cams, AnnealParams().with_schedule(2000))
+    fitter = Fitter(locust, cams, AnnealParams.paper().with_schedule(2000))
     a, b = fitter.fit_frame(clean), fitter.fit_frame(dirty)
     assert (a.dropped, b.dropped) == (0, 3)
     np.testing.assert_array_equal(a.angles_deg, b.angles_deg)
@@ -394,7 +394,7 @@ def test_accepts_a_detections_record(locust):
     frames = planted(locust, cams, truth, seed=14)
     per_record = [[(p, np.full(len(p), 12)) for p in views] for views in frames]
     det = build_detections(per_record, range(3), [-1] * 3, {"view_names": list(cams)})
-    fitter = Fitter(locust, cams, AnnealParams().with_schedule(2000))
+    fitter = Fitter(locust, cams, AnnealParams.paper().with_schedule(2000))
     for a, b in zip(fitter.fit(det), fitter.fit(frames), strict=True):
         np.testing.assert_array_equal(a.angles_deg, b.angles_deg)
     swapped = build_detections(per_record, range(3), [-1] * 3, {"view_names": ["top", "side"]})
@@ -428,7 +428,7 @@ def test_bodies_that_cannot_be_fitted(locust):
 def test_iter_fit_order_and_cancel(locust):
     cams = locust_cameras()
     dets = planted(locust, cams, smooth_random_motion(locust, 6, 2, seed=15))
-    fitter = Fitter(locust, cams, AnnealParams().with_schedule(500))
+    fitter = Fitter(locust, cams, AnnealParams.paper().with_schedule(500))
     assert [r.frame for r in fitter.iter_fit(dets, frames=[4, 0, 2])] == [4, 0, 2]
     gen = fitter.iter_fit(dets, chunk_size=2)
     assert next(gen).frame == 0
@@ -466,7 +466,7 @@ def test_pins_hold_axes_while_the_rest_is_fitted(locust):
     cams = locust_cameras()
     truth = smooth_random_motion(locust, 3, 1, seed=21)
     dets = planted(locust, cams, truth, seed=21)
-    fitter = Fitter(locust, cams, AnnealParams().with_schedule(4000))
+    fitter = Fitter(locust, cams, AnnealParams.paper().with_schedule(4000))
     pinned = fitter.with_pins({"J2.gamma": 90.0, 0: 500.0})  # label or index; clipped
     assert fitter.problem.pins == {}
     assert pinned.problem.pins == {"J2.gamma": 90.0, "J0.phi": 220.0}

@@ -161,7 +161,7 @@ def test_fold_keeps_locked_rotations_out_of_the_loop(locust):
 def test_posture_error_kernel_equals_twin(which, opts, stick_insect):
     body = stick_insect if which == "stick" else odd_body()
     cams = pinhole_and_ortho()
-    fitter = Fitter(body, cams, AnnealParams(error=opts))
+    fitter = Fitter(body, cams, AnnealParams.paper(error=opts))
     rng = np.random.default_rng(2)
     lo, hi = body.ranges_deg().T
     for _ in range(30):

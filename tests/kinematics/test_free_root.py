@@ -208,7 +208,7 @@ def test_free_body_is_placed_and_fitted():
     body = mouse_like()
     cams = three_pinholes()
     angles, roots, frames = planted_frames(body, cams, n=10)
-    params = AnnealParams(refine=True, reanalysis_threshold=2.0).with_schedule(6000)
+    params = AnnealParams.paper(refine=True, reanalysis_threshold=2.0).with_schedule(6000)
     results = Fitter(body, cams, params).fit(frames)
     err = joint_errors(body, results, angles, roots)
     assert np.median(err) < 0.2, err
@@ -221,7 +221,7 @@ def test_free_body_single_frame_and_refine():
     body = mouse_like()
     cams = three_pinholes()
     angles, roots, frames = planted_frames(body, cams, n=1)
-    fitter = Fitter(body, cams, AnnealParams(refine=True).with_schedule(6000))
+    fitter = Fitter(body, cams, AnnealParams.paper(refine=True).with_schedule(6000))
     res = fitter.fit_frame(frames[0])
     assert joint_errors(body, [res], angles, roots)[0] < 0.5
     # refinement from a slightly wrong pose moves the root too, and never raises E
@@ -237,7 +237,7 @@ def test_free_root_seed_carried_over_a_frame_without_detections():
     cams = three_pinholes()
     _, _, frames = planted_frames(body, cams, n=4)
     frames[2] = [np.empty((0, 2)) for _ in cams]
-    fitter = Fitter(body, cams, AnnealParams(refine=True).with_schedule(4000))
+    fitter = Fitter(body, cams, AnnealParams.paper(refine=True).with_schedule(4000))
     placed = fitter.track_roots(frames)
     np.testing.assert_allclose(placed[2], placed[1])
     res = fitter.fit(frames)
@@ -268,7 +268,7 @@ def test_mirror_symmetric_root_is_told_apart_by_the_limbs():
     model = RootModel(body, 0, 5.0)
     poses = search_poses(model, truth)
     assert len(poses) >= 2 and ambiguous(model, poses)
-    params = AnnealParams(refine=True, reanalysis_threshold=2.0).with_schedule(5000)
+    params = AnnealParams.paper(refine=True, reanalysis_threshold=2.0).with_schedule(5000)
     res = Fitter(body, cams, params).fit(frames)
     err = joint_errors(body, res, angles, roots)
     assert err.max() < 1.0, err

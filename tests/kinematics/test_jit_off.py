@@ -18,10 +18,12 @@ SCRIPT = r"""
 import json, numpy as np
 from kinematics.anneal import AnnealParams, Fitter
 from kinematics.observations import Observations
-from tests.kinematics.test_free_root import mouse_like, planted_frames, three_pinholes
+import sys
+sys.path.insert(0, "tests/kinematics")  # by path: a package may install its own 'tests'
+from test_free_root import mouse_like, planted_frames, three_pinholes
 body, cams = mouse_like(), three_pinholes()
 angles, roots, frames = planted_frames(body, cams, n=2)
-params = AnnealParams(refine=True, max_runs=1, seed=3).with_schedule(300)
+params = AnnealParams.paper(refine=True, max_runs=1, seed=3).with_schedule(300)
 out = {}
 res = Fitter(body, cams, params).fit(frames)
 out["blobs"] = [[*r.angles_deg, *r.root_positions.ravel(), r.error] for r in res]

@@ -67,7 +67,7 @@ def test_main_thread_runs_while_one_annealing_run_goes_on(locust):
 def test_main_thread_runs_while_a_video_is_fitted(locust):
     cams = locust_cameras()
     dets = planted(locust, cams, smooth_random_motion(locust, 120, 4, seed=3))
-    fitter = Fitter(locust, cams, AnnealParams(epsilon=0.0, max_runs=1))
+    fitter = Fitter(locust, cams, AnnealParams.paper(epsilon=0.0, max_runs=1))
     fitter.fit(dets[:1])
     gap, duration = longest_stall(lambda: list(fitter.iter_fit(dets, chunk_size=len(dets))))
     assert duration > 0.3, "the fit was too short to tell"

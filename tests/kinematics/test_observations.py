@@ -88,7 +88,7 @@ def test_free_body_from_labelled_keypoints():
     kp[rng.uniform(size=kp.shape[:3]) < 0.05] = np.nan
     obs = Observations.keypoints(kp, [c.name for c in cams], body.marker_names,
                                  body.marker_names)
-    params = AnnealParams(refine=True, reanalysis_threshold=30.0).with_schedule(5000)
+    params = AnnealParams.paper(refine=True, reanalysis_threshold=30.0).with_schedule(5000)
     res = Fitter(body, cams, params).fit(obs)
     err = joint_errors(body, res, angles, roots, "joints")
     assert np.median(err) < 0.3, err
@@ -104,7 +104,7 @@ def test_free_body_from_3d_points_without_cameras():
     pts += rng.normal(0, 0.1, pts.shape)
     pts[3, 1] = np.nan
     obs = Observations.points_3d(pts, body.marker_names, body.marker_names)
-    params = AnnealParams(refine=True, tau0=5.0, reanalysis_threshold=3.0,
+    params = AnnealParams.paper(refine=True, tau0=5.0, reanalysis_threshold=3.0,
                           refine_gate_px=5.0).with_schedule(5000)
     res = Fitter(body, {}, params).fit(obs)
     err = joint_errors(body, res, angles, roots, "joints")

@@ -145,7 +145,7 @@ def test_three_legs_fitted_limb_by_limb():
     body = three_legs()
     cams = top_and_side()
     angles, frames = planted(body, cams, 12, seed=4)
-    params = AnnealParams(refine=True, reanalysis_threshold=2.0, partitions="auto"
+    params = AnnealParams.paper(refine=True, reanalysis_threshold=2.0, partitions="auto"
                           ).with_schedule(4000)
     res = Fitter(body, cams, params).fit(frames)
     err = marker_errors(body, res, angles)
@@ -162,7 +162,7 @@ def test_auto_threshold_is_measured_on_the_video():
     # frame 7: one leg's tip drawn 15 px away in the top view (a wrong detection)
     frames[7][0] = frames[7][0].copy()
     frames[7][0][4] += (15.0, 0.0)
-    params = AnnealParams(refine=True, threshold_mode="auto", max_runs=2).with_schedule(3000)
+    params = AnnealParams.paper(refine=True, threshold_mode="auto", max_runs=2).with_schedule(3000)
     res = Fitter(body, cams, params).fit(frames)
     status = [r.status for r in res]
     assert status[7] == "failed"
@@ -192,7 +192,7 @@ def test_unexplained_detections_trigger_reanalysis_and_the_flag():
     cams = top_and_side()
     _, frames = planted(body, cams, 6, seed=8)
     frames[2][0] = np.vstack([frames[2][0], [[5.0, 5.0]]])  # a ghost far from the body
-    params = AnnealParams(refine=True, max_unexplained=0, reanalysis_threshold=2.0
+    params = AnnealParams.paper(refine=True, max_unexplained=0, reanalysis_threshold=2.0
                           ).with_schedule(3000)
     res = Fitter(body, cams, params).fit(frames)
     assert res[2].unexplained == 1 and res[2].status == "failed" and res[2].runs == 5
@@ -200,4 +200,4 @@ def test_unexplained_detections_trigger_reanalysis_and_the_flag():
     off = Fitter(body, cams, replace(params, max_unexplained=None)).fit(frames)
     assert off[2].status != "failed" and off[2].unexplained == 1
     with pytest.raises(KinematicsError, match="max_unexplained"):
-        AnnealParams(max_unexplained=-2)
+        AnnealParams.paper(max_unexplained=-2)

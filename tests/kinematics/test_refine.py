@@ -51,7 +51,7 @@ def test_refinement_reaches_the_cramer_rao_bound(locust):
     truth = smooth_random_motion(locust, 40, 40, seed=1)
     rng = np.random.default_rng(1)
     dets = [detections(locust, cams, a, rng, sigma) for a in truth]
-    fitter = Fitter(locust, cams, AnnealParams(refine=True).with_schedule(5000))
+    fitter = Fitter(locust, cams, AnnealParams.paper(refine=True).with_schedule(5000))
     results = fitter.fit(dets)
     free = ~locust.locked_mask()
     err = np.array([r.angles_deg for r in results])[:, free] - truth[:, free]
@@ -173,7 +173,7 @@ def test_fit_with_refinement_never_has_a_worse_error_than_without(locust):
     rng = np.random.default_rng(12)
     truth = smooth_random_motion(locust, 16, 2, seed=12)
     dets = [one_image_off(locust, cams, a, rng) for a in truth]
-    base = AnnealParams(max_runs=1, seed=5).with_schedule(3000)
+    base = AnnealParams.paper(max_runs=1, seed=5).with_schedule(3000)
     plain = Fitter(locust, cams, base).fit(dets)
     refined = Fitter(locust, cams, replace(base, refine=True, refine_gate_px=20.0)).fit(dets)
     for p, r in zip(plain, refined, strict=True):

@@ -82,7 +82,10 @@ def test_background_fit_updates_table_timeline_and_views(window, qtbot, wait_idl
 
 
 def test_table_highlights_sorts_and_jumps(window, qtbot, wait_idle):
+    from kinematics.anneal import AnnealParams
+
     s = window.session
+    s.set_params(AnnealParams.paper())  # errors of a few px, a threshold among them
     s.fit()
     wait_idle(s)
     errors = np.array([s.results[f].error for f in range(12)])
@@ -114,7 +117,7 @@ def test_cancel_from_the_window(window, qtbot, wait_idle, monkeypatch):
 
     monkeypatch.setattr(backend, "fit_chunk_size", lambda: 2)  # whatever the core count
     s = window.session
-    s.set_params(AnnealParams(epsilon=0.0, max_runs=1).with_schedule(400_000))
+    s.set_params(AnnealParams.paper(epsilon=0.0, max_runs=1).with_schedule(400_000))
     s.resultsChanged.connect(lambda *_: window.cancel_button.click())
     window.act_fit_all.trigger()
     assert window.cancel_button.isVisible()
@@ -135,7 +138,7 @@ def test_window_stays_responsive_while_fitting(window, qtbot, monkeypatch):
     monkeypatch.setattr(backend, "fit_chunk_size", lambda: 2)
     s = window.session
     # long enough (seconds) that a blocked event loop would show as one long gap
-    s.set_params(AnnealParams(epsilon=0.0, max_runs=1).with_schedule(2_000_000))
+    s.set_params(AnnealParams.paper(epsilon=0.0, max_runs=1).with_schedule(2_000_000))
     ticks = []
     timer = QTimer()
     timer.timeout.connect(lambda: ticks.append(time.perf_counter()))

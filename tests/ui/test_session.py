@@ -4,6 +4,7 @@ undo/redo, histograms, saving and reopening."""
 from __future__ import annotations
 
 import tomllib
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -85,7 +86,7 @@ def test_cancel_a_fit_midway_keeps_what_arrived(session, qtbot, wait_idle, monke
     monkeypatch.setattr(backend, "fit_chunk_size", lambda: 2)  # whatever the core count
     s = session
     # a long schedule without early stop: each batch of frames takes a noticeable time
-    s.set_params(AnnealParams(epsilon=0.0, max_runs=1).with_schedule(400_000))
+    s.set_params(AnnealParams.paper(epsilon=0.0, max_runs=1).with_schedule(400_000))
     s.resultsChanged.connect(lambda frames: s.cancel())
     statuses = []
     s.status.connect(statuses.append)
@@ -285,3 +286,32 @@ def test_open_a_trial_of_a_project_folder(synth_project, tmp_path, qtbot, wait_i
     assert s.save()
     assert len(read_results(trial / "walk.results.csv")) == 3
     s.close()
+
+
+def test_an_alternative_posture_is_one_key_away(session, wait_idle, tmp_path):
+    from kinematics.anneal import Candidate
+
+    s = session
+    s.fit([3])
+    wait_idle(s)
+    fitted = s.results[3]
+    # a frame the fit found ambiguous: its mirror posture kept as a candidate
+    mirror = fitted.angles_deg.copy()
+    mirror[0] += 20.0
+    alt = Candidate(mirror, fitted.root_positions, fitted.error + 0.1, None, None, None)
+    s.results[3] = replace(fitted, status="ambiguous", candidates=(
+        Candidate(fitted.angles_deg, fitted.root_positions, fitted.error, None, None, None),
+        alt))
+    before = s.results[3]
+    assert s.swap_candidate(3)
+    after = s.results[3]
+    assert after.status == "corrected" and after.angles_deg[0] == pytest.approx(mirror[0])
+    assert after.candidates[0] is alt and len(after.candidates) == 2
+    e, _ = Fitter(s.body, s.model.cameras, s.params).error(mirror, s.frame_detections(3))
+    assert after.error == pytest.approx(e, rel=1e-9)
+    assert s.swap_candidate(3)  # again: back to the fitted posture
+    assert s.results[3].angles_deg[0] == pytest.approx(fitted.angles_deg[0])
+    s.undo()
+    s.undo()
+    assert s.results[3] is before
+    assert not s.swap_candidate(4)  # no alternatives there

@@ -20,7 +20,8 @@ from videotrack.paper_setup import write_example_project
 from videotrack.project import open_project
 
 #: A short schedule in the paper's proportions (N_end / N_l = 10, N_end / N_tau = 23).
-ANNEAL = {"n_end": 2000, "n_l": 200, "n_tau": 86}
+# the paper's settings: these tests are about the orchestration, not the fit
+ANNEAL = {"profile": "paper", "n_end": 2000, "n_l": 200, "n_tau": 86}
 TRIALS = ["session1/trial01", "session1/trial02", "session2/trial01"]
 INPUTS = {"video.avi", "truth.csv", "config.toml"}
 

@@ -5,7 +5,7 @@ from pathlib import Path
 
 import pytest
 
-from kinematics.errors import KinematicsError
+from kinematics.errors import KinematicsError, LocatedError
 from kinematics.settings import AnnealParams, ErrorOptions, setting
 from videotrack.config import (
     ANNEAL,
@@ -153,6 +153,7 @@ def test_every_anneal_field_is_a_key(tmp_path):
     flat = {"mode": "error"}  # ErrorOptions' fields are flattened; its mode is `error`
     expected = [f.name for f in dataclasses.fields(AnnealParams) if f.name != "error"]
     expected += [flat.get(f.name, f.name) for f in dataclasses.fields(ErrorOptions)]
+    expected += ["profile"]  # which settings the others start from
     assert sorted(names) == sorted(expected) and len(names) == len(set(names))
     defaults = AnnealParams()
     for key in ANNEAL.keys:
@@ -164,8 +165,22 @@ def test_every_anneal_field_is_a_key(tmp_path):
     # None-able fields are written 0 in a project file, and their docs say so
     for name in ("plausibility_threshold", "root_gate_px", "cap_px"):
         key = ANNEAL.key(name)
-        assert key.default == 0.0 and "written 0 in a project file" in key.doc, name
+        assert "written 0 in a project file" in key.doc, name
+        assert key.default == (10.0 if name == "cap_px" else 0.0), name  # cap: the defaults
     assert anneal_params(parse_config(MINIMAL, tmp_path / "p.toml")) == defaults
+
+
+def test_the_paper_profile_gives_the_papers_settings_under_the_keys_set(tmp_path):
+    p = anneal_params(_anneal_config(tmp_path, 'profile = "paper"\n'))
+    assert p == AnnealParams.paper()
+    p = anneal_params(_anneal_config(tmp_path, 'profile = "paper"\nseed = 4\nrefine = true\n'))
+    assert p == AnnealParams.paper(seed=4, refine=True)
+    # the command line's --paper
+    assert anneal_params(_anneal_config(tmp_path, "seed = 4\n"), profile="paper") == (
+        AnnealParams.paper(seed=4))
+    assert anneal_params(_anneal_config(tmp_path, "")) == AnnealParams()
+    with pytest.raises(LocatedError, match="profile"):
+        anneal_params(_anneal_config(tmp_path, 'profile = "fast"\n'))
 
 
 def test_new_anneal_keys_reach_the_params(tmp_path):
@@ -174,7 +189,7 @@ def test_new_anneal_keys_reach_the_params(tmp_path):
     p = anneal_params(cfg)
     assert (p.root_gate_px, p.refine_gate_px, p.refine_steps, p.segment_length,
             p.max_redraws) == (12.0, 3.5, 4, 8, 2)
-    assert p.error == ErrorOptions() and p.n_end == AnnealParams().n_end
+    assert p.error == AnnealParams().error and p.n_end == AnnealParams().n_end
     assert anneal_params(_anneal_config(tmp_path, "root_gate_px = 0\n")).root_gate_px is None
     # overrides (the command line) still apply on top
     q = anneal_params(cfg, n_end=3500, seed=9)
@@ -234,9 +249,12 @@ def test_old_style_project_loads_unchanged(tmp_path):
     from videotrack.paper_setup import write_paper_project
 
     project = write_paper_project(tmp_path / "demo", frames=2, sequences=1)
-    assert load_model(load_config(project.config)).params == AnnealParams()  # the demo's
-    with open(project.config, "a", encoding="utf-8") as f:
-        f.write(OLD_ANNEAL)  # every key a project file could hold before
+    assert load_model(load_config(project.config)).params == AnnealParams.paper()  # the demo's
+    text = project.config.read_text(encoding="utf-8")
+    # an old project: no profile (the best settings are now the defaults), every key a
+    # project file could hold before
+    project.config.write_text(text.replace('[anneal]\nprofile = "paper"\n', "") + OLD_ANNEAL,
+                              encoding="utf-8")
     params = load_model(load_config(project.config)).params
     assert params == AnnealParams(
         n_end=20000, n_l=2000, n_tau=857, tau0=150.0, l0=0.5, c_l=0.7, c_tau=0.8,

@@ -33,7 +33,8 @@ from videotrack.config import SECTIONS, parse_layer
 
 REPO = Path(__file__).resolve().parents[2]
 DOCS = REPO / "docs"
-GUIDES = ("getting-started.md", "concepts.md", "batch.md", "config.md", "fitting.md")
+GUIDES = ("getting-started.md", "concepts.md", "batch.md", "config.md", "fitting.md",
+          "markerless.md")
 BLOCK = re.compile(r"(?:<!-- (?P<mark>[^\n]*?) -->\n)?```(?P<lang>[\w-]*)\n(?P<body>.*?)^```",
                    re.S | re.M)
 

@@ -90,8 +90,12 @@ def test_resume_after_interruption_gives_identical_file(project, tmp_path, monke
     fitted_again = []
     pipeline.fit_project(model, det, det_path, cut, progress=lambda r: fitted_again.append(r))
     assert cut.read_text() == full.read_text()
+    # the candidate postures too: the checkpoint keeps them, the path continues from it
+    assert (tmp_path / "cut.candidates.csv").read_text() == (
+        tmp_path / "full.candidates.csv").read_text()
     assert sorted(p.name for p in tmp_path.iterdir()) == [
-        "cut.csv", "cut.csv.json", "full.csv", "full.csv.json"]
+        "cut.candidates.csv", "cut.csv", "cut.csv.json", "full.candidates.csv", "full.csv",
+        "full.csv.json"]
     assert len(fitted_again) == 16  # resumed frames are reported too
 
 

@@ -16,7 +16,8 @@ from videotrack.cli import main
 from videotrack.paper_setup import write_example_project
 from videotrack.video import VideoSource
 
-ANNEAL = {"n_end": 2000, "n_l": 200, "n_tau": 86}
+# the paper's settings: these tests are about the orchestration, not the fit
+ANNEAL = {"profile": "paper", "n_end": 2000, "n_l": 200, "n_tau": 86}
 N = 24
 
 

@@ -11,16 +11,18 @@ examples:
   videotrack fit project.toml
   # detect (if not up to date) and fit in one go, with a plot of the angles
   videotrack run project.toml --plot
-  # a quick look: frames 0-99 with a 5x shorter schedule and refinement
-  videotrack fit project.toml --frames 0:100 --n-end 7000 --refine
+  # a quick look: frames 0-99 with a 5x shorter schedule
+  videotrack fit project.toml --frames 0:100 --n-end 7000
+  # the paper's settings (Table 1, Eq. 5, one answer per frame), e.g. to compare
+  videotrack fit project.toml --paper
 
 the project file needs, besides [video], [[views]] and [[filters.steps]]:
   [chain]
   path = "locust_hindleg.xml"    # the kinematic chain (see docs/formats.md)
   [cameras]
   path = "cameras.toml"          # one camera per view (see docs/cameras.md)
-  [anneal]                       # optional: Table 1 of the paper is the default
-  n_end = 35000
+  [anneal]                       # optional: the best measured settings are the default
+  profile = "best"               # or "paper": Table 1 and Eq. 5 (reproduces Table 2)
   seed = 0
 
 Results: a CSV per video (frame, joint.axis angles in degrees, error, error per view, runs,
@@ -52,6 +54,9 @@ def _add_common(p) -> None:
     tune.add_argument("--n-end", type=int, metavar="N",
                       help="iterations per run; N_l and N_tau scale with it")
     tune.add_argument("--seed", type=int, help="seed of the random streams")
+    tune.add_argument("--paper", dest="profile", action="store_const", const="paper",
+                      help="the paper's settings (profile 'paper': Table 1, Eq. 5, no "
+                           "refinement, one answer per frame) under the [anneal] keys set")
     tune.add_argument("--refine", action="store_true", default=None,
                       help="polish each fit by Levenberg-Marquardt")
     tune.add_argument("--start", choices=("mean", "previous"),
@@ -111,7 +116,7 @@ def run_fit(args, detect: bool = False) -> int:
         except ValueError as err:
             raise VideoTrackError(str(err), field="--frames") from None
     anneal = {"n_end": args.n_end, "seed": args.seed, "refine": args.refine,
-              "start": args.start}
+              "start": args.start, "profile": args.profile}
     with step_bars() as progress:
         run = run_project(config, detect=detect, force=args.force, anneal=anneal,
                           frames=frames, results=args.results, plot=args.plot,

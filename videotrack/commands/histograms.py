@@ -123,7 +123,7 @@ def _angles_for(body, results_paths, all_frames: bool):
             raise VideoTrackError(f"no column for axis {missing[0]} of the chain",
                                   file=path, line=1)
         cols = [res.axis_labels.index(lb) for lb in body.axis_labels]
-        keep = np.ones(len(res), bool) if all_frames else res.ok_mask()
+        keep = np.ones(len(res), bool) if all_frames else res.ok_mask(ambiguous=False)
         rows.append(res.angles_deg[keep][:, cols])
     return np.concatenate(rows) if rows else np.empty((0, body.n_axes))
 

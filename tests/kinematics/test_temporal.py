@@ -1,0 +1,160 @@
+"""Candidate postures per frame and the path through time (kinematics.temporal, and the
+Fitter's use of them with ``candidates`` > 1)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from kinematics.anneal import AnnealParams, Fitter
+from kinematics.cameras import OrthographicCamera
+from kinematics.fk import forward_kinematics
+from kinematics.model import Body, Chain, Marker, Root, Segment
+from kinematics.temporal import BREAK_COST, choose_path, distinct, transition_costs
+from tests.conftest import hinge
+
+
+# -- merging -----------------------------------------------------------------------------------
+def test_distinct_merges_near_postures_keeping_the_lower_error():
+    postures = np.array([[0.0, 0.0], [1.0, 1.0], [30.0, 0.0], [np.nan, np.nan], [359.0, 2.0]])
+    errors = np.array([1.0, 0.5, 2.0, np.nan, 0.1])
+    # 359° is 1° from 0° (angles compared modulo 360): one posture with 0/1/359
+    keep = distinct(postures, errors, np.array([5.0, 5.0]), 2, keep=3)
+    np.testing.assert_array_equal(keep, [4, 2])
+    assert list(distinct(postures, errors, np.array([5.0, 5.0]), 2, keep=1)) == [4]
+    # a root coordinate (not an angle) is not wrapped
+    keep = distinct(np.array([[0.0, 0.0], [0.0, 359.0]]), np.array([0.0, 1.0]),
+                    np.array([5.0, 5.0]), 1, keep=3)
+    np.testing.assert_array_equal(keep, [0, 1])
+
+
+def test_transition_cost_in_spreads():
+    prev = np.array([[0.0, 0.0]])
+    cur = np.array([[10.0, 0.0], [0.0, 5.0], [np.nan, 0.0]])
+    cost = transition_costs(prev, cur, np.array([10.0, 5.0]), 1)
+    np.testing.assert_allclose(cost, [[1.0, 1.0, np.inf]])
+
+
+# -- the path ----------------------------------------------------------------------------------
+def two_branches(n=12, wrong=5, lead=0.3):
+    """A planted sequence: candidate 0 follows the movement (1° per frame), candidate 1 is a
+    flip 40° away; at frame ``wrong`` the flip has the lower E by ``lead``."""
+    post = np.zeros((n, 2, 1))
+    post[:, 0, 0] = np.arange(n)
+    post[:, 1, 0] = np.arange(n) + 40.0
+    unary = np.zeros((n, 2))
+    unary[:, 1] = 0.5
+    unary[wrong] = [lead, 0.0]
+    return unary, post
+
+
+def test_path_takes_the_branch_that_continues_the_movement():
+    unary, post = two_branches()
+    assert (choose_path(unary, post, np.array([10.0]), 1) == 0).all()
+    # without continuity every frame keeps its lowest E: the flip wins at frame 5
+    greedy = choose_path(unary, post, np.array([10.0]), 1, weight=0.0)
+    assert greedy[5] == 1 and (np.delete(greedy, 5) == 0).all()
+
+
+def test_path_restarts_at_breaks_and_cuts():
+    unary, post = two_branches()
+    # after a break frame 6 is chosen on its own: the flip branch has the lower E from there
+    unary[6:] = [0.5, 0.0]
+    unary[5] = [0.0, 0.5]
+    breaks = np.zeros(12, bool)
+    breaks[6] = True
+    chosen = choose_path(unary, post, np.array([10.0]), 1, breaks=breaks)
+    assert (chosen[:6] == 0).all() and (chosen[6:] == 1).all()
+    # without the break, one 40° jump (16) costs more than the later frames' lead (6 x 0.4):
+    # the path stays on branch 0 ...
+    unary[6:] = [0.4, 0.0]
+    assert (choose_path(unary, post, np.array([10.0]), 1) == 0).all()
+    # ... and a jump no pair of candidates explains (> BREAK_COST) is a cut by itself
+    post[6:] += 100.0
+    assert BREAK_COST < 100.0 ** 2 / 100.0
+    chosen = choose_path(unary, post, np.array([10.0]), 1)
+    assert (chosen[:6] == 0).all() and (chosen[6:] == 1).all()
+
+
+def test_path_skips_frames_without_candidates_and_honours_an_anchor():
+    unary, post = two_branches(n=6, wrong=0, lead=0.3)
+    unary[3] = np.inf
+    chosen = choose_path(unary, post, np.array([10.0]), 1)
+    assert chosen[3] == -1 and (chosen[:3] == 0).all() and (chosen[4:] == 0).all()
+    # a window whose left end chose the flip branch continues it
+    chosen = choose_path(unary, post, np.array([10.0]), 1, anchor=np.array([41.0]))
+    assert (chosen[:3] == 1).all() and (chosen[4:] == 0).all()
+
+
+# -- the fitter ------------------------------------------------------------------------------
+def mirror_arm() -> tuple[Body, dict]:
+    """A hinge seen from the side, along its own plane: +θ and -θ project identically."""
+    seg = Segment("arm", 50.0, markers=(Marker("M0", (-25.0, 0.0, 0.0)), Marker("M1")))
+    body = Body("arm", (Chain("arm", hinge("J", "theta", -70, 70, seg), Root("fixed")),),
+                units="px")
+    cam = OrthographicCamera.from_axes("side", 2.0, ("x", "z"), (100.0, 100.0),
+                                       size=(300, 200))
+    return body, {"side": cam}
+
+
+def frames_of(body, cams, thetas, seed=0):
+    rng = np.random.default_rng(seed)
+    out = []
+    for t in thetas:
+        mk = forward_kinematics(body, np.array([0.0, 0.0, t])).markers
+        out.append([cam.project(mk) + rng.normal(0, 0.05, (len(mk), 2))
+                    for cam in cams.values()])
+    return out
+
+
+FAST = dict(refine=True, n_end=3000, n_l=300, n_tau=130, threshold_mode="absolute",
+            reanalysis_threshold=50.0, error=AnnealParams.paper().error)
+
+
+def test_a_mirror_posture_is_flagged_ambiguous_with_its_alternative():
+    body, cams = mirror_arm()
+    res = Fitter(body, cams, AnnealParams(candidates=6, **FAST)).fit_frame(
+        frames_of(body, cams, [30.0])[0])
+    # fit_frame decides a frame alone: candidates are kept, no path
+    thetas = sorted(round(c.angles_deg[2]) for c in res.candidates)
+    assert thetas == [-30, 30]
+    (seq,) = Fitter(body, cams, AnnealParams(candidates=6, **FAST)).fit(
+        frames_of(body, cams, [30.0]))
+    assert seq.status == "ambiguous"
+    assert {round(c.angles_deg[2]) for c in seq.candidates} == {-30, 30}
+    assert abs(seq.candidates[0].angles_deg[2] - seq.angles_deg[2]) < 1e-9
+
+
+def test_the_path_keeps_one_branch_through_a_mirror_ambiguity():
+    body, cams = mirror_arm()
+    truth = np.linspace(20.0, 50.0, 16)
+    res = Fitter(body, cams, AnnealParams(candidates=4, **FAST)).fit(
+        frames_of(body, cams, truth))
+    fitted = np.array([r.angles_deg[2] for r in res])
+    sign = np.sign(fitted)
+    assert (sign == sign[0]).all(), fitted  # no flip in the middle of the movement
+    np.testing.assert_allclose(np.abs(fitted), truth, atol=1.0)
+    # with one answer per frame the branch is random frame by frame
+    single = Fitter(body, cams, AnnealParams(candidates=1, **FAST)).fit(
+        frames_of(body, cams, truth))
+    assert len({np.sign(r.angles_deg[2]) for r in single}) == 2
+
+
+def test_neighbour_seeded_refit_finds_a_posture_the_frame_missed():
+    body, cams = mirror_arm()
+    truth = np.linspace(20.0, 50.0, 12)
+    fitter = Fitter(body, cams, AnnealParams(candidates=2, **FAST))
+    obs = fitter.observations(frames_of(body, cams, truth))
+    neighbour = fitter.fit(obs)[3].candidates[0]
+    again = fitter._refit_from(obs, 4, neighbour, fitter.params)
+    # started from frame 3's posture, the cold local fit lands on frame 4's same branch
+    assert np.sign(again.angles_deg[2]) == np.sign(neighbour.angles_deg[2])
+    assert abs(abs(again.angles_deg[2]) - truth[4]) < 1.0
+
+
+@pytest.mark.parametrize("profile", ["best", "paper"])
+def test_profiles(profile):
+    p = AnnealParams.profile(profile)
+    assert (p.candidates > 1) == (profile == "best")
+    assert p.refine == (profile == "best")
+    assert AnnealParams.paper(seed=3).seed == 3
