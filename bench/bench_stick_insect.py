@@ -83,7 +83,7 @@ def main() -> int:
     truth = walking(body, args.frames)
     cols = [body.axis_labels.index(k) for k in TABLE3]
     with tempfile.TemporaryDirectory(prefix="bench_stick_") as tmp:
-        scene, det = render_and_detect(body, cams, truth, SynthOptions(seed=0), Path(tmp))
+        _, det = render_and_detect(body, cams, truth, SynthOptions(seed=0), Path(tmp))
     counts = np.array([[len(det.points_of(k, v)) for v in range(det.n_views)]
                        for k in range(len(truth))])
     fused = int((counts < len(body.marker_names)).sum())

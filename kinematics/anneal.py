@@ -105,7 +105,8 @@ class FrameResult:
     status : str
         ``"ok"`` (E within the threshold at the first run), ``"reanalysed"`` (within it after
         re-runs), ``"ambiguous"`` (within it, but another candidate posture far from this
-        one fits about as well: see ``candidates``), ``"failed"`` (above it after
+        one fits about as well, or the chosen posture jumps from a neighbour's and no re-fit
+        found one that continues the movement: see ``candidates``), ``"failed"`` (above it after
         ``max_runs``), ``"no-detections"``.
     root_positions : ndarray, shape (n_chains, 3)
         Root of each chain used for this frame (configured or tracked).
@@ -834,8 +835,9 @@ class Fitter:
         # Re-analysis seeded by neighbours: a frame where the chosen path jumps (to or from
         # it) is fitted again, cold and locally, from every candidate of both neighbours;
         # two rounds, so a run of a few wrong frames is entered from both ends.
-        tried: set[tuple[int, int]] = set()
-        for _ in range(2):
+        def jumping() -> set[int]:
+            """Frames next to a jump of the chosen path (larger than the window's typical
+            change allows)."""
             jumps = np.full(len(window), np.nan)
             for i in range(1, len(window)):
                 if choice[i] >= 0 and choice[i - 1] >= 0 and not breaks[i]:
@@ -844,9 +846,11 @@ class Fitter:
                                                          n_angles)[0, 0]
             typical = np.nanmedian(jumps) if np.isfinite(jumps).any() else 0.0
             limit = min(REDO_JUMP, max(REDO_JUMP_MIN, REDO_JUMP_RATIO * typical))
-            redo = set()
-            for i in np.flatnonzero(jumps > limit):
-                redo.update((int(i) - 1, int(i)))
+            return {int(k) for i in np.flatnonzero(jumps > limit) for k in (i - 1, i)}
+
+        tried: set[tuple[int, int]] = set()
+        for _ in range(2):
+            redo = jumping()
             grown = False
             for i in sorted(redo):
                 extra = []
@@ -871,6 +875,8 @@ class Fitter:
             if not grown:
                 break
             choice, unary, post = path()
+        # a jump the re-fits could not remove: the frames on both sides need a look
+        still_jumping = jumping()
         # "about as well": within ambiguous_px per marker image, and within half the typical
         # E per image of the window (on a clean video a posture 60x worse than the chosen
         # one is a poor local minimum, not an ambiguity)
@@ -884,7 +890,7 @@ class Fitter:
                 continue
             chosen = r.candidates[choice[i]]
             near = np.abs(unary[i] - unary[i, choice[i]]) <= margin
-            ambiguous = int(near.sum()) > 1
+            ambiguous = int(near.sum()) > 1 or i in still_jumping
             cands = (chosen, *(c for k, c in enumerate(r.candidates) if k != choice[i]))
             results.append(self._frame_result(
                 obs, int(idx[first + i]), r.frame, chosen.state, chosen.seed_pos,
