@@ -835,9 +835,9 @@ class Fitter:
         # Re-analysis seeded by neighbours: a frame where the chosen path jumps (to or from
         # it) is fitted again, cold and locally, from every candidate of both neighbours;
         # two rounds, so a run of a few wrong frames is entered from both ends.
-        def jumping() -> set[int]:
-            """Frames next to a jump of the chosen path (larger than the window's typical
-            change allows)."""
+        def jumping(cap: float = REDO_JUMP) -> set[int]:
+            """Frames next to a jump of the chosen path: larger than REDO_JUMP_RATIO times the
+            window's typical change (at least REDO_JUMP_MIN, at most ``cap``)."""
             jumps = np.full(len(window), np.nan)
             for i in range(1, len(window)):
                 if choice[i] >= 0 and choice[i - 1] >= 0 and not breaks[i]:
@@ -845,7 +845,7 @@ class Fitter:
                                                          post[i, choice[i]][None], scale,
                                                          n_angles)[0, 0]
             typical = np.nanmedian(jumps) if np.isfinite(jumps).any() else 0.0
-            limit = min(REDO_JUMP, max(REDO_JUMP_MIN, REDO_JUMP_RATIO * typical))
+            limit = min(cap, max(REDO_JUMP_MIN, REDO_JUMP_RATIO * typical))
             return {int(k) for i in np.flatnonzero(jumps > limit) for k in (i - 1, i)}
 
         tried: set[tuple[int, int]] = set()
@@ -875,8 +875,9 @@ class Fitter:
             if not grown:
                 break
             choice, unary, post = path()
-        # a jump the re-fits could not remove: the frames on both sides need a look
-        still_jumping = jumping()
+        # a jump the re-fits could not remove: the frames on both sides need a look (relative
+        # to the window's own movement only: a fast or coarsely sampled one jumps throughout)
+        still_jumping = jumping(cap=np.inf)
         # "about as well": within ambiguous_px per marker image, and within half the typical
         # E per image of the window (on a clean video a posture 60x worse than the chosen
         # one is a poor local minimum, not an ambiguity)

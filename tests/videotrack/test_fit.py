@@ -29,7 +29,7 @@ def test_run_fits_planted_postures(project, capsys):
     out = capsys.readouterr().out
     assert "fitted 16 frames" in out and "frames/s" in out
     res = read_results(project / "detections.results.csv")
-    assert len(res) == 16 and set(res.status) <= {"ok", "reanalysed"}
+    assert len(res) == 16 and set(res.status) <= {"ok", "reanalysed", "ambiguous"}
     truth = truth_angles(project, res.axis_labels)
     err = np.abs((res.angles_deg - truth + 180) % 360 - 180)
     # gamma is well determined in both views; the others within a few degrees on most frames
