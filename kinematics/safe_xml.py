@@ -63,18 +63,34 @@ def read_document(
     The file size is checked before anything is read. Errors carry ``file=path``.
     """
     source = os.fspath(path)
-    try:
-        size = os.stat(source).st_size
-        if size > max_bytes:
-            raise KinematicsError(_too_large(size, max_bytes), file=source)
-        with open(source, "rb") as f:
-            data = f.read(max_bytes + 1)  # the file may have grown since stat
-    except OSError as err:
-        raise KinematicsError(f"cannot read file: {err.strerror or err}", file=source) from None
+    data = _read_bytes(source, max_bytes)
     return parse_document(
         data, source, root,
         max_bytes=max_bytes, max_depth=max_depth, max_elements=max_elements,
     )
+
+
+def read_foreign(
+    path: str | os.PathLike,
+    *,
+    max_bytes: int = MAX_BYTES,
+    max_depth: int = MAX_DEPTH,
+    max_elements: int = MAX_ELEMENTS,
+) -> Element:
+    """Read and parse another tool's XML file (e.g. a Qualisys ``.qca``): the same limits and
+    refusals as :func:`read_document` (size, depth, element count, no DTD or entities), but no
+    schema; the caller checks the elements it needs. Errors carry ``file=path``."""
+    source = os.fspath(path)
+    data = _read_bytes(source, max_bytes)
+    try:
+        if len(data) > max_bytes:
+            raise KinematicsError(_too_large(len(data), max_bytes))
+        if not data.strip():
+            raise KinematicsError("file is empty")
+        _refuse_doctype_bytes(data)
+        return _parse_streaming(data, max_depth, max_elements)
+    except KinematicsError as err:
+        raise err.located(file=source) from None
 
 
 def parse_document(
@@ -111,6 +127,18 @@ def parse_document(
     except KinematicsError as err:
         raise err.located(file=source) from None
     return elem
+
+
+def _read_bytes(source: str, max_bytes: int) -> bytes:
+    """The file's bytes, its size checked before anything is read."""
+    try:
+        size = os.stat(source).st_size
+        if size > max_bytes:
+            raise KinematicsError(_too_large(size, max_bytes), file=source)
+        with open(source, "rb") as f:
+            return f.read(max_bytes + 1)  # the file may have grown since stat
+    except OSError as err:
+        raise KinematicsError(f"cannot read file: {err.strerror or err}", file=source) from None
 
 
 def _too_large(size: int, limit: int) -> str:

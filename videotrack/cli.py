@@ -32,6 +32,7 @@ os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
 COMMAND_MODULES = (
     "videotrack.commands.chain",
     "videotrack.commands.synth",
+    "videotrack.commands.calibrate",
     "videotrack.commands.detect",
     "videotrack.commands.keypoints",
     "videotrack.commands.fit",

@@ -34,7 +34,7 @@ from videotrack.config import SECTIONS, parse_layer
 REPO = Path(__file__).resolve().parents[2]
 DOCS = REPO / "docs"
 GUIDES = ("getting-started.md", "concepts.md", "batch.md", "config.md", "fitting.md",
-          "markerless.md")
+          "markerless.md", "calibration.md")
 BLOCK = re.compile(r"(?:<!-- (?P<mark>[^\n]*?) -->\n)?```(?P<lang>[\w-]*)\n(?P<body>.*?)^```",
                    re.S | re.M)
 
@@ -54,7 +54,8 @@ def load_tool(name: str):
 def test_cli_reference_is_up_to_date():
     expected = load_tool("make_cli_docs").render()
     assert (DOCS / "cli.md").read_text() == expected, "run python tools/make_cli_docs.py"
-    for command in ("batch", "demo", "eval", "detect", "fit", "synth"):
+    for command in ("batch", "demo", "eval", "detect", "fit", "synth", "calibrate",
+                    "keypoints"):
         assert f"## `videotrack {command}`" in expected
 
 
