@@ -893,6 +893,13 @@ class Fitter:
             near = np.abs(unary[i] - unary[i, choice[i]]) <= margin
             ambiguous = int(near.sum()) > 1 or i in still_jumping
             cands = (chosen, *(c for k, c in enumerate(r.candidates) if k != choice[i]))
+            if np.array_equal(chosen.angles_deg, r.angles_deg) and np.array_equal(
+                    chosen.root_positions, r.root_positions):
+                # the frame's own best: scored already, only the flag may change
+                ambiguous = ambiguous and r.status not in ("failed", "no-detections")
+                results.append(replace(r, candidates=cands,
+                                       status="ambiguous" if ambiguous else r.status))
+                continue
             results.append(self._frame_result(
                 obs, int(idx[first + i]), r.frame, chosen.state, chosen.seed_pos,
                 chosen.seed_rot, p,
