@@ -150,6 +150,17 @@ class FrameResult:
     candidates: tuple = ()
 
     @property
+    def spread_deg(self) -> np.ndarray:
+        """Per axis, how far apart the frame's candidate postures are (largest minus smallest,
+        degrees, turns wrapped); zeros with fewer than two candidates. Axes with a spread
+        are the ones the frame is unsure about."""
+        if len(self.candidates) < 2:
+            return np.zeros(np.size(self.angles_deg))
+        a = np.array([c.angles_deg for c in self.candidates], float)
+        d = (a - a[0] + 180.0) % 360.0 - 180.0  # each relative to the chosen posture
+        return d.max(axis=0) - d.min(axis=0)
+
+    @property
     def ok(self) -> bool:
         """True for ``ok`` and ``reanalysed`` frames (E within the threshold)."""
         return self.status in ("ok", "reanalysed")

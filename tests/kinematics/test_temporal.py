@@ -123,6 +123,9 @@ def test_a_mirror_posture_is_flagged_ambiguous_with_its_alternative():
     assert seq.status == "ambiguous"
     assert {round(c.angles_deg[2]) for c in seq.candidates} == {-30, 30}
     assert abs(seq.candidates[0].angles_deg[2] - seq.angles_deg[2]) < 1e-9
+    # the spread says which axis the frame is unsure about: θ, by the mirror's 60°
+    assert seq.spread_deg[2] == pytest.approx(60.0, abs=1.0)
+    assert seq.spread_deg[[0, 1]].tolist() == [0.0, 0.0]
 
 
 def test_the_path_keeps_one_branch_through_a_mirror_ambiguity():
