@@ -19,6 +19,18 @@ def test_gui_command_help_and_missing_project(capsys, tmp_path):
     assert "nope.toml: no such project file or folder" in capsys.readouterr().err
 
 
+def test_gui_without_a_display_is_a_one_line_error():
+    import os
+
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("DISPLAY", "WAYLAND_DISPLAY", "QT_QPA_PLATFORM")}
+    out = subprocess.run([sys.executable, "-m", "videotrack", "gui"], capture_output=True,
+                         text=True, env=env, timeout=120)
+    assert out.returncode == 1
+    assert out.stderr.strip().startswith("videotrack: error: cannot start the GUI: no display")
+    assert len(out.stderr.strip().splitlines()) == 1
+
+
 def test_cli_does_not_load_qt():
     code = ("import sys, videotrack.cli\n"
             "videotrack.cli.build_parser()\n"

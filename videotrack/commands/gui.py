@@ -6,6 +6,7 @@ Qt is imported only when the command runs, so the rest of the command line never
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 EXAMPLES = """\
@@ -49,8 +50,28 @@ def run(args) -> int:
         raise VideoTrackError("no such project file or folder", file=args.project)
     if args.trial is not None and args.project is None:
         raise VideoTrackError("--trial needs the project folder", field="--trial")
+    reason = _no_display()
+    if reason:
+        raise VideoTrackError(f"cannot start the GUI: {reason}")
     try:
         from ui.app import run as run_gui
     except ImportError as err:  # e.g. Qt's system libraries are missing
         raise VideoTrackError(f"cannot start the GUI: {err}") from None
     return run_gui(args.project, args.trial)
+
+
+def _no_display() -> str:
+    """Why Qt would abort for want of a display ('' when it should start): on Linux without
+    DISPLAY or WAYLAND_DISPLAY and no other platform chosen, Qt's xcb plugin exits the process
+    with "Reinstalling the application may fix this problem", which helps nobody."""
+    import os
+
+    if not sys.platform.startswith("linux"):
+        return ""
+    platform = os.environ.get("QT_QPA_PLATFORM", "")
+    if platform and not platform.startswith(("xcb", "wayland")):
+        return ""  # offscreen, vnc, eglfs, ...: the user chose one
+    if os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"):
+        return ""
+    return ("no display (neither DISPLAY nor WAYLAND_DISPLAY is set): run it on a desktop or "
+            "with 'ssh -X', or set QT_QPA_PLATFORM=offscreen for scripts")
