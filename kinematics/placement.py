@@ -37,6 +37,7 @@ import numpy as np
 from kinematics.cameras import OrthographicCamera
 from kinematics.fk import forward_kinematics_reference
 from kinematics.model import Body
+from kinematics.triangulation import triangulate_linear
 
 #: Default reprojection gate of triangulation, pixels.
 DEFAULT_GATE_PX = 4.0
@@ -373,30 +374,23 @@ def place_roots(body: Body, cameras, frames_views, windows: np.ndarray,
 
 def triangulate_labelled(cameras, views: list[np.ndarray], conf: list[np.ndarray],
                          n_markers: int) -> np.ndarray:
-    """3D position of every labelled marker of one frame by linear least squares over the
-    views where its keypoint is present, shape (n_markers, 3), NaN where fewer than two
-    views (one for orthographic pairs is not enough either) see it.
+    """3D position of every labelled marker of one frame by the confidence-weighted linear
+    triangulation of :func:`kinematics.triangulation.triangulate_linear` over the views where
+    its keypoint is present, shape (n_markers, 3), NaN where fewer than two views (one for
+    orthographic pairs is not enough either) see it.
 
     ``views[v]`` is (n_markers, 2) keypoints in body-marker order, or empty; ``conf[v]`` the
     matching weights (a keypoint with weight 0 or NaN coordinates is missing).
     """
-    a_rows = [[] for _ in range(n_markers)]
-    b_rows = [[] for _ in range(n_markers)]
-    for cam, uv, w in zip(cameras, views, conf, strict=True):
-        if len(uv) != n_markers:
-            continue
-        ok = np.isfinite(uv).all(axis=1) & (w > 0)
-        if not ok.any():
-            continue
-        a, b = _linear_rows(cam, uv[ok])
-        for k, i in enumerate(np.flatnonzero(ok)):
-            a_rows[i].append(a[k])
-            b_rows[i].append(b[k])
-    out = np.full((n_markers, 3), np.nan)
-    for i in range(n_markers):
-        if len(a_rows[i]) >= 2:
-            out[i] = _solve(np.concatenate(a_rows[i])[None], np.concatenate(b_rows[i])[None])[0]
-    return out
+    xy = np.full((len(views), 1, n_markers, 2), np.nan)
+    weight = np.zeros((len(views), 1, n_markers))
+    for v, (uv, w) in enumerate(zip(views, conf, strict=True)):
+        if len(uv) == n_markers:
+            xy[v, 0] = uv
+            weight[v, 0] = w
+    if len(views) < 2:  # one view cannot place anything; not an error here
+        return np.full((n_markers, 3), np.nan)
+    return triangulate_linear(cameras, xy, weight).xyz[0]
 
 
 def place_roots_from_points(body: Body, points3d: np.ndarray, windows: np.ndarray

@@ -35,6 +35,7 @@ COMMAND_MODULES = (
     "videotrack.commands.calibrate",
     "videotrack.commands.detect",
     "videotrack.commands.keypoints",
+    "videotrack.commands.triangulate",
     "videotrack.commands.fit",
     "videotrack.commands.histograms",
     "videotrack.commands.gui",
