@@ -163,6 +163,13 @@ def bad_frames(results: Mapping, threshold: float) -> list[int]:
     return sorted(f for f, r in results.items() if bool(is_bad(r.error, threshold)))
 
 
+def frames_to_check(results: Mapping, threshold: float) -> list[int]:
+    """Frames a person should look at, ascending: the bad ones and the ambiguous ones (a
+    posture another candidate fits about as well)."""
+    return sorted(f for f, r in results.items()
+                  if bool(is_bad(r.error, threshold)) or r.status == "ambiguous")
+
+
 @dataclass(frozen=True)
 class Timeline:
     """Arrays of the timeline plot over all records."""

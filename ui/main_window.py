@@ -116,7 +116,7 @@ class MainWindow(QMainWindow):
         self.act_next = a("Next frame", lambda: s.step(1), "Right")
         self.act_prev = a("Previous frame", lambda: s.step(-1), "Left")
         self.act_next_bad = a("Next bad frame", self.next_bad, "Ctrl+Right",
-                              "Jump to the next frame above the threshold")
+                              "Jump to the next frame above the threshold or ambiguous")
         self.act_swap = a("&Alternative posture", lambda: s.swap_candidate(), "A",
                           "Replace this frame's posture by the next candidate the fit kept "
                           "(an ambiguous frame's mirror posture); again to cycle")
@@ -434,7 +434,7 @@ class MainWindow(QMainWindow):
 
     def next_bad(self) -> None:
         s = self.session
-        later = [f for f in adapters.bad_frames(s.results, s.threshold) if f > s.frame]
+        later = [f for f in adapters.frames_to_check(s.results, s.threshold) if f > s.frame]
         if later:
             s.set_frame(later[0])
 

@@ -77,6 +77,9 @@ def test_table_timeline_and_highlight_rule():
     np.testing.assert_array_equal(t.error_per_view[2], [7.5, 7.5])
     assert adapters.is_bad(t.error, 10.0).tolist() == [False, False, True, False]
     assert adapters.bad_frames(results, 5.0) == [2, 3]
+    # an ambiguous frame needs a look although its error is small
+    checked = {**results, 1: result(1, 1.0, "ambiguous")}
+    assert adapters.frames_to_check(checked, 10.0) == [1, 2]
     line = adapters.timeline(results, 4, 9)
     np.testing.assert_array_equal(line.error, t.error)
     assert np.isnan(line.angles_deg[1]).all() and (line.angles_deg[2] == 2.0).all()
