@@ -862,7 +862,7 @@ class Fitter:
         tried: set[tuple[int, int]] = set()
         for _ in range(2):
             redo = jumping()
-            grown = False
+            grown = changed = False
             for i in sorted(redo):
                 extra = []
                 for j in (i - 1, i + 1):
@@ -883,9 +883,11 @@ class Fitter:
                                             replace(p, candidates=p.candidates + len(extra)))
                     window[i] = replace(window[i], candidates=merged)
                     grown = grown or len(merged) > before
+                    changed = True
+            if changed:  # the path's choice indexes the candidates as they are now
+                choice, unary, post = path()
             if not grown:
                 break
-            choice, unary, post = path()
         # a jump the re-fits could not remove: the frames on both sides need a look (relative
         # to the window's own movement only: a fast or coarsely sampled one jumps throughout)
         still_jumping = jumping(cap=np.inf)

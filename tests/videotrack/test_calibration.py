@@ -20,6 +20,9 @@ from videotrack.errors import VideoTrackError
 
 CHARUCO = Board("charuco", (7, 5), 30.0, 22.0, "4X4_50")
 CHECKER = Board("checkerboard", (8, 6), 30.0)
+GRID_TABLE = {"type": "aruco", "markers": [5, 4], "marker_mm": 30.0, "separation_mm": 6.0,
+              "dictionary": "4X4_50"}
+GRID = board_from_table(GRID_TABLE)
 DIST = (-0.2, 0.1, 0.001, -0.001, 0.0)
 
 
@@ -104,7 +107,8 @@ def test_triangulation_inverts_projection():
 # --- board config and detection -------------------------------------------------------------
 
 
-@pytest.mark.parametrize("board", [CHARUCO, CHECKER], ids=["charuco", "checkerboard"])
+@pytest.mark.parametrize("board", [CHARUCO, CHECKER, GRID], ids=["charuco", "checkerboard",
+                                                                  "aruco"])
 def test_detection_finds_known_corners_on_rendered_boards(board):
     cams = rig(2)
     image, S = board_image(board, 40)
@@ -134,6 +138,45 @@ def test_charuco_partial_view_keeps_corner_identities():
     assert np.max(np.linalg.norm(uv - truth[ids], axis=1)) < 0.6
 
 
+def test_rendered_grid_is_the_board_opencv_prints():
+    image, S = board_image(GRID, 40)
+    printed = GRID._cv.generateImage((image.shape[1], image.shape[0]), marginSize=40)
+    assert np.array_equal(image, printed)
+    # marker 6 (row 1, column 1) begins one pitch (36 mm = 48 px) in from the first
+    x, y, _ = S @ [*GRID.object_points[4 * 6, :2], 1]
+    assert (x, y) == (40 - 0.5 + 48, 40 - 0.5 + 48) and image[88, 88] == 0 == image[88, 127]
+    assert image[87, 88] == 255 == image[88, 128]
+    with pytest.raises(ValueError, match="whole number of pixels"):
+        board_image(GRID, 44)  # 6 mm would be 8.8 px
+
+
+def test_grid_partial_views_keep_marker_identities_and_few_markers_are_skipped():
+    cam = rig(1, dist=())[0]
+    image, S = board_image(GRID, 40)
+    (r, t), = board_poses_facing(GRID, [cam], 1, seed=3, min_cameras=1)
+    view = render_view(image, S, cam, r, t)
+    truth = cam.project(GRID.object_points @ rodrigues(r).T + t)
+    cut = np.median(truth[:, 0])
+    hidden = view.copy()
+    hidden[:, int(cut):] = 128  # hide the right half of the board
+    ids, uv = GRID.detect(hidden)
+    assert 12 <= len(ids) < GRID.n_corners and len(ids) % 4 == 0
+    assert np.all(truth[ids, 0] < cut)
+    assert np.max(np.linalg.norm(uv - truth[ids], axis=1)) < 0.4
+    # three markers make a view; two (8 corners) are too few to trust: the view is skipped
+    import cv2
+
+    quads = truth.reshape(-1, 4, 2)
+    for shown, expected in ((3, 12), (2, 0)):
+        painted = view.copy()
+        for quad in quads[shown:]:  # paint over the other markers (white, as the paper)
+            centre = quad.mean(axis=0)
+            cv2.fillConvexPoly(painted, np.rint(centre + 1.3 * (quad - centre)).astype(np.int32),
+                               255)
+        ids, _ = GRID.detect(painted)
+        assert len(ids) == expected and set(ids // 4) <= set(range(shown))
+
+
 def test_board_config_errors(tmp_path):
     path = tmp_path / "board.toml"
     path.write_text('[board]\ntype = "charuco"\nsquares = [7, 5]\nsquare_mm = 30\n'
@@ -149,15 +192,27 @@ def test_board_config_errors(tmp_path):
                          ({"type": "charuco", "squares": [5, 5], "square_mm": 2,
                            "marker_mm": 1, "dictionary": "9X9_1"}, "dictionary"),
                          ({"type": "charuco", "squares": [20, 20], "square_mm": 2,
-                           "marker_mm": 1, "dictionary": "4X4_50"}, "dictionary")]:
+                           "marker_mm": 1, "dictionary": "4X4_50"}, "dictionary"),
+                         ({**GRID_TABLE, "markers": [5]}, "markers"),
+                         ({**GRID_TABLE, "markers": [1, 4]}, "markers"),
+                         ({**GRID_TABLE, "separation_mm": 0}, "separation_mm"),
+                         ({**GRID_TABLE, "marker_mm": None}, "marker_mm"),
+                         ({**GRID_TABLE, "markers": [10, 6]}, "dictionary"),  # 60 > 50
+                         ({**GRID_TABLE, "dictionary": None}, "dictionary")]:
         with pytest.raises(VideoTrackError, match=f"board.{field}"):
             board_from_table(table)
+    with pytest.raises(VideoTrackError, match=r"board: unknown key.*squares for type 'aruco'"):
+        board_from_table({**GRID_TABLE, "squares": [5, 4]})
     path.write_text("board_x = 8\nboard_y = 11\nsquare_length = 24.0\nmarker_length = 18.75\n"
                     "marker_bits = 4\ndict_size = 1000\n")  # an Anipose board file
     assert load_board(path) == Board("charuco", (8, 11), 24.0, 18.75, "4X4_1000")
     path.write_text("[board\n")
     with pytest.raises(VideoTrackError, match="not valid TOML"):
         load_board(path)
+    path.write_text('[board]\ntype = "aruco"\nmarkers = [5, 4]\nmarker_mm = 30\n'
+                    'separation_mm = 6\ndictionary = "4X4_50"\n')
+    assert load_board(path) == GRID and GRID.separation_mm == 6.0
+    assert GRID.describe() == "aruco grid 5x4 markers of 30 mm, 6 mm apart, dictionary 4X4_50"
 
 
 def _render_folder(folder, board, cams, n_views, seed=4):
@@ -304,6 +359,41 @@ def test_command_calibrates_rendered_views(tmp_path, capsys, monkeypatch):
     # the same again: from the cache, outputs replaced
     assert cli(*args) == 0
     assert not stray  # no library warning reaches the user
+
+
+def test_command_calibrates_an_aruco_grid_and_names_a_mismatched_one(tmp_path, capsys):
+    from kinematics.camera_io import load_camera_file
+
+    cams = rig(3)
+    _render_folder(tmp_path, GRID, cams, 8)
+    board = tmp_path / "grid.toml"
+
+    def write(**change):
+        table = {**GRID_TABLE, **change}
+        board.write_text("[board]\n" + "".join(
+            f"{k} = {v!r}\n".replace("'", '"') for k, v in table.items()))
+
+    write()
+    out = tmp_path / "cameras.toml"
+    args = ["calibrate", board, *[f"--camera={c.name}={tmp_path / c.name}" for c in cams],
+            "-o", out, "--restarts", "2", "--distortion", "4"]
+    assert cli(*args) == 0
+    text = capsys.readouterr().out
+    assert "board: aruco grid 5x4 markers of 30 mm, 6 mm apart" in text
+    assert abs(float(re.search(r"marker size: ([\d.]+) mm measured", text)[1]) - 30) < 0.05
+    median = float(re.search(r"^all +\d+ +([\d.]+)", text, re.M)[1])
+    assert median < 0.1  # sub-pixel corners, through lens distortion
+    got = load_camera_file(out)
+    _check_recovered(argparse.Namespace(cameras=list(got.cameras.values())), cams, 5.0, 0.01)
+    for change, described in (({"markers": [4, 3]}, "aruco grid 4x3 markers"),
+                              ({"markers": [4, 5]}, "aruco grid 4x5 markers"),
+                              ({"dictionary": "5X5_50"}, "dictionary 5X5_50")):
+        write(**change)
+        assert cli(*args) == 1
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1, err
+        assert f"{tmp_path / 'cam0'}: --camera cam0: no aruco grid " in err and described in err
+        assert "check the board config (markers along x and y, dictionary)" in err
 
 
 def test_command_errors_are_one_line(tmp_path, capsys):

@@ -161,10 +161,11 @@ def detect_all(board: Board, sources: list[Source], *, max_frames: int | None = 
         fresh[f"{key}_uv"], fresh[f"{key}_size"] = uv, np.array(size)
         corners = Corners(source.name, size, frames, uv, [source.label(int(f)) for f in frames])
         if corners.views_found == 0:
+            counted = ("markers along x and y, dictionary" if board.type == "aruco" else
+                       "squares are counted, not inner corners")
             raise VideoTrackError(f"no {board.describe()} found in any of {len(frames)} "
-                                  "sampled frames; check the board config (squares are "
-                                  "counted, not inner corners) and the images",
-                                  file=source.spec, field=f"--camera {source.name}")
+                                  f"sampled frames; check the board config ({counted}) and "
+                                  "the images", file=source.spec, field=f"--camera {source.name}")
         out.append(corners)
     if cache is not None:
         with atomic_write(cache, "wb") as fh:

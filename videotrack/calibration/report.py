@@ -2,7 +2,7 @@
 
 - reprojection error per camera and overall (median, 95th percentile) over all corners;
 - board geometry: the corners triangulated from all cameras, the distance between neighbours
-  against the true square size;
+  against the true square size (the marker side on an ArUco grid);
 - views used per camera and how much of the image the corners cover;
 - repeatability: the spread of camera centres and focal lengths over the starts.
 """
@@ -33,7 +33,7 @@ DIVERGED = 2.0
 class Report:
     rows: list[dict]  # per camera
     overall: dict
-    square: dict | None  # median, p95 of |measured - true| ... in mm; None: too few views
+    square: dict | None  # square (marker) side: median, p95 of |measured - true| ... in mm
     repeat: dict | None  # centre_mm, focal_rel, starts, diverged; None: one start
     warnings: list[str] = field(default_factory=list)
 
@@ -49,7 +49,7 @@ class Report:
                    f"{o['p95']:>7.3f} {o['outliers']:>8}")
         if self.square:
             s = self.square
-            out.append(f"square size: {s['measured']:.3f} mm measured (median of "
+            out.append(f"{s['what']} size: {s['measured']:.3f} mm measured (median of "
                        f"{s['pairs']} neighbouring corners triangulated), true {s['true']:g} "
                        f"mm, error {s['error']:+.3f} mm")
         if self.repeat:
@@ -74,22 +74,20 @@ def _coverage(uv: np.ndarray, size) -> float:
 
 def _square(cal: Calibration, corners: list[Corners], board: Board) -> dict | None:
     uv = np.array([c.uv for c in corners])  # (c, v, n, 2)
-    nx, ny = board.inner
+    pairs, true, what = board.edges()
     measured = []
     for v in range(uv.shape[1]):
         if np.isfinite(uv[:, v, :, 0]).any(axis=1).sum() < 2:
             continue
-        X = triangulate(cal.cameras, uv[:, v]).reshape(ny, nx, 3)
-        measured.append(np.linalg.norm(X[:, 1:] - X[:, :-1], axis=-1).ravel())
-        measured.append(np.linalg.norm(X[1:] - X[:-1], axis=-1).ravel())
+        X = triangulate(cal.cameras, uv[:, v])
+        measured.append(np.linalg.norm(X[pairs[:, 0]] - X[pairs[:, 1]], axis=-1))
     d = np.concatenate(measured) if measured else np.zeros(0)
     d = d[np.isfinite(d)]
     if len(d) == 0:
         return None
     med = float(np.median(d))
-    return {"measured": med, "true": board.square_mm, "error": med - board.square_mm,
-            "p95_abs": float(np.percentile(np.abs(d - board.square_mm), 95)),
-            "pairs": len(d)}
+    return {"what": what, "measured": med, "true": true, "error": med - true,
+            "p95_abs": float(np.percentile(np.abs(d - true), 95)), "pairs": len(d)}
 
 
 def _repeat(cal: Calibration) -> dict | None:

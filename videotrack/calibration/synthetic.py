@@ -18,9 +18,32 @@ from videotrack.calibration.boards import Board
 __all__ = ["board_image", "board_poses_facing", "render_view", "write_views"]
 
 
+def _grid_image(board: Board, m: int) -> tuple[np.ndarray, np.ndarray]:
+    """An ArUco grid with ``m`` px per marker side and a one-marker white margin, each marker
+    placed on whole pixels (``GridBoard.generateImage`` truncates fractional positions)."""
+    scale = m / board.marker_mm
+    gap = board.separation_mm * scale
+    if abs(gap - round(gap)) > 1e-6:
+        raise ValueError(f"the separation is {gap:g} px at {m} px per marker; choose "
+                         "px_per_square so that it is a whole number of pixels")
+    nx, ny = board.squares
+    pitch = m + round(gap)
+    image = np.full((ny * pitch - round(gap) + 2 * m, nx * pitch - round(gap) + 2 * m), 255,
+                    np.uint8)
+    dictionary = board._cv.getDictionary()
+    for k in range(nx * ny):  # marker k at column k % nx, row k // nx, as GridBoard puts it
+        x, y = m + (k % nx) * pitch, m + (k // nx) * pitch
+        image[y:y + m, x:x + m] = dictionary.generateImageMarker(k, m)
+    S = np.array([[scale, 0, m - 0.5], [0, scale, m - 0.5], [0, 0, 1.0]])
+    return image, S
+
+
 def board_image(board: Board, px_per_square: int = 40) -> tuple[np.ndarray, np.ndarray]:
     """The board as a grey image with a one-square white margin, and the 3x3 matrix taking
-    board coordinates (mm, z = 0 plane, homogeneous) to image pixels (centres at integers)."""
+    board coordinates (mm, z = 0 plane, homogeneous) to image pixels (centres at integers).
+    For an ArUco grid, ``px_per_square`` is the pixels per marker side."""
+    if board.type == "aruco":
+        return _grid_image(board, px_per_square)
     nx, ny = board.squares
     m = px_per_square
     size = (nx * m + 2 * m, ny * m + 2 * m)

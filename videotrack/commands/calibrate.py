@@ -35,6 +35,15 @@ The board config is a TOML file with a [board] table (Anipose board files work t
   marker_mm = 18.75         # charuco only
   dictionary = "4X4_1000"   # charuco only
 
+or, for an ArUco grid (OpenCV's GridBoard):
+
+  [board]
+  type = "aruco"
+  markers = [5, 7]          # markers along x and y
+  marker_mm = 30.0
+  separation_mm = 6.0       # gap between neighbouring markers
+  dictionary = "4X4_50"
+
 Frame i of every camera must be the same instant (synchronised videos, or image lists that
 sort in the same order). Up to --max-frames frames are sampled evenly from each. Detected
 corners are cached in OUT.corners.npz, so a second run (another --restarts ...) starts at
@@ -42,15 +51,16 @@ once. The world frame is the reference camera's (x right, y down, z forward), in
 
 The report gives per camera the views with the board, the views used, the reprojection error
 (median, 95th percentile) and outliers, how much of the image the board covered; the square
-size measured by triangulating the corners (a check of the whole calibration); and the spread
-of camera centres and focal lengths over the --restarts starts.
+size (the marker side of an ArUco grid) measured by triangulating the corners (a check of the
+whole calibration); and the spread of camera centres and focal lengths over the --restarts
+starts.
 """
 
 
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser(
         "calibrate",
-        help="calibrate cameras from views of a checkerboard or ChArUco board",
+        help="calibrate cameras from views of a checkerboard, ChArUco board or ArUco grid",
         description=(
             "Detect the board in every camera, estimate each camera's lens (intrinsics) and "
             "the cameras' poses (extrinsics) by joint bundle adjustment with outlier "
