@@ -36,6 +36,8 @@ def reference() -> str:
         parts.append(describe_section(section))
         if name == "filters":
             parts.append(describe_section(FILTER_STEPS, level=4))
+        if name == "keypoints":
+            parts.append(describe_section(section.key("filter").items))
     return "\n".join(parts)
 
 

@@ -319,7 +319,7 @@ def config_from_layers(
     ``sources`` the files merged, top first.
     """
     path = Path(path).absolute()
-    merged = merge_layers(layers)
+    merged = _markerless_defaults(merge_layers(layers))
     sections: dict[str, Any] = {}
     for name, section in SECTIONS.items():
         value = merged.get(name)
@@ -336,6 +336,16 @@ def config_from_layers(
     return Config(path=path, sections=sections, given=given,
                   sources=tuple(Path(s) for s in sources) or (path,),
                   base=Path(base) if base is not None else None, keys_given=keys_given)
+
+
+def _markerless_defaults(merged: Mapping) -> dict:
+    """A project fitted to keypoint files (``[keypoints] files``) detects no markers: its
+    ``[video] path`` and ``[[filters.steps]]`` may be left out (they are then empty)."""
+    out = dict(merged)
+    if (merged.get("keypoints") or {}).get("files"):
+        out["video"] = {"path": "", **(merged.get("video") or {})}
+        out["filters"] = {"steps": [], **(merged.get("filters") or {})}
+    return out
 
 
 def describe_section(section: Section | Variants, level: int = 3) -> str:
@@ -638,7 +648,8 @@ def _polygons_rule(polygons: list) -> str | None:
 
 VIDEO = register_section(Section("video", (
     Key("path", "path | list[path]", doc="Video file or image-sequence folder; a list of them "
-        "for synchronised cameras (one file per camera)."),
+        "for synchronised cameras (one file per camera). Not needed when [keypoints] files is "
+        "set."),
     Key("fps", "float", 0.0, "Frame rate; 0 takes it from the video (image sequences: 25).",
         min=0.0, max=1e6),
     Key("deinterlace", "str", "none", "Split each frame into its two fields (half-frames).",
@@ -716,7 +727,8 @@ FILTER_STEPS = Variants("filters.steps", "type", {
 }, doc="Filter steps run in order on each view image; the chain must end with a mask.")
 
 FILTERS = register_section(Section("filters", (
-    Key("steps", "list[table]", doc="Ordered filter steps ([[filters.steps]] tables).",
+    Key("steps", "list[table]", doc="Ordered filter steps ([[filters.steps]] tables); not "
+        "needed when [keypoints] files is set.",
         items=FILTER_STEPS),
 ), doc="The filter chain that turns a view image into a mask of marker pixels."))
 
@@ -785,3 +797,58 @@ FIT = register_section(Section("fit", (
         "marked (beside the results)."),
     Key("jobs", "int", 0, "Threads for fitting; 0 uses every core.", min=0, max=1024),
 ), doc="Outputs of 'videotrack fit' and 'videotrack run'."))
+
+
+# -- the markerless route -------------------------------------------------------------------
+
+def _pairs_rule(offsets: list) -> str | None:
+    for i, pair in enumerate(offsets):
+        if len(pair) != 2:
+            return f"entry {i} must be [x, y], got {pair}"
+    return None
+
+
+def _names_rule(table: Mapping) -> str | None:
+    for kp, marker in table.items():
+        if not isinstance(marker, str) or not marker:
+            return f"{kp}: must name a chain marker (a string), got {marker!r}"
+    return None
+
+
+def _keypoint_filter_section() -> Section:
+    from videotrack.keypoint_filters import KeypointFilterSettings
+
+    return record_section("keypoints.filter", KeypointFilterSettings,
+                          "Anipose's 2D filters, each off by default (docs/markerless.md).")
+
+
+KEYPOINTS = register_section(Section("keypoints", (
+    Key("files", "list[path]", [], "2D keypoint files (or OpenPose JSON folders), one per "
+        "camera: per view in the order of [[views]], else per camera in the camera file's "
+        "order. Empty: the marker route (detect markers in the video)."),
+    Key("format", "str", "", "Keypoint file format; empty: detected from each file.",
+        choices=("", "dlc", "sleap", "openpose", "lightning-pose", "anipose")),
+    Key("individual", "str", "", "The animal, track or person to follow: a name or an index; "
+        "empty: the first (OpenPose: the largest person)."),
+    Key("model", "str", "", "OpenPose keypoint names: BODY_25, BODY_25B or COCO; empty: "
+        "from the number of points."),
+    Key("crop_offsets", "list[list[float]]", [], "Per file, [x, y] pixels added to its "
+        "keypoints (the tracker ran on a crop); empty: none.", check=_pairs_rule),
+    Key("frame_offsets", "list[int]", [], "Per file, added to its frame numbers (the tracked "
+        "video started later); empty: none."),
+    Key("markers", "table", {}, "Keypoint name = chain marker name; empty: keypoints map to "
+        "the markers named like them. Keypoints without a marker are left out.",
+        check=_names_rule),
+    Key("route", "str", "2d", "'2d': fit the chain to the 2D keypoints (labelled "
+        "reprojection error); '3d': triangulate them first and fit the chain to the 3D "
+        "points (set [anneal] tau0 and reanalysis_threshold in length units).",
+        choices=("2d", "3d")),
+    Key("triangulation", "str", "linear", "Route '3d': the triangulation backend.",
+        choices=("linear", "ransac", "optim")),
+    Key("min_score", "float", 0.0, "Keypoints scored below this are not used (after the "
+        "filters).", min=0.0, max=1.0),
+    Key("filter", "table", {}, "[keypoints.filter]: the 2D filters (keys below).",
+        items=_keypoint_filter_section()),
+), doc="The markerless route: fit the chain to 2D keypoints (DeepLabCut, SLEAP, OpenPose, "
+       "Lightning Pose, Anipose) instead of detected markers; [video] and [filters] are then "
+       "not needed."))

@@ -27,6 +27,12 @@ cover the video(s) (a truncated file, an unreadable image) or no frame could be 
 
 Outputs never replace inputs (:func:`videotrack.outputs.guard_outputs`), checked before any
 work is done.
+
+The markerless route: a project whose ``[keypoints] files`` are set has no detections; its
+keypoints are loaded by :func:`videotrack.markerless.load_keypoints` into a
+:class:`~videotrack.markerless.KeypointInput`, which stands where the detections do (records,
+video frames, times; the fitter gets its Observations), and the sidecar records the keypoint
+files by content hash and the ``[keypoints]`` settings instead of the detections file.
 """
 
 from __future__ import annotations
@@ -46,6 +52,7 @@ from kinematics.model import Body
 from videotrack.config import anneal_from_table
 from videotrack.errors import VideoTrackError, VideoTrackWarning
 from videotrack.identity import relative_message, relative_path
+from videotrack.markerless import KeypointInput, fitting_model, is_markerless, load_keypoints
 from videotrack.results import (
     Results,
     attach_candidates,
@@ -65,8 +72,9 @@ BAD_SHARE_WARNING = 0.1
 #: Sidecar keys that decide whether results are up to date (inputs by content hash, and
 #: every parameter), in the order ``changed: ...`` lists them; paths are not among them.
 IDENTITY_KEYS = ("chain_sha256", "cameras_sha256", "histograms_sha256", "views",
-                 "view_cameras", "axes", "markers", "seed", "anneal", "detections_sha256")
-_KEY_NAMES = {"view_cameras": "view cameras"}
+                 "view_cameras", "axes", "markers", "seed", "anneal", "detections_sha256",
+                 "keypoints_sha256", "keypoints_options")
+_KEY_NAMES = {"view_cameras": "view cameras", "keypoints_options": "keypoint settings"}
 
 
 @dataclass(frozen=True)
@@ -161,8 +169,11 @@ def load_model(config, **overrides) -> ProjectModel:
     if hist_path:
         body = apply_archive(body, load_archive(hist_path))
     all_cameras = load_cameras(cameras_path)
+    views = config["views"]
+    if not views and is_markerless(config):  # keypoint files: one per camera, in file order
+        views = [{"name": name, "camera": name} for name in all_cameras]
     cameras = {}
-    for i, view in enumerate(config["views"]):
+    for i, view in enumerate(views):
         name = view["camera"] or view["name"]
         if name not in all_cameras:
             raise VideoTrackError(f"camera '{name}' is not in {cameras_path} (it has "
@@ -219,13 +230,16 @@ def check_detection_views(model: ProjectModel, detections, detections_path: Path
                            [(v["width"], v["height"]) for v in meta["videos"]], model.cameras)
 
 
-def results_sidecar(model: ProjectModel, detections_path: Path,
+def results_sidecar(model: ProjectModel, detections_path: Path | KeypointInput,
                     results_path: str | os.PathLike | None = None) -> dict:
     """What a results file records about its inputs and parameters (its sidecar, less the
-    rows, the warnings and the CSV's own hash): chain, cameras and detections with their
-    hashes, views and their cameras, axes, seed and every annealing parameter. Paths are
-    relative to the folder of ``results_path`` when given (so the project can move)."""
+    rows, the warnings and the CSV's own hash): chain, cameras and detections (or, given a
+    :class:`~videotrack.markerless.KeypointInput`, the keypoint files and settings) with
+    their hashes, views and their cameras, axes, seed and every annealing parameter. Paths
+    are relative to the folder of ``results_path`` when given (so the project can move)."""
     base = None if results_path is None else Path(results_path).absolute().parent
+    if isinstance(detections_path, KeypointInput):
+        return {**model.signature(base), **detections_path.sidecar(base)}
     where = str(detections_path) if base is None else relative_path(detections_path, base)
     return {**model.signature(base), "detections": where,
             "detections_sha256": file_sha256(detections_path)}
@@ -240,7 +254,8 @@ def changed_inputs(meta: Mapping, expected: Mapping) -> list[str]:
         if meta.get(k) != expected.get(k)))
 
 
-def results_stale_reason(model: ProjectModel, detections_path: Path, results_path: Path,
+def results_stale_reason(model: ProjectModel, detections_path: Path | KeypointInput,
+                         results_path: Path,
                          n_rows: int) -> str | None:
     """Why ``results_path`` is not the complete fit of these detections with this model, or
     None when it is up to date (same inputs by content hash, same parameters, ``n_rows``
@@ -287,7 +302,7 @@ def fit_project(
     fitter = model.fitter()
     results_path = Path(results_path)
     idx = np.arange(detections.n_records) if frames is None else np.asarray(list(frames))
-    sidecar = results_sidecar(model, detections_path, results_path)
+    sidecar = results_sidecar(model, _source(detections, detections_path), results_path)
     partial = _partial_path(results_path)
     done = _resume(partial, sidecar) if model.params.start == "mean" else {}
     wanted = set(idx.tolist())
@@ -304,7 +319,8 @@ def fit_project(
     before = [int(f) for f in idx[: len(idx) - len(todo)]]
     previous = results.get(before[-1]) if before and len(todo) and all(
         int(f) in done for f in before) else None
-    gen = fitter.iter_fit(detections, todo, previous=previous) if todo.size else iter(())
+    observed = detections.observations if isinstance(detections, KeypointInput) else detections
+    gen = fitter.iter_fit(observed, todo, previous=previous) if todo.size else iter(())
     with contextlib.closing(gen):
         for r in gen:
             results[r.frame] = r
@@ -325,12 +341,18 @@ def fit_project(
     return table
 
 
+def _source(detections, detections_path: Path | None) -> Path | KeypointInput:
+    """What results are fitted from, as their sidecar names it: the keypoints of a
+    markerless project, else the detections file."""
+    return detections if isinstance(detections, KeypointInput) else detections_path
+
+
 def fit_warnings(table: Results, detections=None) -> list[str]:
     """What looks wrong in fitted results: detections with non-finite coordinates, and more
     than :data:`BAD_SHARE_WARNING` of the frames failed or without detections (naming the
     first of them)."""
     found = []
-    if detections is not None and len(detections.points):
+    if detections is not None and len(getattr(detections, "points", ())):
         bad = ~np.isfinite(detections.points).all(axis=1)
         if bad.any():
             rows = np.searchsorted(detections.offsets, np.flatnonzero(bad), side="right") - 1
@@ -412,6 +434,7 @@ class ProjectRun:
     Attributes
     ----------
     detections_path, results_path : Path
+        (``detections_path`` is None for a project fitted to keypoint files)
     steps : tuple of str
         What was computed: ``"detect"``, ``"fit"``, ``"plot"`` (none: all was up to date).
     fit_reason : str
@@ -439,7 +462,7 @@ class ProjectRun:
         ``fit=False``).
     """
 
-    detections_path: Path
+    detections_path: Path | None
     results_path: Path
     steps: tuple[str, ...] = ()
     fit_reason: str = ""
@@ -539,9 +562,22 @@ def run_project(
 
     report = _reporter(progress, cancel)
     plot = config["fit"]["plot"] if plot is None else plot
+    if is_markerless(config) and not fit:
+        raise VideoTrackError("the project is fitted to keypoint files: there are no markers "
+                              "to detect ('videotrack fit' fits it)", file=config.path,
+                              field="keypoints.files")
     with _recorded_warnings() as caught:
         with _recorded_warnings(pass_on=True) as loading:
             model = load_model(config, **(anneal or {})) if fit else None  # fails before work
+        if is_markerless(config):
+            run = _markerless_run(config, model, force=force, results=results, plot=plot)
+            with _recorded_warnings(pass_on=True) as reading:
+                data = load_keypoints(config, model)
+            model = fitting_model(model, data)
+            run = _fit(replace(run, detections=data), model, frames, force,
+                       config["fit"]["jobs"] if threads is None else threads, report, log,
+                       [*loading, *reading])
+            return _reported(_plot(run, plot), caught)
         det_out = default_output(config)
         results_path = (Path(results) if results is not None else
                         default_results_path(config, det_out))
@@ -562,7 +598,22 @@ def run_project(
     return _reported(run, caught)
 
 
-def _guard(config, model, det_out: Path, results_path: Path, *, detect: bool, fit: bool,
+def _markerless_run(config, model: ProjectModel, *, force: bool, results, plot: bool
+                    ) -> ProjectRun:
+    """The start of a markerless project's run: its results path, outputs checked against
+    its inputs (the keypoint files among them) before any work."""
+    from videotrack.markerless import default_results_path as keypoints_results_path
+    from videotrack.markerless import keypoint_inputs
+
+    results_path = (Path(results) if results is not None else
+                    keypoints_results_path(config))
+    _guard(config, model, None, results_path, detect=False, fit=True, plot=plot,
+           force=force, results_given=results is not None, inputs=keypoint_inputs(config))
+    return ProjectRun(None, results_path)
+
+
+def _guard(config, model, det_out: Path | None, results_path: Path, *, detect: bool,
+           fit: bool,
            plot: bool, force: bool, results_given: bool, inputs: dict) -> None:
     """Refuse outputs that are inputs, or existing files of another kind (unless force),
     before any work is done (:func:`videotrack.outputs.guard_outputs`)."""
@@ -583,8 +634,9 @@ def _guard(config, model, det_out: Path, results_path: Path, *, detect: bool, fi
     if plot:
         outputs[default_plot_path(results_path)] = "png"
     field = "--results" if results_given else "fit.results" if config["fit"]["results"] else None
-    guard_outputs(outputs, {**inputs, det_out: "the detections file"}, force=force,
-                  field=field)
+    if det_out is not None:
+        inputs = {**inputs, det_out: "the detections file"}
+    guard_outputs(outputs, inputs, force=force, field=field)
 
 
 def _reported(run: ProjectRun, caught: Sequence[str]) -> ProjectRun:
@@ -622,6 +674,19 @@ def plan_project(config, *, force: bool = False, plot: bool | None = None) -> tu
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", VideoTrackWarning)
         model = load_model(config)
+        if is_markerless(config):
+            results = _markerless_run(config, model, force=force, results=None,
+                                      plot=wanted).results_path
+            if force:
+                return "fit", "--force"
+            data = load_keypoints(config, model)
+            reason = results_stale_reason(fitting_model(model, data), data, results,
+                                          data.n_records)
+            if reason is not None:
+                return "fit", reason
+            if wanted and _older(default_plot_path(results), results):
+                return "plot", "no plot of the current results"
+            return "up to date", ""
         det_path = default_output(config)
         results = default_results_path(config, det_path)
         _guard(config, model, det_path, results, detect=True, fit=True, plot=wanted,
@@ -725,7 +790,7 @@ def _fit(run: ProjectRun, model: ProjectModel, frames: slice | None, force: bool
     idx = None if frames is None else range(*frames.indices(n))
     why = ("--force" if force else
            f"records {idx.start}:{idx.stop}" if idx is not None else
-           results_stale_reason(model, run.detections_path, out, n))
+           results_stale_reason(model, _source(detections, run.detections_path), out, n))
     if why is None:
         discard_checkpoint(out)  # left if a run was killed right after its last write
         return _with_results(replace(run, model=model), read_results(out))

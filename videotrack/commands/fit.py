@@ -122,7 +122,7 @@ def run_fit(args, detect: bool = False) -> int:
                           frames=frames, results=args.results, plot=args.plot,
                           threads=args.jobs, progress=progress, log=note)
     print_warnings(run)
-    if detect:
+    if detect and run.detections_path is not None:  # None: fitted to keypoint files
         from videotrack.commands.detect import print_detected
 
         if run.detected:

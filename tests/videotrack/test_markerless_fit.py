@@ -1,0 +1,138 @@
+"""The markerless route through a project: `videotrack fit project.toml` with [keypoints]
+files fits the chain to DeepLabCut keypoints (2D) or to their triangulation (3D)."""
+
+import numpy as np
+import pytest
+
+from videotrack.cli import main
+from videotrack.config import load_config
+from videotrack.results import read_results, read_sidecar
+from videotrack.synth_keypoints import write_session
+
+N_FRAMES = 16
+ANNEAL = "[anneal]\nseed = 1\nn_end = 8000\nn_l = 800\nn_tau = 350\ncap_px = 30.0\n"
+TRIANGULATED = ('route = "3d"\ntriangulation = "ransac"\n' + ANNEAL
+                + "tau0 = 5.0\nreanalysis_threshold = 3.0\n")
+
+
+def angle_errors(results, session) -> np.ndarray:
+    err = np.abs((results.angles_deg - session.angles_deg + 180) % 360 - 180)
+    return err[:, ~session.body.locked_mask()]
+
+
+@pytest.fixture(scope="module")
+def session(tmp_path_factory):
+    return write_session(tmp_path_factory.mktemp("markerless"), N_FRAMES, noise_px=1.0,
+                         bad_share=0.1, project_text=ANNEAL)
+
+
+def fit(project, *extra) -> int:
+    return main(["fit", str(project), *extra])
+
+
+def test_fit_to_2d_keypoints_matches_truth_then_is_up_to_date(session, capsys):
+    assert fit(session.project) == 0
+    out = capsys.readouterr().out
+    assert f"fitted {N_FRAMES} frames" in out
+    csv = session.project.parent / "cam0DLC.results.csv"
+    res = read_results(csv)
+    assert len(res) == N_FRAMES and res.view_names == ("cam0", "cam1", "cam2", "cam3")
+    np.testing.assert_array_equal(res.video_frames, np.arange(N_FRAMES))
+    err = angle_errors(res, session)
+    assert np.median(err) < 2.0 and np.median(err.max(axis=1)) < 5.0
+    assert np.median(np.linalg.norm(res.joints - session.joints, axis=2)) < 1.0  # mm
+    side = read_sidecar(csv)
+    assert side["keypoints"] == [p.name for p in session.files]
+    assert len(side["keypoints_sha256"]) == 4 and "detections" not in side
+    assert side["keypoints_options"]["route"] == "2d"
+    before = csv.stat().st_mtime_ns
+    assert fit(session.project) == 0
+    assert "is up to date" in capsys.readouterr().out
+    assert csv.stat().st_mtime_ns == before
+
+
+def test_changed_keypoint_file_or_setting_makes_results_stale(session, tmp_path, capsys):
+    from videotrack.pipeline import plan_project
+
+    folder = tmp_path / "copy"
+    moved = write_session(folder, N_FRAMES, noise_px=1.0, bad_share=0.1, project_text=ANNEAL)
+    assert fit(moved.project) == 0
+    assert plan_project(load_config(moved.project)) == ("up to date", "")
+    lines = moved.files[2].read_text().splitlines()
+    lines[5] = lines[5].replace(".", "1.", 1)  # one coordinate of frame 2 moves
+    moved.files[2].write_text("\n".join(lines) + "\n")
+    assert plan_project(load_config(moved.project)) == ("fit", "changed: keypoints")
+    capsys.readouterr()
+    assert fit(moved.project) == 0
+    assert f"fitted {N_FRAMES} frames" in capsys.readouterr().out
+    text = moved.project.read_text()
+    moved.project.write_text(text.replace("[anneal]", "min_score = 0.5\n[anneal]"))
+    assert plan_project(load_config(moved.project)) == ("fit", "changed: keypoint settings")
+
+
+def test_fit_to_triangulated_points(session, tmp_path, capsys):
+    tri = write_session(tmp_path, N_FRAMES, noise_px=1.0, bad_share=0.1,
+                        project_text=TRIANGULATED)
+    assert fit(tri.project) == 0
+    res = read_results(tmp_path / "cam0DLC.results.csv")
+    err = angle_errors(res, tri)
+    assert np.median(err) < 3.0
+    assert np.median(np.linalg.norm(res.joints - tri.joints, axis=2)) < 1.5
+    assert read_sidecar(tmp_path / "cam0DLC.results.csv")["keypoints_options"]["route"] == "3d"
+
+
+@pytest.mark.parametrize("change, field", [
+    (lambda s: s.files[1].write_text(s.files[1].read_text().replace("0.", "abc", 1)), "cam1DLC"),
+    (lambda s: s.project.write_text(s.project.read_text() + '[keypoints.markers]\n'
+                                    'knee = "kneecap"\n'), "keypoints.markers"),
+    (lambda s: s.project.write_text(s.project.read_text().replace(', "cam3DLC.csv"', "")),
+     "keypoints.files"),
+    (lambda s: s.project.write_text(s.project.read_text().replace(
+        "[keypoints]", "[keypoints]\ncrop_offsets = [[0, 0], [1, 2]]")), "keypoints.crop_offsets"),
+])
+def test_bad_keypoint_input_is_one_line_and_writes_nothing(tmp_path, capsys, change, field):
+    s = write_session(tmp_path, 6, project_text=ANNEAL)
+    change(s)
+    before = sorted(p.name for p in tmp_path.iterdir())
+    assert fit(s.project) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and field in err[0] and "Traceback" not in err[0], err
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+
+def test_outputs_never_replace_a_keypoint_file(session, capsys):
+    assert fit(session.project, "--results", str(session.files[0])) == 1
+    assert "keypoint file 0" in capsys.readouterr().err
+
+
+def test_resume_after_interruption_gives_identical_file(tmp_path, monkeypatch):
+    from videotrack import pipeline
+    from videotrack.markerless import load_keypoints
+
+    # every root marker in every frame: the free root's seed of a frame does not depend on
+    # the frames fitted before it (with gaps it is carried over from them; see the report)
+    session = write_session(tmp_path / "s", N_FRAMES, noise_px=1.0, bad_share=0.0,
+                            project_text=ANNEAL)
+    config = load_config(session.project)
+    model = pipeline.load_model(config, n_end=3000)
+    data = load_keypoints(config, model)
+    full = tmp_path / "full.csv"
+    pipeline.fit_project(model, data, None, full)
+    monkeypatch.setattr(pipeline, "CHECKPOINT_SECONDS", 0.0)
+    cut = tmp_path / "cut.csv"
+    seen = []
+
+    def killer(r):
+        seen.append(r.frame)
+        if len(seen) == 6:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        pipeline.fit_project(model, data, None, cut, progress=killer)
+    assert not cut.exists() and (tmp_path / "cut.csv.partial").exists()
+    kept = []
+    pipeline.fit_project(model, data, None, cut, resumed=lambda n, of: kept.append(n))
+    assert kept and kept[0] >= 1
+    assert cut.read_text() == full.read_text()
+    assert (tmp_path / "cut.candidates.csv").read_text() == (
+        tmp_path / "full.candidates.csv").read_text()
