@@ -42,6 +42,7 @@ COMMAND_MODULES = (
     "videotrack.commands.batch",
     "videotrack.commands.demo",
     "videotrack.commands.eval",
+    "videotrack.commands.export",
 )
 
 
