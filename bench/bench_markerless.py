@@ -32,7 +32,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from _report import in_out_folder, machine, print_table
 
-ANNEAL_2D = "[anneal]\nseed = 0\ncap_px = 30.0\n"
+ANNEAL_2D = "[anneal]\nseed = 0\n"  # the 2D route's default cap (30 px)
 ANNEAL_3D = "[anneal]\nseed = 0\ntau0 = 5.0\nreanalysis_threshold = 3.0\ncap_px = 30.0\n"
 ROUTES = {
     "chain fitted to 2D keypoints": 'route = "2d"\n' + ANNEAL_2D,

@@ -10,9 +10,9 @@ from videotrack.results import read_results, read_sidecar
 from videotrack.synth_keypoints import write_session
 
 N_FRAMES = 16
-ANNEAL = "[anneal]\nseed = 1\nn_end = 8000\nn_l = 800\nn_tau = 350\ncap_px = 30.0\n"
+ANNEAL = "[anneal]\nseed = 1\nn_end = 8000\nn_l = 800\nn_tau = 350\n"
 TRIANGULATED = ('route = "3d"\ntriangulation = "ransac"\n' + ANNEAL
-                + "tau0 = 5.0\nreanalysis_threshold = 3.0\n")
+                + "tau0 = 5.0\nreanalysis_threshold = 3.0\ncap_px = 30.0\n")
 
 
 def angle_errors(results, session) -> np.ndarray:
@@ -136,3 +136,13 @@ def test_resume_after_interruption_gives_identical_file(tmp_path, monkeypatch):
     assert cut.read_text() == full.read_text()
     assert (tmp_path / "cut.candidates.csv").read_text() == (
         tmp_path / "full.candidates.csv").read_text()
+
+
+def test_the_2d_route_defaults_to_a_keypoint_sized_cap(session, tmp_path):
+    from videotrack.config import load_config
+    from videotrack.pipeline import KEYPOINT_CAP_PX, anneal_params
+
+    assert anneal_params(load_config(session.project)).error.cap_px == KEYPOINT_CAP_PX
+    own = tmp_path / "own.toml"
+    own.write_text(session.project.read_text().replace("[anneal]", "[anneal]\ncap_px = 12.0"))
+    assert anneal_params(load_config(own)).error.cap_px == 12.0  # a project's own value wins
