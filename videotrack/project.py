@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import fnmatch
 import os
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 
@@ -68,6 +68,11 @@ BATCH = register_section(Section("batch", (
         "a trial's videos in its folder; several matches are synchronised cameras, in name "
         "order (a view's 'video' index). Ignored where [video] path is set in the trial's "
         "own config.toml.", check=_patterns_rule),
+    Key("keypoints", "list[str]", [], "File-name patterns of a trial's 2D keypoint files "
+        "(e.g. ['*DLC*.csv'] or ['*.slp']), one per camera in name order: a folder with such "
+        "files and no video is a trial of the markerless route ([keypoints] files set for "
+        "it). Empty: trials are found by their videos only. Ignored where [keypoints] files "
+        "is set in the trial's own config.toml.", check=_patterns_rule),
     Key("jobs", "int", 0, "Trials processed at the same time, one process each; 0: one per "
         "core. --jobs overrides. Project config.toml only.", min=0, max=4096),
     Key("summary", "path", "summary.csv", "Project summary table (CSV), relative to the "
@@ -202,7 +207,8 @@ def open_project(path: str | os.PathLike) -> Project:
     if not trials:
         raise VideoTrackError(
             f"no trial: no folder matching [batch] trials {batch['trials']} holds a video "
-            f"matching [batch] videos", file=config_path, field="batch.trials")
+            f"matching [batch] videos (or keypoint files matching [batch] keypoints)",
+            file=config_path, field="batch.trials")
     return Project(root, config_path, batch, _claim_outputs(trials), tuple(ignored))
 
 
@@ -242,7 +248,11 @@ def _trial_config(root: Path, folder: Path, layers: _LayerCache) -> Config:
     merged = merge_layers(stack)
     own = folder / CONFIG_NAME
     extra = []
-    if "path" in merged.get("video", {}):
+    keypoints = _trial_keypoints(folder, files, stack, merged)
+    if keypoints is not None:  # the markerless route: no video needed
+        if keypoints:
+            extra = [parse_layer({"keypoints": {"files": [str(p) for p in keypoints]}}, own)]
+    elif "path" in merged.get("video", {}):
         setter = [f for f, layer in zip(files, stack, strict=True)
                   if "path" in layer.get("video", {})][-1]
         if setter != own:
@@ -258,6 +268,31 @@ def _trial_config(root: Path, folder: Path, layers: _LayerCache) -> Config:
         value = [str(v) for v in videos] if len(videos) > 1 else str(videos[0])
         extra = [parse_layer({"video": {"path": value}}, own)]
     return config_from_layers([*stack, *extra], files[-1], base=folder, sources=files)
+
+
+def _trial_keypoints(folder: Path, files: list[Path], stack: list, merged: Mapping
+                     ) -> list[Path] | None:
+    """A markerless trial's keypoint files: [] when the trial's own config.toml sets
+    ``[keypoints] files``, those matching ``[batch] keypoints`` when the folder has no video,
+    None for a trial of the marker route. A keypoint list set above the trial folder would
+    make every trial read the same files: refused, as for videos."""
+    setters = [f for f, layer in zip(files, stack, strict=True)
+               if layer.get("keypoints", {}).get("files")]
+    if setters:
+        if setters[-1] != folder / CONFIG_NAME:
+            raise VideoTrackError(
+                "set above the trial folder, so every trial would read the same keypoint "
+                "files: set them in a trial's own config.toml, or let [batch] keypoints find "
+                "each trial's files", file=setters[-1], field="keypoints.files")
+        return []
+    patterns = merged.get("batch", {}).get("keypoints", [])
+    if not patterns or "path" in merged.get("video", {}):
+        return None
+    videos = merged.get("batch", {}).get("videos", BATCH.key("videos").default)
+    if _find_videos(folder, videos):
+        return None
+    found = _find_videos(folder, patterns)
+    return found or None
 
 
 def _find_videos(folder: Path, patterns: Sequence[str]) -> list[Path]:

@@ -146,3 +146,30 @@ def test_the_2d_route_defaults_to_a_keypoint_sized_cap(session, tmp_path):
     own = tmp_path / "own.toml"
     own.write_text(session.project.read_text().replace("[anneal]", "[anneal]\ncap_px = 12.0"))
     assert anneal_params(load_config(own)).error.cap_px == 12.0  # a project's own value wins
+
+
+def test_batch_finds_markerless_trials_by_their_keypoint_files(tmp_path, capsys):
+    import shutil
+
+    root = tmp_path / "project"
+    sessions = {name: write_session(root / name, 10, noise_px=1.0, bad_share=0.0, seed=k)
+                for k, name in enumerate(("t1", "t2"))}
+    for shared in ("rat.xml", "cameras.toml"):
+        shutil.copy(root / "t1" / shared, root / shared)
+    (root / "config.toml").write_text(
+        '[chain]\npath = "rat.xml"\n[cameras]\npath = "cameras.toml"\n'
+        '[batch]\ntrials = ["*"]\nkeypoints = ["cam*DLC.csv"]\n' + ANNEAL, encoding="utf-8")
+    assert main(["batch", str(root), "--jobs", "1"]) == 0
+    out = capsys.readouterr().out
+    assert "2 trials: 2 done" in out, out
+    for name in ("t1", "t2"):
+        res = read_results(root / name / "cam0DLC.results.csv")
+        assert len(res) == 10 and np.median(angle_errors(res, sessions[name])) < 3
+    assert main(["batch", str(root), "--jobs", "1"]) == 0
+    assert "2 up to date" in capsys.readouterr().out
+    # a keypoint list set for every trial at once is refused, naming the file
+    (root / "config.toml").write_text((root / "config.toml").read_text()
+                                      + '[keypoints]\nfiles = ["a.csv"]\n', encoding="utf-8")
+    assert main(["batch", str(root), "--jobs", "1"]) == 1
+    assert "every trial would read the same keypoint files" in capsys.readouterr().err
+
