@@ -155,6 +155,11 @@ class Session(QObject):
         except LocatedError as err:
             self.error.emit(str(err))
             return False
+        if config["keypoints"]["files"]:
+            self.error.emit(f"{path}: a project of the markerless route ([keypoints] files): "
+                            "the window shows projects of marker videos only; fit it with "
+                            "'videotrack fit' (see docs/markerless.md)")
+            return False
         self._close_videos()
         self._clear()
         self.raw_config, self.trial = raw, trial
