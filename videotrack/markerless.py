@@ -155,8 +155,8 @@ def load_keypoints(config, model) -> KeypointInput:
     low = ~(score >= table["min_score"])  # NaN scores (missing) too
     xy[low], score[low] = np.nan, np.nan
     if table["route"] == "3d":
-        obs = Observations.points_3d(_triangulate(model, xy, score, table), markers,
-                                     body.marker_names)
+        obs = Observations.points_3d(_triangulate(model, xy, score, table, markers),
+                                     markers, body.marker_names)
     else:
         kp = np.concatenate([xy, np.nan_to_num(score)[..., None]], axis=3)
         obs = Observations.keypoints(kp.transpose(1, 0, 2, 3), views, markers,
@@ -203,12 +203,34 @@ def _filtered(tracks, settings):
     return apply_filters(tracks, settings) if settings.active else tracks
 
 
-def _triangulate(model, xy: np.ndarray, score: np.ndarray, table) -> np.ndarray:
-    """(frames, points, 4): the triangulated points with weight 1 (NaN where not placed)."""
+def rigid_pairs(body, markers) -> tuple[list[tuple[int, int]], np.ndarray]:
+    """Pairs of ``markers`` (indices into it) on the same segment of ``body``, and their
+    distances: constant whatever the posture, the limb lengths the optimised triangulation
+    holds (given, not estimated, since the chain knows them)."""
+    where = {m.name: (id(seg), np.asarray(m.offset, float)) for _, seg, m in body.markers()}
+    pairs, lengths = [], []
+    for a in range(len(markers)):
+        for b in range(a + 1, len(markers)):
+            (sa, pa), (sb, pb) = where[markers[a]], where[markers[b]]
+            if sa == sb and np.linalg.norm(pa - pb) > 0:
+                pairs.append((a, b))
+                lengths.append(float(np.linalg.norm(pa - pb)))
+    return pairs, np.array(lengths)
+
+
+def _triangulate(model, xy: np.ndarray, score: np.ndarray, table, markers) -> np.ndarray:
+    """(frames, points, 4): the triangulated points with weight 1 (NaN where not placed);
+    the optimised backend holds the distances of markers on one segment."""
     from kinematics import triangulation
 
     method = getattr(triangulation, f"triangulate_{table['triangulation']}")
-    tri = method(list(model.cameras.values()), xy, score, min_score=table["min_score"])
+    extra = {}
+    if table["triangulation"] == "optim":
+        pairs, lengths = rigid_pairs(model.body, markers)
+        if pairs:
+            extra = {"limbs": pairs, "limb_lengths": lengths}
+    tri = method(list(model.cameras.values()), xy, score, min_score=table["min_score"],
+                 **extra)
     weight = np.where(np.isfinite(tri.xyz).all(axis=2), 1.0, np.nan)
     return np.concatenate([tri.xyz, weight[..., None]], axis=2)
 

@@ -173,3 +173,19 @@ def test_batch_finds_markerless_trials_by_their_keypoint_files(tmp_path, capsys)
     assert main(["batch", str(root), "--jobs", "1"]) == 1
     assert "every trial would read the same keypoint files" in capsys.readouterr().err
 
+
+
+def test_the_optimised_triangulation_holds_the_chains_rigid_pairs(tmp_path):
+    from videotrack.markerless import rigid_pairs
+
+    tri = write_session(tmp_path, N_FRAMES, noise_px=1.0, bad_share=0.1,
+                        project_text=TRIANGULATED.replace('"ransac"', '"optim"'))
+    pairs, lengths = rigid_pairs(tri.body, list(tri.body.marker_names))
+    # the pelvis markers (hips and tail base) are the only ones sharing a segment
+    assert pairs == [(0, 1), (0, 2), (1, 2)]
+    truth = tri.markers[0]
+    np.testing.assert_allclose(lengths, [np.linalg.norm(truth[a] - truth[b])
+                                         for a, b in pairs], rtol=1e-9)
+    assert fit(tri.project) == 0
+    res = read_results(tmp_path / "cam0DLC.results.csv")
+    assert np.median(angle_errors(res, tri)) < 3.0
