@@ -616,11 +616,7 @@ class Fitter:
                                       self.problem.start, seg_off, params)
 
         if params.candidates > 1:
-            anchor = None
-            if previous is not None and len(idx) and previous.frame == idx[0] - 1 and (
-                    previous.runs or previous.candidates):
-                anchor = self._posture_vector(previous)
-            yield from self._over_time(obs, idx, roots, rots, chunks(), starts, anchor,
+            yield from self._over_time(obs, idx, roots, rots, chunks(), starts, previous,
                                        params)
         else:
             for block in chunks():
@@ -792,7 +788,7 @@ class Fitter:
         return np.r_[spread[self._joint_axes()], turn,
                      np.full(3 * self.problem.n_chains, length / 4.0)]
 
-    def _over_time(self, obs: Observations, idx, roots, rots, chunks, starts, anchor,
+    def _over_time(self, obs: Observations, idx, roots, rots, chunks, starts, previous,
                    p: AnnealParams) -> Iterator[FrameResult]:
         """Choose one candidate per frame by the path through time (fixed-lag: a frame is
         decided once ``LAG`` later frames are fitted), re-fit implausible frames from their
@@ -806,20 +802,28 @@ class Fitter:
             pending.extend(chunk)
             while len(pending) > 2 * lag:
                 decided = self._decide(obs, idx, roots, rots, pending, done, images, scale,
-                                       anchor, starts, p)
+                                       previous, starts, p)
                 out, pending = decided[:lag], pending[lag:]
                 done += lag
-                anchor = self._posture_vector(out[-1]) if out[-1].candidates else None
+                previous = out[-1]
                 yield from out
         if pending:
             yield from self._decide(obs, idx, roots, rots, pending, done, images, scale,
-                                    anchor, starts, p)
+                                    previous, starts, p)
 
-    def _decide(self, obs, idx, roots, rots, window: list, first: int, images, scale, anchor,
-                starts, p: AnnealParams) -> list[FrameResult]:
-        """The window's results with the path's choice applied (module :mod:`temporal`)."""
+    def _decide(self, obs, idx, roots, rots, window: list, first: int, images, scale,
+                previous: FrameResult | None, starts, p: AnnealParams) -> list[FrameResult]:
+        """The window's results with the path's choice applied (module :mod:`temporal`);
+        ``previous`` is the result chosen just before the window (its left anchor)."""
         n_angles = self._n_wrapped
         window = list(window)
+        anchor = None
+        if previous is not None and window and previous.frame == window[0].frame - 1 and (
+                previous.runs or previous.candidates):
+            anchor = self._posture_vector(previous)
+            # the anchor as a seed for re-fitting the window's first frame
+            previous = Candidate(previous.angles_deg, previous.root_positions,
+                                 previous.error, None, None, None)
 
         def path():
             k = max((len(r.candidates) for r in window), default=0)
@@ -850,6 +854,9 @@ class Fitter:
             """Frames next to a jump of the chosen path: larger than REDO_JUMP_RATIO times the
             window's typical change (at least REDO_JUMP_MIN, at most ``cap``)."""
             jumps = np.full(len(window), np.nan)
+            if anchor is not None and choice[0] >= 0 and not breaks[0]:
+                jumps[0] = temporal.transition_costs(anchor[None], post[0, choice[0]][None],
+                                                     scale, n_angles)[0, 0]
             for i in range(1, len(window)):
                 if choice[i] >= 0 and choice[i - 1] >= 0 and not breaks[i]:
                     jumps[i] = temporal.transition_costs(post[i - 1, choice[i - 1]][None],
@@ -857,7 +864,8 @@ class Fitter:
                                                          n_angles)[0, 0]
             typical = np.nanmedian(jumps) if np.isfinite(jumps).any() else 0.0
             limit = min(cap, max(REDO_JUMP_MIN, REDO_JUMP_RATIO * typical))
-            return {int(k) for i in np.flatnonzero(jumps > limit) for k in (i - 1, i)}
+            return {int(k) for i in np.flatnonzero(jumps > limit) for k in (i - 1, i)
+                    if k >= 0}
 
         tried: set[tuple[int, int]] = set()
         for _ in range(2):
@@ -866,9 +874,13 @@ class Fitter:
             for i in sorted(redo):
                 extra = []
                 for j in (i - 1, i + 1):
-                    if not (0 <= j < len(window)) or breaks[max(i, j)]:
+                    if j == -1 and anchor is not None and not breaks[0]:
+                        seeds = (previous,)  # the frame just before the window
+                    elif not (0 <= j < len(window)) or breaks[max(i, j)]:
                         continue
-                    for cand in window[j].candidates:
+                    else:
+                        seeds = window[j].candidates
+                    for cand in seeds:
                         if (i, id(cand)) in tried:
                             continue
                         tried.add((i, id(cand)))
