@@ -189,16 +189,34 @@ def timeline(results: Mapping, n_frames: int, n_axes: int) -> Timeline:
     return Timeline(np.arange(n_frames, dtype=float), angles, error)
 
 
-def learning_angles(results: Mapping, statuses: Sequence[str] | None = GOOD_STATUSES
-                    ) -> np.ndarray:
+def learning_angles(results: Mapping, statuses: Sequence[str] | None = GOOD_STATUSES,
+                    threshold: float | None = None) -> np.ndarray:
     """Postures to learn histograms from (Eq. 4), shape (n, n_axes), in frame order.
 
-    ``statuses`` None takes every fitted frame; frames without a finite posture are skipped.
+    ``statuses`` None takes every fitted frame. With a ``threshold`` the frames are judged by
+    it instead of by their stored statuses (set by the fit's threshold): :func:`trusted`.
+    Frames without a finite posture are skipped.
     """
-    rows = [np.asarray(results[f].angles_deg, float) for f in sorted(results)
-            if statuses is None or results[f].status in statuses]
+    if threshold is not None:
+        keep = [f for f in sorted(results) if trusted(results[f], threshold)]
+    else:
+        keep = [f for f in sorted(results) if statuses is None or results[f].status in statuses]
+    rows = [np.asarray(results[f].angles_deg, float) for f in keep]
     rows = [a for a in rows if np.all(np.isfinite(a))]
     return np.array(rows).reshape(len(rows), -1) if rows else np.empty((0, 0))
+
+
+#: Statuses of fitted frames whose trust the error threshold decides.
+FITTED_STATUSES = ("ok", "reanalysed", "failed")
+
+
+def trusted(result, threshold: float) -> bool:
+    """A frame within the threshold now: corrected by hand, or fitted with E ≤ ``threshold``
+    (whatever status the fit gave it under its own threshold; ambiguous frames are not)."""
+    if result.status == "corrected":
+        return True
+    error = float(result.error)
+    return result.status in FITTED_STATUSES and np.isfinite(error) and error <= threshold
 
 
 # -- histograms -----------------------------------------------------------------------------

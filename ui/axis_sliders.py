@@ -2,7 +2,8 @@
 
 Used by the manual correction panel and by the chain editor. ``moved(index, value)`` fires
 while a slider is dragged (for live re-projection), ``committed(index, value)`` when it is
-released or a number is entered; ``index`` is the axis' posture-vector index.
+released or a number is entered; ``index`` is the axis' posture-vector index. The mouse wheel
+changes a slider or number only while it has the keyboard focus (click it first).
 """
 
 from __future__ import annotations
@@ -14,6 +15,32 @@ from PySide6.QtWidgets import QDoubleSpinBox, QGridLayout, QLabel, QSlider, QWid
 
 #: Slider steps per degree.
 STEPS = 10
+
+
+class _WheelGuard:
+    """Mixin: the wheel edits the value only while the widget has the keyboard focus.
+
+    Otherwise the wheel event goes to the parent (the panel scrolls), so scrolling over the
+    correction panel never moves a slider and re-fits a frame.
+    """
+
+    def __init__(self, *args) -> None:
+        super().__init__(*args)
+        self.setFocusPolicy(Qt.FocusPolicy.StrongFocus)  # click or Tab, not the wheel
+
+    def wheelEvent(self, event) -> None:
+        if self.hasFocus():
+            super().wheelEvent(event)
+        else:
+            event.ignore()
+
+
+class FocusSlider(_WheelGuard, QSlider):
+    """A slider that takes the wheel only when focused."""
+
+
+class FocusSpinBox(_WheelGuard, QDoubleSpinBox):
+    """A number box that takes the wheel only when focused."""
 
 
 class AxisSliders(QWidget):
@@ -40,10 +67,10 @@ class AxisSliders(QWidget):
         for row, index in enumerate(indices):
             a = refs[index].axis
             label = QLabel(refs[index].label)
-            slider = QSlider(Qt.Orientation.Horizontal)
+            slider = FocusSlider(Qt.Orientation.Horizontal)
             slider.setRange(round(a.min_deg * STEPS), round(a.max_deg * STEPS))
             slider.setMinimumWidth(120)
-            box = QDoubleSpinBox()
+            box = FocusSpinBox()
             box.setRange(a.min_deg, a.max_deg)
             box.setDecimals(1)
             box.setSuffix("°")

@@ -5,7 +5,8 @@ The chain is shown as a tree of chains, joints, axes, segments and markers. Sele
 element shows its numbers; every change is applied to a copy of the chain, checked by
 :func:`kinematics.model.validate_body` and, when valid, drawn at once on the video views.
 Sliders move the free axes of the posture. OK makes the copy the session's chain (one undo
-step), Cancel forgets it, Save as XML writes it to a file. Names cannot be changed here,
+step), Cancel forgets it, Save as XML writes it to a file. Enter commits the field being
+edited and never closes the dialog. Names cannot be changed here,
 because results files name their columns after them.
 """
 
@@ -124,6 +125,9 @@ class ChainEditor(QDialog):
         self.save_button.clicked.connect(self.save_as)
         self.buttons.accepted.connect(self.accept)
         self.buttons.rejected.connect(self.reject)
+        for button in self.buttons.buttons():  # no default button: Enter is for the fields
+            button.setAutoDefault(False)
+            button.setDefault(False)
         layout = QVBoxLayout(self)
         layout.addWidget(split, 1)
         layout.addWidget(self.buttons)
@@ -402,6 +406,14 @@ class ChainEditor(QDialog):
                                               "Chain XML (*.xml)")
         if path:
             s.save_chain_as(path, self.body)
+
+    def keyPressEvent(self, event) -> None:
+        """Enter commits the field being edited (the field has seen it) and never closes the
+        dialog: only its buttons do. Esc still cancels."""
+        if event.key() in (Qt.Key.Key_Return, Qt.Key.Key_Enter):
+            event.accept()
+            return
+        super().keyPressEvent(event)
 
     def accept(self) -> None:
         s = self.session

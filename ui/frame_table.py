@@ -1,13 +1,20 @@
 """The per-frame error table (Fig. 4, part 1): frame, error, error per view, runs, status.
 
 Rows above the re-analysis threshold are shaded red, frames corrected by hand blue. The
-table sorts by any column (numbers as numbers); clicking a row makes it the current frame.
+table sorts by any column (numbers as numbers); clicking a row (or moving to it with the
+Up/Down keys) makes it the current frame, and stepping frames moves the selection along.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from PySide6.QtCore import QAbstractTableModel, QModelIndex, QSortFilterProxyModel, Qt
+from PySide6.QtCore import (
+    QAbstractTableModel,
+    QItemSelectionModel,
+    QModelIndex,
+    QSortFilterProxyModel,
+    Qt,
+)
 from PySide6.QtWidgets import QAbstractItemView, QHeaderView, QTableView
 
 from ui import adapters, style
@@ -145,6 +152,7 @@ class FrameTable(QTableView):
         self.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.ResizeToContents)
         self.horizontalHeader().setStretchLastSection(True)
         self.setAlternatingRowColors(False)
+        self._clicking = False
         self.clicked.connect(self._clicked)
         session.frameChanged.connect(self.follow)
 
@@ -156,18 +164,42 @@ class FrameTable(QTableView):
         return int(self.proxy.mapToSource(self.proxy.index(row, 0)).row())
 
     def _clicked(self, index) -> None:
-        self.session.set_frame(self.frame_at(index.row()))
+        self._clicking = True  # a Ctrl/Shift click has made the selection: keep it
+        try:
+            self.session.set_frame(self.frame_at(index.row()))
+        finally:
+            self._clicking = False
+
+    def keyPressEvent(self, event) -> None:
+        """Up/Down/Page keys move the current row; the current frame follows it."""
+        before = self.currentIndex()
+        super().keyPressEvent(event)
+        current = self.currentIndex()
+        if current.isValid() and current != before:
+            self._clicking = True
+            try:
+                self.session.set_frame(self.frame_at(current.row()))
+            finally:
+                self._clicking = False
 
     def follow(self, frame: int) -> None:
-        """Scroll to the current frame (without changing a multi-row selection)."""
+        """Scroll to the current frame and make the selection agree with it.
+
+        A multi-row selection that holds the frame is kept (for *Fit selected*); otherwise
+        the frame's row alone is selected, so the highlighted rows are what F7 fits.
+        """
         if not 0 <= frame < self.source.rowCount():
             return
         index = self.proxy.index(self.row_of(frame), 0)
         self.scrollTo(index, QAbstractItemView.ScrollHint.EnsureVisible)
-        if len(self.selectionModel().selectedRows()) <= 1:
-            self.selectionModel().blockSignals(True)
-            self.selectRow(index.row())
-            self.selectionModel().blockSignals(False)
+        if self._clicking or frame in self.selected_frames():
+            return
+        # not selectRow(): it would toggle while Ctrl is held (Ctrl+→); signals stay on so
+        # that the view repaints the highlight
+        sel = self.selectionModel()
+        flags = QItemSelectionModel.SelectionFlag
+        sel.setCurrentIndex(index, flags.NoUpdate)
+        sel.select(index, flags.ClearAndSelect | flags.Rows)
 
     def selected_frames(self) -> list[int]:
         return sorted(self.frame_at(i.row()) for i in self.selectionModel().selectedRows())

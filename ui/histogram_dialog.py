@@ -6,6 +6,8 @@ the archive can be exported as histogram XML and loaded again, e.g. into another
 
 from __future__ import annotations
 
+import contextlib
+
 import numpy as np
 import pyqtgraph as pg
 from PySide6.QtWidgets import (
@@ -48,8 +50,8 @@ class HistogramDialog(QDialog):
                                                   "fill": (0, 0, 0, 150)})
         self.plot.addItem(self.current)
         self.info = QLabel()
-        self.good_only = QCheckBox("Only frames within the threshold (ok, re-analysed, "
-                                   "corrected)")
+        self.good_only = QCheckBox("Only frames within the current error threshold (and "
+                                   "corrected ones)")
         self.good_only.setChecked(True)
         learn = QPushButton("Learn from analysed frames (Eq. 4)")
         learn.clicked.connect(self.learn)
@@ -77,13 +79,27 @@ class HistogramDialog(QDialog):
         layout.addWidget(self.good_only)
         layout.addLayout(buttons)
         self.buttons = (learn, load)
-        session.busyChanged.connect(self._busy)
+        # the session outlives the dialog: every link is undone when the dialog closes or is
+        # destroyed, or a frame step would reach its deleted widgets
+        refresh = lambda *_: self.refresh()  # noqa: E731
+        self._links = [(session.busyChanged, self._busy),
+                       (session.bodyChanged, self.fill), (session.projectChanged, self.fill),
+                       *((sig, refresh) for sig in (session.frameChanged,
+                                                     session.resultsChanged,
+                                                     session.postureChanged))]
+        for sig, slot in self._links:
+            sig.connect(slot)
+        self.destroyed.connect(lambda *_, links=self._links: _unlink(links))
         self._busy(session.busy)
-        for sig in (session.bodyChanged, session.projectChanged):
-            sig.connect(self.fill)
-        for sig in (session.frameChanged, session.resultsChanged, session.postureChanged):
-            sig.connect(lambda *_: self.refresh())
         self.fill()
+
+    def closeEvent(self, event) -> None:
+        _unlink(self._links)
+        super().closeEvent(event)
+
+    def done(self, result: int) -> None:  # Esc: reject() hides without a close event
+        _unlink(self._links)
+        super().done(result)
 
     def _busy(self, busy: bool) -> None:
         for b in self.buttons:  # the chain must not change under a running fit
@@ -135,8 +151,7 @@ class HistogramDialog(QDialog):
         return np.asarray(self.bars.opts["x"]), np.asarray(self.bars.opts["height"])
 
     def learn(self) -> None:
-        statuses = adapters.GOOD_STATUSES if self.good_only.isChecked() else None
-        self.session.learn_histograms(statuses)
+        self.session.learn_histograms(within_threshold=self.good_only.isChecked())
 
     def export(self) -> None:
         path, _ = QFileDialog.getSaveFileName(self, "Export histogram archive",
@@ -151,3 +166,11 @@ class HistogramDialog(QDialog):
                                               "Histogram archive (*.xml)")
         if path:
             self.session.import_histograms(path)
+
+
+def _unlink(links: list) -> None:
+    """Disconnect the dialog's session handlers (once; the list is emptied)."""
+    while links:
+        sig, slot = links.pop()
+        with contextlib.suppress(RuntimeError, TypeError):  # already gone with the session
+            sig.disconnect(slot)

@@ -59,6 +59,7 @@ class MainWindow(QMainWindow):
         self.session = session or Session(self)
         self.errors: list[str] = []  # every message shown, newest last
         self.video_views: list[VideoView] = []
+        self._views_of: tuple | None = None  # (project file, view names) of the video views
         self.setWindowTitle("VideoTrack")
         self.resize(1500, 900)
         self._build_actions()
@@ -231,6 +232,10 @@ class MainWindow(QMainWindow):
         self.progress.setFormat("%v / %m")
         self.progress.setVisible(False)
         self.rate = QLabel()
+        self.stale_label = QLabel()  # results of an earlier chain: say so until re-fitted
+        self.stale_label.setStyleSheet(f"color: {style.STALE_TEXT}; font-weight: bold")
+        self.stale_label.setVisible(False)
+        bar.addPermanentWidget(self.stale_label)
         self.cancel_button = QPushButton("Cancel")
         self.cancel_button.clicked.connect(self.session.cancel)
         self.cancel_button.setVisible(False)
@@ -253,6 +258,16 @@ class MainWindow(QMainWindow):
         s.error.connect(self.show_error)
         s.dirtyChanged.connect(lambda *_: self._update_title())
         s.undoChanged.connect(self._update_actions)
+        for sig in (s.projectChanged, s.bodyChanged, s.resultsChanged, s.undoChanged):
+            sig.connect(self._update_stale)
+
+    def _update_stale(self, *_) -> None:
+        """Warn while shown errors are of an earlier chain (after a chain edit)."""
+        n = len(self.session.stale)
+        self.stale_label.setVisible(n > 0)
+        self.stale_label.setText(
+            f"⚠ errors of {n} frame{'s' if n != 1 else ''} are of the previous chain: "
+            "fit them again (F5; F7 for corrected frames)" if n else "")
 
     # -- project ------------------------------------------------------------------------
     def open_project(self, path, trial: str | None = None) -> bool:
@@ -281,15 +296,18 @@ class MainWindow(QMainWindow):
 
     def _project_changed(self) -> None:
         s = self.session
-        for v in self.video_views:
-            v.setParent(None)
-            v.deleteLater()
-        self.video_views = []
-        for k, name in enumerate(s.view_names):
-            view = VideoView(k, name)
-            view.markerDragged.connect(self._marker_dragged)
-            self.views_splitter.addWidget(view)
-            self.video_views.append(view)
+        views_of = (s.config_path, tuple(s.view_names))
+        if views_of != self._views_of:  # the same views keep their zoom and pan (settings OK)
+            self._views_of = views_of
+            for v in self.video_views:
+                v.setParent(None)
+                v.deleteLater()
+            self.video_views = []
+            for k, name in enumerate(s.view_names):
+                view = VideoView(k, name)
+                view.markerDragged.connect(self._marker_dragged)
+                self.views_splitter.addWidget(view)
+                self.video_views.append(view)
         n = s.n_frames
         for w in (self.slider, self.frame_box):
             w.blockSignals(True)
@@ -374,7 +392,8 @@ class MainWindow(QMainWindow):
             view.set_overlay(overlays[k] if k < len(overlays) else None, names)
             lines = [f"{len(detections[k])} detected"]
             if result is not None and np.isfinite(result.error_per_view[k]):
-                lines.append(f"error {result.error_per_view[k]:.2f} px")
+                lines.append(f"error {result.error_per_view[k]:.2f} px"
+                             + (" (previous chain)" if s.frame in s.stale else ""))
             view.set_info("  ".join(lines))
         self.posture_view.set_geometry(s.geometry())
 

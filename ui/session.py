@@ -40,6 +40,7 @@ class Edit:
     results: dict[int, tuple] = field(default_factory=dict)
     pins: dict[int, tuple] = field(default_factory=dict)
     body: tuple[Body, Body] | None = None
+    stale: tuple[frozenset, frozenset] | None = None  # Session.stale before and after
 
     def record_result(self, frame: int, before, after) -> None:
         old = self.results.get(frame, (before, None))[0]
@@ -116,6 +117,8 @@ class Session(QObject):
         self.results_path: Path | None = None
         self.results: dict[int, backend.FrameResult] = {}
         self.pins: dict[int, dict[int, float]] = {}
+        #: Frames whose results (error, status) were computed with an earlier chain.
+        self.stale: set[int] = set()
         self.frame = 0
         self.preview_body: Body | None = None
         self.preview_angles: np.ndarray | None = None
@@ -268,7 +271,14 @@ class Session(QObject):
         chain_changed = (config["chain"] != self.config["chain"]
                          or config["cameras"] != self.config["cameras"])
         self.raw_config = copy.deepcopy(raw)
+        # the threshold set in the window stays unless the edit changed the project's one
+        kept = self.params
+        filed = self.model.params.reanalysis_threshold if self.model is not None else None
         problems = self._install(config, keep_body=not chain_changed)
+        if (kept is not None and self.model is not None
+                and self.model.params.reanalysis_threshold == filed):
+            self.params = replace(self.params,
+                                  reanalysis_threshold=kept.reanalysis_threshold)
         if chain_changed:
             # edits of the old chain are gone with it, and so is undoing them
             self._dirty.discard("chain")
@@ -280,6 +290,8 @@ class Session(QObject):
             if any(np.size(r.angles_deg) != n_axes for r in self.results.values()):
                 self.results, self.pins = {}, {}
                 problems.append("the results were made with another chain and were dropped")
+            elif chain_changed:
+                self.stale = set(self.results)  # kept, but of the previous chain
         self._mark("config")
         self._check_detections()
         self.projectChanged.emit()
@@ -451,6 +463,8 @@ class Session(QObject):
 
     def _apply(self, edit: Edit, which: int) -> None:
         """Set the state of ``edit``: ``which`` 0 for before (undo), 1 for after (redo)."""
+        if edit.stale is not None:
+            self.stale = set(edit.stale[which])
         for frame, pair in edit.results.items():
             if pair[which] is None:
                 self.results.pop(frame, None)
@@ -468,6 +482,12 @@ class Session(QObject):
             self.body = edit.body[which]
             self._mark("chain")
             self.bodyChanged.emit()
+
+    def _freshen(self, edit: Edit, frames) -> None:
+        """These frames' results are now of the current chain (recorded in ``edit``)."""
+        before = frozenset(self.stale) if edit.stale is None else edit.stale[0]
+        self.stale.difference_update(frames)
+        edit.stale = (before, frozenset(self.stale))
 
     def _push(self, edit: Edit) -> None:
         if edit:
@@ -509,8 +529,13 @@ class Session(QObject):
         self.status.emit(f"redid: {edit.label}")
         self.undoChanged.emit()
 
-    def commit_body(self, body: Body, label: str = "edit chain") -> bool:
-        """Make ``body`` the session's chain (undoable); it is validated first."""
+    def commit_body(self, body: Body, label: str = "edit chain",
+                    geometry: bool = True) -> bool:
+        """Make ``body`` the session's chain (undoable); it is validated first.
+
+        ``geometry`` False for a change that leaves the projection alone (histograms);
+        otherwise every result becomes :attr:`stale` until its frame is fitted again.
+        """
         from kinematics.model import validate_body
 
         try:
@@ -519,9 +544,14 @@ class Session(QObject):
             self.error.emit(str(err))
             return False
         self.preview_body = None
-        edit = Edit(label, body=(self.body, body))
+        before = frozenset(self.stale)
+        edit = Edit(label, body=(self.body, body),
+                    stale=(before, before | set(self.results) if geometry else before))
         self._apply(edit, 1)
         self._push(edit)
+        if geometry and self.stale:
+            self.status.emit(f"chain changed: the errors of {len(self.stale)} frames are of "
+                             "the previous chain until they are fitted again")
         return True
 
     def set_results(self, results: Iterable, label: str) -> None:
@@ -531,6 +561,7 @@ class Session(QObject):
             edit.record_result(r.frame, self.results.get(r.frame), r)
             if r.frame in self.pins and r.status != backend.CORRECTED:
                 edit.record_pins(r.frame, self.pins[r.frame], None)
+        self._freshen(edit, list(edit.results))
         self._apply(edit, 1)
         self._push(edit)
 
@@ -633,6 +664,7 @@ class Session(QObject):
             self.results[r.frame] = r
             if r.frame in self.pins:
                 edit.record_pins(r.frame, self.pins.pop(r.frame), None)
+        self._freshen(edit, [r.frame for r in batch])
         self._mark("results")
         self.resultsChanged.emit([r.frame for r in batch])
 
@@ -683,6 +715,7 @@ class Session(QObject):
             edit = Edit(label)
             edit.record_result(frame, self.results.get(frame), result)
             edit.record_pins(frame, self.pins.get(frame), pins)
+            self._freshen(edit, [frame])
             self.preview_angles = None
             self._apply(edit, 1)
             self._push(edit)
@@ -766,20 +799,21 @@ class Session(QObject):
             self.postureChanged.emit()
 
     # -- histograms ---------------------------------------------------------------------
-    def learn_histograms(self, statuses=adapters.GOOD_STATUSES) -> int:
-        """Eq. 4 learning from the analysed frames (of these statuses; None: all fitted).
-
-        Returns the number of frames learned from (0: nothing changed).
+    def learn_histograms(self, within_threshold: bool = True) -> int:
+        """Eq. 4 learning from the analysed frames: those within the current threshold
+        (corrected, or E ≤ :attr:`threshold` now, see :func:`ui.adapters.trusted`), or every
+        fitted frame. Returns the number of frames learned from (0: nothing changed).
         """
         from kinematics.histogram_xml import apply_archive, archive_from_body, update_archive
 
-        angles = adapters.learning_angles(self.results, statuses)
+        angles = (adapters.learning_angles(self.results, threshold=self.threshold)
+                  if within_threshold else adapters.learning_angles(self.results, None))
         if self.body is None or len(angles) == 0:
             self.status.emit("no analysed frames to learn from")
             return 0
         archive = update_archive(archive_from_body(self.body), self.body, angles)
         self.commit_body(apply_archive(self.body, archive),
-                         f"learn histograms from {len(angles)} frames")
+                         f"learn histograms from {len(angles)} frames", geometry=False)
         self.status.emit(f"histograms learned from {len(angles)} frames (Eq. 4)")
         return len(angles)
 
@@ -805,7 +839,8 @@ class Session(QObject):
         except LocatedError as err:
             self.error.emit(str(err))
             return False
-        return self.commit_body(body, f"load histograms from {Path(path).name}")
+        return self.commit_body(body, f"load histograms from {Path(path).name}",
+                                geometry=False)
 
     # -- chain file ---------------------------------------------------------------------
     def save_chain_as(self, path, body: Body | None = None) -> bool:

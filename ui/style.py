@@ -17,6 +17,7 @@ PINNED = "#ff3df2"
 CURRENT_FRAME = "#ffd400"
 ERROR_CURVE = "#e8e8e8"
 THRESHOLD = "#ff5050"
+STALE_TEXT = "#d97400"  # the warning that errors are of an earlier chain
 BAD_ROW = QColor("#ffd2d2")
 CORRECTED_ROW = QColor("#d5e6ff")
 UNFITTED_TEXT = QColor("#8a8a8a")
