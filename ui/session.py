@@ -887,9 +887,11 @@ class Session(QObject):
 
         try:
             if "config" in self._dirty:
-                import tomli_w
+                from videotrack.config import updated_toml_text
 
-                atomic_write_text(self.config.path, tomli_w.dumps(self.raw_config))
+                # edit the file in place: the user's comments and layout survive
+                text = self.config.path.read_text(encoding="utf-8")
+                atomic_write_text(self.config.path, updated_toml_text(text, self.raw_config))
             if "chain" in self._dirty and self.model is not None:
                 save_body(self.model.chain_path, self.body)
             if "results" in self._dirty and self.model is not None:

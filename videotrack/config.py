@@ -206,6 +206,29 @@ class Config:
         return name in self.sections
 
 
+def updated_toml_text(text: str, table: Mapping) -> str:
+    """``text`` (a TOML document) changed to hold ``table``, keeping its comments, order and
+    formatting wherever a value did not change (a project file a person wrote and commented,
+    saved again by the GUI). Keys ``table`` lacks are removed; an array of tables that
+    changed is replaced whole."""
+    import tomlkit
+
+    doc = tomlkit.parse(text)
+    _sync(doc, table)
+    return tomlkit.dumps(doc)
+
+
+def _sync(container, table: Mapping) -> None:
+    for key in [k for k in container if k not in table]:
+        del container[key]
+    for key, value in table.items():
+        if key in container and isinstance(value, Mapping) and isinstance(
+                container[key], Mapping):
+            _sync(container[key], value)
+        elif key not in container or container[key] != value:
+            container[key] = value
+
+
 def load_config(path: str | os.PathLike) -> Config:
     """Read and validate a project TOML file.
 

@@ -209,6 +209,20 @@ def test_apply_config_marks_stale_detections(session, project):
     assert tomllib.loads(project.read_text())["filters"]["steps"][0]["value"] == 150
 
 
+def test_saving_the_config_keeps_the_users_comments(session, project):
+    s = session
+    project.write_text("# my rig, calibrated in May\n" + project.read_text().replace(
+        "[cameras]", "[cameras]  # the May calibration"), encoding="utf-8")
+    assert s.open_project(project)
+    raw = tomllib.loads(project.read_text())
+    raw["filters"]["steps"][0]["value"] = 150
+    assert s.apply_config(raw) and s.save()
+    text = project.read_text()
+    assert text.startswith("# my rig, calibrated in May\n")
+    assert "[cameras]  # the May calibration" in text
+    assert tomllib.loads(text) == raw
+
+
 def test_errors_are_one_line_messages(qtbot, project, tmp_path):
     s = Session()
     messages = []

@@ -292,3 +292,20 @@ def test_a_section_follows_its_record(tmp_path):
     with pytest.raises(VideoTrackError) as err:
         record_from_table(Outer, section.validate({"kind": "b"}), file="x.toml", where="toy")
     assert str(err.value) == "x.toml: toy.limit_px: mode b needs a limit"
+
+
+def test_updated_toml_text_keeps_comments_and_drops_removed_keys():
+    import tomllib
+
+    from videotrack.config import updated_toml_text
+
+    text = ('# project\n[video]\npath = "a.avi"  # camera A\n\n[anneal]\nseed = 3  # lucky\n'
+            'n_end = 1000\n')
+    table = tomllib.loads(text)
+    table["anneal"]["seed"] = 4
+    del table["anneal"]["n_end"]
+    table["fit"] = {"plot": True}
+    out = updated_toml_text(text, table)
+    assert tomllib.loads(out) == table
+    assert out.startswith("# project\n") and "# camera A" in out and "seed = 4  # lucky" in out
+    assert "n_end" not in out
