@@ -56,9 +56,10 @@ def write_table(path: str | os.PathLike, columns: Sequence[str], values: np.ndar
 
 
 def read_table(path: str | os.PathLike) -> tuple[list[str], np.ndarray]:
-    """Read a table written by :func:`write_table`: (columns, values (n_rows, n_columns))."""
+    """Read a numeric CSV table (:func:`write_table`'s, or another tool's: a byte-order mark
+    and blank cells, read as NaN, are accepted): (columns, values (n_rows, n_columns))."""
     try:
-        with open(path, newline="", encoding="utf-8") as fh:
+        with open(path, newline="", encoding="utf-8-sig") as fh:
             rows = list(csv.reader(fh))
     except OSError as err:
         raise VideoTrackError(f"cannot read table: {err.strerror}", file=path) from None
@@ -73,7 +74,7 @@ def read_table(path: str | os.PathLike) -> tuple[list[str], np.ndarray]:
             raise VideoTrackError(f"row has {len(row)} cells, header has {len(columns)}",
                                   file=path, line=i + 2)
         for j, cell in enumerate(row):
-            if cell == "":
+            if cell.strip() == "":
                 continue
             try:
                 out[i, j] = float(cell)

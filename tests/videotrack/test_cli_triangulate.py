@@ -205,10 +205,10 @@ def test_reads_anipose_pandas_output(tmp_path):
 
 @pytest.mark.parametrize("text, message", [
     ("a,b\n1,2\n", "bad.csv:1: not an Anipose pose-3d CSV"),
-    ("p_x,p_y,p_z,p_error,p_ncams,p_score,fnum\n1,2,3,0,2,1\n", "bad.csv:2: 6 fields"),
+    ("p_x,p_y,p_z,p_error,p_ncams,p_score,fnum\n1,2,3,0,2,1\n", "bad.csv:2: row has 6 cells"),
     ("p_x,p_y,p_z,p_error,p_ncams,p_score,fnum\n1,2,zz,0,2,1,0\n",
-     "bad.csv:2: p_z: not a number"),
-    ("", "bad.csv: empty file"),
+     "bad.csv:2: p_z: 'zz' is not a number"),
+    ("", "bad.csv: file is empty"),
 ])
 def test_bad_pose3d_files(tmp_path, text, message):
     path = tmp_path / "bad.csv"

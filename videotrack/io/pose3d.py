@@ -18,6 +18,7 @@ import numpy as np
 
 from kinematics.fileio import atomic_write_text
 from videotrack.errors import VideoTrackError
+from videotrack.tables import read_table
 
 __all__ = ["FIELDS", "Pose3D", "is_pose3d", "read_pose3d", "write_pose3d"]
 
@@ -129,29 +130,9 @@ def read_pose3d(path: str | os.PathLike) -> Pose3D:
     VideoTrackError
         One line naming the file, line and column of a problem.
     """
-    try:
-        with open(path, encoding="utf-8-sig", newline="") as fh:
-            rows = list(csv.reader(fh))
-    except (OSError, UnicodeDecodeError, csv.Error) as err:
-        raise VideoTrackError(f"cannot read: {err}", file=path) from None
-    if not rows:
-        raise VideoTrackError("empty file", file=path)
-    header = rows[0]
+    header, values = read_table(path)
     names = _header_names(header, path)
     col = {h: i for i, h in enumerate(header)}
-    values = np.full((len(rows) - 1, len(header)), np.nan)
-    for r, row in enumerate(rows[1:]):
-        if len(row) != len(header):
-            raise VideoTrackError(f"{len(row)} fields, the header has {len(header)}",
-                                  file=path, line=r + 2)
-        for c, text in enumerate(row):
-            if text.strip() == "":
-                continue
-            try:
-                values[r, c] = float(text)
-            except ValueError:
-                raise VideoTrackError(f"not a number: {text!r}", file=path, line=r + 2,
-                                      field=header[c]) from None
 
     def take(suffix):
         return values[:, [col[f"{n}_{suffix}"] for n in names]]
