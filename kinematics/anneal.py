@@ -942,7 +942,7 @@ class Fitter:
         sel = np.array([position], np.int64)
         out = FitOutputs.empty(1, self.problem.n_state, self.n_views, 1)
         parts = partitions_of(self.problem, p.partitions, p.partition_rounds, p.claim_gate_px)
-        # the run index 1_000_003 keeps this stream apart from the frame's own runs
+        # keyed by frame + 1_000_003: a random stream apart from the frames' own runs
         _ak.fit_frames(np.array([0, 1], np.int64), np.array([position + 1_000_003], np.int64),
                        np.ascontiguousarray(pos[None]), np.ascontiguousarray(rot[None]),
                        state, self.problem.folded, self.problem.cams, self.problem.dofs,

@@ -33,7 +33,6 @@ from videotrack.project import command_config, trial_outputs
 from videotrack.results import (
     STATUSES,
     attach_candidates,
-    candidates_path,
     frame_results,
     read_results,
     read_sidecar,
@@ -51,6 +50,7 @@ __all__ = [
     "ProjectModel",
     "ProjectRun",
     "anneal_params",
+    "attach_candidates",
     "check_detection_views",
     "detect_markers",
     "frame_results",
@@ -110,18 +110,6 @@ def iter_fit(fitter: Fitter, detections, frames: Sequence[int],
                            chunk_size=chunk_size)
 
 
-def replace_result(result: FrameResult, **changes) -> FrameResult:
-    """A copy of ``result`` with ``changes`` (dataclass fields)."""
-    return replace(result, **changes)
-
-
-def with_candidates_file(results: dict[int, FrameResult], results_path
-                         ) -> dict[int, FrameResult]:
-    """``results`` with the candidate postures of the candidates file beside them (when
-    there is one), so the GUI can offer an ambiguous frame's alternatives."""
-    return attach_candidates(results, results_path)
-
-
 def with_status(result: FrameResult, status: str) -> FrameResult:
     """A copy of ``result`` with another status (e.g. :data:`CORRECTED`)."""
     return replace(result, status=status)
@@ -173,7 +161,5 @@ def save_project_results(path: str | os.PathLike, model: ProjectModel, body: Bod
     table = results_from_fit(body, ordered, model.view_names, detections)
     sidecar = {**results_sidecar(model, Path(detections_path)), "source": "videotrack gui"}
     written = _write_results(path, table, sidecar)
-    stale = candidates_path(path)
-    if write_candidates(path, body, ordered) is None and stale.exists():
-        stale.unlink()  # the candidates of an earlier fit would not match these results
+    write_candidates(path, body, ordered)
     return written

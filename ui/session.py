@@ -234,7 +234,7 @@ class Session(QObject):
             try:
                 self.results = backend.read_project_results(self.results_path, self.body,
                                                             self.view_names)
-                self.results = backend.with_candidates_file(self.results, self.results_path)
+                self.results = backend.attach_candidates(self.results, self.results_path)
             except LocatedError as err:
                 self.error.emit(str(err))
 
@@ -753,7 +753,7 @@ class Session(QObject):
         except LocatedError as err:
             self.error.emit(str(err))
             return False
-        result = backend.replace_result(backend.manual_result(
+        result = replace(backend.manual_result(
             frame, chosen.angles_deg, chosen.root_positions, error, per_view,
             self.params.seed if self.params else 0), candidates=cycled)
         edit = Edit(f"frame {frame}: alternative posture")

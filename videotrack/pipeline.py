@@ -347,9 +347,7 @@ def fit_project(
     base = results_path.absolute().parent
     found = [relative_message(w, base) for w in (*notes, *fit_warnings(table, detections))]
     write_results(results_path, table, {**sidecar, "warnings": list(dict.fromkeys(found))})
-    stale = candidates_path(results_path)
-    if write_candidates(results_path, model.body, ordered) is None and stale.exists():
-        stale.unlink()  # an earlier run's candidates would not match these results
+    write_candidates(results_path, model.body, ordered)
     discard_checkpoint(results_path)
     return table
 

@@ -220,11 +220,13 @@ def format_candidates(body: Body, fit_results: Sequence) -> str:
 
 
 def write_candidates(path: str | os.PathLike, body: Body, fit_results: Sequence) -> Path | None:
-    """Write the candidates file beside results ``path`` (atomically); None (and nothing
-    written) when no frame has candidates."""
-    if not any(getattr(r, "candidates", ()) for r in fit_results):
-        return None
+    """Write the candidates file beside results ``path`` (atomically). When no frame has
+    candidates, nothing is written and a candidates file left by an earlier fit is removed
+    (it would not match these results); None then."""
     out = candidates_path(path)
+    if not any(getattr(r, "candidates", ()) for r in fit_results):
+        out.unlink(missing_ok=True)
+        return None
     atomic_write_text(out, format_candidates(body, fit_results))
     return out
 

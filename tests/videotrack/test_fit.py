@@ -41,6 +41,25 @@ def test_run_fits_planted_postures(project, capsys):
     # 3D points are the FK of the angles: the tibia tip M3 sits 77 px from J2
     d = np.linalg.norm(res.markers[:, 3] - res.joints[:, 2], axis=1)
     np.testing.assert_allclose(d, 77.0, atol=1e-9)
+    assert (project / "detections.results.candidates.csv").exists()  # the default fit's
+
+
+def test_candidates_file_round_trip_and_stale_removal(project, tmp_path):
+    from dataclasses import replace
+
+    from kinematics.chain_xml import load_body
+    from videotrack.results import attach_candidates, frame_results, write_candidates
+
+    fitted = project / "detections.results.csv"
+    results = attach_candidates(frame_results(read_results(fitted), 0), fitted)
+    assert any(len(r.candidates) for r in results.values())
+    body = load_body(project / "chain.xml")
+    out = write_candidates(tmp_path / "r.csv", body, list(results.values()))
+    assert out.read_text() == (project / "detections.results.candidates.csv").read_text()
+    # results without candidates (the paper's settings): the earlier file would not match
+    assert write_candidates(tmp_path / "r.csv", body,
+                            [replace(r, candidates=()) for r in results.values()]) is None
+    assert not out.exists()
 
 
 def test_up_to_date_results_are_not_fitted_again(project, capsys):
