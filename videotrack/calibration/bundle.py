@@ -243,6 +243,26 @@ def board_poses_one(corners: Corners, v: int, object_points, intr) -> np.ndarray
 # --- step 3: bundle adjustment ----------------------------------------------------------------
 
 
+def project_by_camera(cams: np.ndarray, cam: np.ndarray, xw: np.ndarray, jacobian: bool):
+    """Project world points ``xw`` (k, 3) through the cameras ``cams[cam]`` (parameter rows,
+    :data:`_N_CAM` each): pixels (k, 2) and, with ``jacobian``, d pixel / d camera parameters
+    (k, 2, _N_CAM) and d pixel / d world point (k, 2, 3) (else None, None)."""
+    uv = np.empty((len(cam), 2))
+    jc = np.empty((len(cam), 2, _N_CAM)) if jacobian else None
+    jx = np.empty((len(cam), 2, 3)) if jacobian else None
+    for c in np.unique(cam):
+        sel = np.flatnonzero(cam == c)
+        q = cams[c]
+        K = np.array([[q[6], 0.0, q[8]], [0.0, q[7], q[9]], [0.0, 0.0, 1.0]])
+        pix, J = cv2.projectPoints(xw[sel], q[:3], q[3:6], K, q[10:])
+        uv[sel] = pix.reshape(-1, 2)
+        if jacobian:
+            J = J.reshape(-1, 2, _N_CAM)
+            jc[sel] = J
+            jx[sel] = J[:, :, 3:6] @ cv2.Rodrigues(q[:3])[0]  # d x_cam / d x_world = R_c
+    return uv, jc, jx
+
+
 class Problem:
     """Residuals of all observed corners, and their analytic Jacobian, for packed camera and
     board-pose parameters.
@@ -281,22 +301,14 @@ class Problem:
             Rv[i], dRv[i] = R, dR.reshape(3, 3, 3)  # dRv[i, j] = dR / d r_j
         xb = self.obj[p]
         xw = np.einsum("nij,nj->ni", Rv[v], xb) + views[v, 3:]
-        res = np.empty((len(rows), 2))
-        jc = np.empty((len(rows), 2, _N_CAM)) if jacobian else None
-        jv = np.empty((len(rows), 2, 6)) if jacobian else None
-        for cam in np.unique(c):
-            sel = np.flatnonzero(c == cam)
-            q = cams[cam]
-            K = np.array([[q[6], 0.0, q[8]], [0.0, q[7], q[9]], [0.0, 0.0, 1.0]])
-            uv, J = cv2.projectPoints(xw[sel], q[:3], q[3:6], K, q[10:])
-            res[sel] = uv.reshape(-1, 2) - self.uv[rows[sel]]
-            if jacobian:
-                J = J.reshape(-1, 2, _N_CAM)
-                jc[sel] = J
-                duv_dxw = J[:, :, 3:6] @ cv2.Rodrigues(q[:3])[0]  # d x_cam / d x_world = R_c
-                dxw_drv = np.einsum("njab,nb->naj", dRv[v[sel]], xb[sel])
-                jv[sel, :, :3] = duv_dxw @ dxw_drv
-                jv[sel, :, 3:] = duv_dxw
+        uv, jc, duv_dxw = project_by_camera(cams, c, xw, jacobian)
+        res = uv - self.uv[rows]
+        jv = None
+        if jacobian:
+            jv = np.empty((len(rows), 2, 6))
+            dxw_drv = np.einsum("njab,nb->naj", dRv[v], xb)
+            jv[:, :, :3] = duv_dxw @ dxw_drv
+            jv[:, :, 3:] = duv_dxw
         return res.ravel(), jc, jv
 
     def residuals(self, full: np.ndarray, rows: np.ndarray) -> np.ndarray:

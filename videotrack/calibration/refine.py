@@ -9,12 +9,17 @@ it is restored afterwards from the camera centres' spread before refinement.
 
 from __future__ import annotations
 
-import cv2
 import numpy as np
 
 from kinematics.calibration_math import camera_from_params, params_from_camera, triangulate
 from kinematics.cameras import PinholeCamera
-from videotrack.calibration.bundle import _N_CAM, Options, Problem, adjust_iterative
+from videotrack.calibration.bundle import (
+    _N_CAM,
+    Options,
+    Problem,
+    adjust_iterative,
+    project_by_camera,
+)
 from videotrack.errors import VideoTrackError
 
 __all__ = ["refine_extrinsics", "triangulated_errors"]
@@ -57,20 +62,8 @@ class PointProblem(Problem):
     def evaluate(self, full, rows, jacobian=True):
         cams, pts = self.unpack(full)
         c, p = self.cam[rows], self.view[rows]
-        res = np.empty((len(rows), 2))
-        jc = np.empty((len(rows), 2, _N_CAM)) if jacobian else None
-        jp = np.empty((len(rows), 2, 3)) if jacobian else None
-        for cam in np.unique(c):
-            sel = np.flatnonzero(c == cam)
-            q = cams[cam]
-            K = np.array([[q[6], 0.0, q[8]], [0.0, q[7], q[9]], [0.0, 0.0, 1.0]])
-            uv, J = cv2.projectPoints(pts[p[sel]], q[:3], q[3:6], K, q[10:])
-            res[sel] = uv.reshape(-1, 2) - self.uv[rows[sel]]
-            if jacobian:
-                J = J.reshape(-1, 2, _N_CAM)
-                jc[sel] = J
-                jp[sel] = J[:, :, 3:6] @ cv2.Rodrigues(q[:3])[0]
-        return res.ravel(), jc, jp
+        uv, jc, jp = project_by_camera(cams, c, pts[p], jacobian)
+        return (uv - self.uv[rows]).ravel(), jc, jp
 
     def _columns(self, rows):
         cols_cam = np.arange(_N_CAM)[None] + self.cam[rows, None] * _N_CAM
