@@ -46,6 +46,7 @@ import numba
 import numpy as np
 
 from kinematics import _anneal_kernels as _ak
+from kinematics import _lane_kernels as _lk
 from kinematics import placement, temporal
 from kinematics.error_function import projection_error
 from kinematics.errors import KinematicsError
@@ -599,6 +600,8 @@ class Fitter:
         seg = self.params.segment_length if self.params.start == "previous" else 1
         if chunk_size is None:  # enough frames (or segments) to keep every thread busy
             chunk = 8 * threads if seg == 1 else 2 * threads * seg
+            if seg == 1 and params.backend != "scalar":  # and, for lanes, their lanes
+                chunk = max(chunk, 2 * _lk.LANES * threads // max(1, params.candidates))
         else:
             chunk = chunk_size
         if isinstance(chunk, bool) or not isinstance(chunk, int | np.integer) or chunk < 1:
@@ -656,8 +659,15 @@ class Fitter:
         n, ns, nv = len(frame_ids), pr.n_state, self.n_views
         out = FitOutputs.empty(n, ns, nv, max(p.max_runs, p.candidates))
         parts = partitions_of(pr, p.partitions, p.partition_rounds, p.claim_gate_px)
-        _ak.fit_frames(seg_off, frame_ids, roots, rots, start, pr.folded, pr.cams, pr.dofs,
-                       schedule_of(p), error_args(p.error), arrays, parts, out)
+        if self._use_lanes(p, arrays.objective, parts, n):
+            threads = numba.get_num_threads()
+            groups = np.unique(np.linspace(0, n, min(threads, n) + 1).astype(np.int64))
+            _lk.fit_frames_lanes(groups, frame_ids, roots, rots, start, pr.folded, pr.cams,
+                                 pr.dofs, schedule_of(p), error_args(p.error), arrays,
+                                 float(p.claim_gate_px), _lk.LANES, out)
+        else:
+            _ak.fit_frames(seg_off, frame_ids, roots, rots, start, pr.folded, pr.cams,
+                           pr.dofs, schedule_of(p), error_args(p.error), arrays, parts, out)
         results = []
         for k in range(n):
             cands = ()
@@ -670,6 +680,21 @@ class Fitter:
                 pairs=int(out.pairs[k]), error=(float(out.error[k]), out.view_error[k].copy()),
                 candidates=cands))
         return results
+
+    @staticmethod
+    def _use_lanes(p: AnnealParams, objective: int, parts, n_frames: int) -> bool:
+        """Whether the lane kernel fits this block: it does what the scalar kernel does for
+        unlabelled points, one partition and independent frames; 'auto' also wants enough
+        runs to fill the lanes of every thread."""
+        valid = (objective == _ak.OBJ_NEAREST and parts.bounds.shape[0] == 1
+                 and p.start == "mean")
+        if p.backend == "lanes" and not valid:
+            raise KinematicsError("the lanes backend fits unlabelled points with one "
+                                  "partition and start 'mean'; use backend 'auto' or 'scalar'",
+                                  field="backend")
+        runs = n_frames * max(1, p.candidates)
+        return p.backend == "lanes" or (p.backend == "auto" and valid
+                                         and runs >= _lk.LANES * numba.get_num_threads())
 
     def _frame_result(self, obs: Observations, position: int, frame_id: int, state, root_pos,
                       root_rot, p: AnnealParams, *, runs: int, iterations: int, pairs: int,

@@ -44,6 +44,7 @@ def setting(default, doc: str, *, min=None, max=None, choices=None, none=None):
 
 START_MODES = ("mean", "previous")
 PARTITION_MODES = ("auto", "none")
+BACKENDS = ("auto", "scalar", "lanes")
 THRESHOLD_MODES = ("absolute", "auto")
 
 #: Cost of a marker with no finite projection when no cap is set (same as the kernels).
@@ -219,6 +220,11 @@ class AnnealParams:
         "flatten": {"mode": "error"}})
     seed: int = setting(0, "Seed of the random streams; written into every result.",
                         min=0, max=2**62)
+    backend: str = setting(
+        "auto", "Which kernel anneals: 'scalar' one run at a time, 'lanes' many runs at once "
+        "in SIMD lanes (the same results to the last bit; faster on many frames), 'auto' "
+        "lanes where they are valid (unlabelled points, one partition, start 'mean') and "
+        "there are enough runs to fill them, else scalar.", choices=BACKENDS)
 
     def __post_init__(self) -> None:
         self.validate()
@@ -278,6 +284,9 @@ class AnnealParams:
         if self.partitions not in PARTITION_MODES:
             raise KinematicsError(f"must be one of {', '.join(PARTITION_MODES)}, got "
                                   f"{self.partitions!r}", field="partitions")
+        if self.backend not in BACKENDS:
+            raise KinematicsError(f"must be one of {', '.join(BACKENDS)}, got "
+                                  f"{self.backend!r}", field="backend")
         if self.start not in START_MODES:
             raise KinematicsError(f"must be one of {', '.join(START_MODES)}, got "
                                   f"{self.start!r}", field="start")

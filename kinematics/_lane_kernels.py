@@ -1,0 +1,662 @@
+"""numba lane kernels: many annealing runs at once, one per SIMD lane (private; the public
+entry is :class:`kinematics.anneal.Fitter` with ``backend = "lanes"``).
+
+One annealing run is latency-bound: each iteration waits for the previous acceptance. Runs
+of different frames (and the candidate runs of one frame) are independent, so this module
+anneals ``LANES`` of them together: every per-run quantity has a last axis of ``LANES``
+entries, and every loop over that axis is straight-line code that LLVM turns into packed
+vector instructions (``for ln in range(nl)``: the lane count is read from an array's shape,
+because LLVM fully unrolls a loop with a compile-time trip count of 8 and numba leaves SLP
+vectorisation off, so the unrolled code would stay scalar). Decisions
+that differ between runs (acceptance, redraws, the nearest detection) are selects, not
+branches.
+
+The readable twin and test oracle is the scalar kernel :func:`kinematics._anneal_kernels.
+fit_frames`: each run here performs exactly the scalar kernel's arithmetic in the same order
+on the same random stream (splitmix64 per seed, frame and run), so the outputs agree to the
+last bit — whatever the number of lanes or threads. What a lane cannot do cheaply (loading a
+run, its starting E, refinement, deciding on re-runs) calls the scalar kernels.
+
+Layout (``L = LANES``): state ``cur``, ``cand``, ``best``, ``cs``, ``sn`` (n_state, L);
+``rot`` (nj, 9, L) row-major A'_j; ``pos`` (nj, 3, L); ``mk`` (nm, 3, L); ``proj``
+(nv, nm, 2, L); detections ``dx``, ``dy`` (nv, c_max, L), padded with :data:`PAD` beyond the
+lane's own ``ndet`` (nv, L). The supported problems are those :func:`lanes_valid` accepts
+(unlabelled points, one partition, independent frames); the scalar kernel does the rest.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+from kinematics import _refine_kernels as _rk
+from kinematics._anneal_kernels import (
+    NAN_MARKER_COST,
+    ROOT_POSE,
+    count_unexplained,
+    evaluate,
+    mix64,
+    project_posture,
+    stream_state,
+)
+from kinematics._camera_kernels import ORTHOGRAPHIC
+
+#: Runs annealed together: four 512-bit registers of float64 (bench/bench_lanes.py: 16 and
+#: 64 lanes are slower; 8 leave LLVM's vector loop unused).
+LANES = 32
+
+#: Coordinate of a padding detection: farther than any real one, finite when squared.
+PAD = 1.0e30
+
+_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+_S11 = np.uint64(11)
+_TWO_M53 = 1.0 / 9007199254740992.0  # 2**-53
+
+# The scalar kernel's sine/cosine constants (kinematics._anneal_kernels.sincos).
+_TWO_OVER_PI = 6.36619772367581382433e-01
+_PIO2_HI = 1.57079632673412561417e00
+_PIO2_LO = 6.07710050650619224932e-11
+_S1, _S2, _S3 = -1.66666666666666324348e-01, 8.33333333332248946124e-03, -1.98412698298579493134e-04
+_S4, _S5, _S6 = 2.75573137070700676789e-06, -2.50507602534068634195e-08, 1.58969099521155010221e-10
+_C1, _C2, _C3 = 4.16666666666666019037e-02, -1.38888888888741095749e-03, 2.48015872894767294178e-05
+_C4, _C5, _C6 = -2.75573143513906633035e-07, 2.08757232129817482790e-09, -1.13596475577881948265e-11
+
+_OPTS = {"cache": True, "nogil": True, "error_model": "numpy"}
+
+
+@njit(inline="always", **_OPTS)
+def _sincos(x):
+    """``(sin x, cos x)`` bit-identical to the scalar kernel's ``sincos``, without branches
+    (the quadrant picks by selects, so a loop over lanes vectorises)."""
+    k = np.rint(x * _TWO_OVER_PI)
+    r = (x - k * _PIO2_HI) - k * _PIO2_LO
+    z = r * r
+    s = r + r * z * (_S1 + z * (_S2 + z * (_S3 + z * (_S4 + z * (_S5 + z * _S6)))))
+    c = 1.0 - 0.5 * z + z * z * (_C1 + z * (_C2 + z * (_C3 + z * (_C4 + z * (_C5 + z * _C6)))))
+    q = int(k) & 3
+    s1 = c if q & 1 else s
+    c1 = s if q & 1 else c
+    s1 = -s1 if q >= 2 else s1
+    c1 = -c1 if q == 1 or q == 2 else c1
+    return s1, c1
+
+
+@njit(**_OPTS)
+def sincos_lanes(x, s, c):
+    """Fill ``s``, ``c`` with :func:`_sincos` of ``x`` (for tests)."""
+    for k in range(x.shape[0]):
+        s[k], c[k] = _sincos(x[k])
+
+
+# -- forward kinematics and projection of all lanes ----------------------------------------
+@njit(inline="always", **_OPTS)
+def _turn_lanes(b, cs, sn, a):
+    """Right-multiply every lane's A'_j (``b``, (9, L)) by its rotation about world axis
+    ``a`` (cosines ``cs``, sines ``sn``): the scalar kernel's column mixing (x mixes
+    columns 1, 2; y 2, 0; z 0, 1), in place."""
+    u = 1 if a == 0 else (2 if a == 1 else 0)
+    w = 2 if a == 0 else (0 if a == 1 else 1)
+    for ln in range(b.shape[1]):
+        c = cs[ln]
+        s = sn[ln]
+        u0, w0, u1, w1, u2, w2 = b[u, ln], b[w, ln], b[3 + u, ln], b[3 + w, ln], b[6 + u, ln], b[
+            6 + w, ln]
+        b[u, ln] = c * u0 + s * w0
+        b[w, ln] = c * w0 - s * u0
+        b[3 + u, ln] = c * u1 + s * w1
+        b[3 + w, ln] = c * w1 - s * u1
+        b[6 + u, ln] = c * u2 + s * w2
+        b[6 + w, ln] = c * w2 - s * u2
+
+
+@njit(inline="always", **_OPTS)
+def project_lanes(vals, cs, sn, rpos, rrot, parent, chain, pre_rot, pre_trans, post_trans,
+                  elem_axis, elem_index, joint_flags, marker_joint, marker_local, slide_index,
+                  kind, P, K, dist, R, t, rot, pos, mk, proj):
+    """Markers of every lane's posture projected into every view (the scalar
+    ``_project_cs`` per lane, the same values to the last bit): fills ``proj``
+    (nv, nm, 2, L), ``rot``, ``pos``, ``mk``. ``rpos`` (n_chains, 3, L), ``rrot``
+    (n_chains, 9, L) are each lane's root positions and seed rotations.
+
+    Each joint is one loop over lanes with every intermediate in registers. The scalar
+    kernel's shortcuts (identity G_j, zero h_j, absent rotations) are done here as full
+    products, which give the same numbers exactly for finite values and keep the loop free
+    of branches.
+    """
+    nl = vals.shape[1]  # a run-time count: LLVM vectorises the loops instead of unrolling
+    for j in range(parent.shape[0]):
+        p = parent[j]
+        m00, m01, m02 = pre_rot[j, 0, 0], pre_rot[j, 0, 1], pre_rot[j, 0, 2]
+        m10, m11, m12 = pre_rot[j, 1, 0], pre_rot[j, 1, 1], pre_rot[j, 1, 2]
+        m20, m21, m22 = pre_rot[j, 2, 0], pre_rot[j, 2, 1], pre_rot[j, 2, 2]
+        g0, g1, g2 = pre_trans[j, 0], pre_trans[j, 1], pre_trans[j, 2]
+        h0, h1, h2 = post_trans[j, 0], post_trans[j, 1], post_trans[j, 2]
+        c = chain[j]
+        posed = p < 0 and joint_flags[j] & ROOT_POSE
+        k = slide_index[j] if posed else 0
+        # q: the parent's A' (a root: its seed rotation, or the identity)
+        qs = rot[p] if p >= 0 else rrot[c]
+        ident = p < 0 and not posed
+        # A'_j = q · G_j, then each turn in place. LLVM vectorises a loop over lanes only
+        # without branches (turns are specialised outside the loop) and with at most nine
+        # stores, loads before stores.
+        for ln in range(nl):
+            q00, q01, q02 = qs[0, ln], qs[1, ln], qs[2, ln]
+            q10, q11, q12 = qs[3, ln], qs[4, ln], qs[5, ln]
+            q20, q21, q22 = qs[6, ln], qs[7, ln], qs[8, ln]
+            if ident:
+                q00, q01, q02, q10, q11, q12, q20, q21, q22 = (
+                    1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
+            b00 = q00 * m00 + q01 * m10 + q02 * m20
+            b01 = q00 * m01 + q01 * m11 + q02 * m21
+            b02 = q00 * m02 + q01 * m12 + q02 * m22
+            b10 = q10 * m00 + q11 * m10 + q12 * m20
+            b11 = q10 * m01 + q11 * m11 + q12 * m21
+            b12 = q10 * m02 + q11 * m12 + q12 * m22
+            b20 = q20 * m00 + q21 * m10 + q22 * m20
+            b21 = q20 * m01 + q21 * m11 + q22 * m21
+            b22 = q20 * m02 + q21 * m12 + q22 * m22
+            rot[j, 0, ln], rot[j, 1, ln], rot[j, 2, ln] = b00, b01, b02
+            rot[j, 3, ln], rot[j, 4, ln], rot[j, 5, ln] = b10, b11, b12
+            rot[j, 6, ln], rot[j, 7, ln], rot[j, 8, ln] = b20, b21, b22
+        for e in range(3):
+            if elem_axis[j, e] >= 0:
+                _turn_lanes(rot[j], cs[elem_index[j, e]], sn[elem_index[j, e]],
+                            elem_axis[j, e])
+        # p_j = p_parent + q · g_j + A'_j · h_j (a root: its position, moved by the state)
+        if p >= 0:
+            for ln in range(nl):
+                px = pos[p, 0, ln] + qs[0, ln] * g0 + qs[1, ln] * g1 + qs[2, ln] * g2
+                py = pos[p, 1, ln] + qs[3, ln] * g0 + qs[4, ln] * g1 + qs[5, ln] * g2
+                pz = pos[p, 2, ln] + qs[6, ln] * g0 + qs[7, ln] * g1 + qs[8, ln] * g2
+                px = px + (rot[j, 0, ln] * h0 + rot[j, 1, ln] * h1 + rot[j, 2, ln] * h2)
+                py = py + (rot[j, 3, ln] * h0 + rot[j, 4, ln] * h1 + rot[j, 5, ln] * h2)
+                pz = pz + (rot[j, 6, ln] * h0 + rot[j, 7, ln] * h1 + rot[j, 8, ln] * h2)
+                pos[j, 0, ln] = px
+                pos[j, 1, ln] = py
+                pos[j, 2, ln] = pz
+        else:
+            for ln in range(nl):  # roots: few, left as they come
+                px = rpos[c, 0, ln] + vals[k, ln] if posed else rpos[c, 0, ln]
+                py = rpos[c, 1, ln] + vals[k + 1, ln] if posed else rpos[c, 1, ln]
+                pz = rpos[c, 2, ln] + vals[k + 2, ln] if posed else rpos[c, 2, ln]
+                pos[j, 0, ln] = px + (rot[j, 0, ln] * h0 + rot[j, 1, ln] * h1 + rot[j, 2, ln] * h2)
+                pos[j, 1, ln] = py + (rot[j, 3, ln] * h0 + rot[j, 4, ln] * h1 + rot[j, 5, ln] * h2)
+                pos[j, 2, ln] = pz + (rot[j, 6, ln] * h0 + rot[j, 7, ln] * h1 + rot[j, 8, ln] * h2)
+    nv = kind.shape[0]
+    for m in range(marker_joint.shape[0]):
+        j = marker_joint[m]
+        a0, a1, a2 = marker_local[m, 0], marker_local[m, 1], marker_local[m, 2]
+        for ln in range(nl):
+            x = pos[j, 0, ln] + rot[j, 0, ln] * a0 + rot[j, 1, ln] * a1 + rot[j, 2, ln] * a2
+            y = pos[j, 1, ln] + rot[j, 3, ln] * a0 + rot[j, 4, ln] * a1 + rot[j, 5, ln] * a2
+            z = pos[j, 2, ln] + rot[j, 6, ln] * a0 + rot[j, 7, ln] * a1 + rot[j, 8, ln] * a2
+            mk[m, 0, ln] = x
+            mk[m, 1, ln] = y
+            mk[m, 2, ln] = z
+        for v in range(nv):
+            if kind[v] == ORTHOGRAPHIC:
+                p00, p01, p02, p03 = P[v, 0, 0], P[v, 0, 1], P[v, 0, 2], P[v, 0, 3]
+                p10, p11, p12, p13 = P[v, 1, 0], P[v, 1, 1], P[v, 1, 2], P[v, 1, 3]
+                for ln in range(nl):
+                    x, y, z = mk[m, 0, ln], mk[m, 1, ln], mk[m, 2, ln]
+                    proj[v, m, 0, ln] = p00 * x + p01 * y + p02 * z + p03
+                    proj[v, m, 1, ln] = p10 * x + p11 * y + p12 * z + p13
+            else:
+                _pinhole_lanes(K, dist, R, t, v, mk, m, proj)
+
+
+@njit(inline="always", **_OPTS)
+def _pinhole_lanes(K, dist, R, t, v, mk, m, proj):
+    """``project_point`` of a pinhole camera for every lane (NaN behind the camera)."""
+    nl = mk.shape[2]
+    r00, r01, r02 = R[v, 0, 0], R[v, 0, 1], R[v, 0, 2]
+    r10, r11, r12 = R[v, 1, 0], R[v, 1, 1], R[v, 1, 2]
+    r20, r21, r22 = R[v, 2, 0], R[v, 2, 1], R[v, 2, 2]
+    t0, t1, t2 = t[v, 0], t[v, 1], t[v, 2]
+    k1, k2, p1, p2 = dist[v, 0], dist[v, 1], dist[v, 2], dist[v, 3]
+    k3, k4, k5, k6 = dist[v, 4], dist[v, 5], dist[v, 6], dist[v, 7]
+    fx, cx, fy, cy = K[v, 0, 0], K[v, 0, 2], K[v, 1, 1], K[v, 1, 2]
+    for ln in range(nl):
+        x, y, z = mk[m, 0, ln], mk[m, 1, ln], mk[m, 2, ln]
+        xc = r00 * x + r01 * y + r02 * z + t0
+        yc = r10 * x + r11 * y + r12 * z + t1
+        zc = r20 * x + r21 * y + r22 * z + t2
+        xn = xc / zc
+        yn = yc / zc
+        r2 = xn * xn + yn * yn
+        radial = (1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1.0 + r2 * (k4 + r2 * (k5 + r2 * k6)))
+        xd = xn * radial + 2.0 * p1 * xn * yn + p2 * (r2 + 2.0 * xn * xn)
+        yd = yn * radial + p1 * (r2 + 2.0 * yn * yn) + 2.0 * p2 * xn * yn
+        front = zc > 0.0  # also false for NaN
+        proj[v, m, 0, ln] = fx * xd + cx if front else np.nan
+        proj[v, m, 1, ln] = fy * yd + cy if front else np.nan
+
+
+# -- Eq. 5 and its variants for all lanes ----------------------------------------------------
+@njit(inline="always", **_OPTS)
+def error_lanes(proj, dx, dy, ndet, cmax, bidirectional, weight, cap, penalty_cap, nearest,
+                ev, best, arg, matched, out):
+    """E of every lane (the scalar ``projection_error``, same operations in the same order)
+    into ``out`` (L,). ``nearest`` (nm, L) int64, ``ev``, ``best`` (L,), ``arg`` (L,) int64
+    and ``matched`` (L,) bool are scratch (allocating them here would cost more than the
+    arithmetic)."""
+    nv = proj.shape[0]
+    nm = proj.shape[1]
+    missing = cap if cap < np.inf else NAN_MARKER_COST
+    nl = out.shape[0]
+    for ln in range(nl):
+        out[ln] = 0.0
+    for v in range(nv):
+        for ln in range(nl):
+            ev[ln] = 0.0
+        cm = cmax[v]
+        if cm > 0:
+            for i in range(nm):
+                for ln in range(nl):
+                    best[ln] = np.inf
+                    arg[ln] = -1
+                for c in range(cm):
+                    for ln in range(nl):
+                        ex = proj[v, i, 0, ln] - dx[v, c, ln]
+                        ey = proj[v, i, 1, ln] - dy[v, c, ln]
+                        d2 = ex * ex + ey * ey
+                        closer = d2 < best[ln]
+                        best[ln] = d2 if closer else best[ln]
+                        arg[ln] = c if closer else arg[ln]
+                for ln in range(nl):
+                    nearest[i, ln] = arg[ln]
+                    d = np.sqrt(best[ln]) if arg[ln] >= 0 else missing
+                    ev[ln] += min(d, cap)
+            if bidirectional:
+                for c in range(cm):
+                    for ln in range(nl):
+                        matched[ln] = False
+                        best[ln] = np.inf
+                    for i in range(nm):
+                        for ln in range(nl):
+                            matched[ln] = matched[ln] | (nearest[i, ln] == c)
+                            ex = proj[v, i, 0, ln] - dx[v, c, ln]
+                            ey = proj[v, i, 1, ln] - dy[v, c, ln]
+                            best[ln] = min(best[ln], ex * ex + ey * ey)
+                    for ln in range(nl):
+                        d = np.sqrt(best[ln]) if best[ln] < np.inf else missing
+                        add = (not matched[ln]) & (c < ndet[v, ln])
+                        ev[ln] = ev[ln] + weight * min(d, penalty_cap) if add else ev[ln]
+        for ln in range(nl):
+            out[ln] += ev[ln] if ndet[v, ln] > 0 else 0.0
+
+
+# -- the annealing iterations of all lanes ---------------------------------------------------
+@njit(**_OPTS)
+def iterate_lanes(n_iter, free_idx, n_hist, step, hist, nbins, th, dof_kind, lo, hi,
+                  max_redraws, n_end, n_l, n_tau, c_l, c_tau, eps, active, rs, it, tau,
+                  length, to_tau, to_l, e_cur, e_best, cur, cand, best, cs, sn, rpos, rrot,
+                  body, cams, dx, dy, ndet, cmax, bidirectional, weight, cap,
+                  penalty_cap, rot, pos, mk, proj, nearest, e):
+    """Anneal every lane (scalar ``anneal_chain``'s iteration, per lane) until an active lane
+    has finished (``it >= n_end`` or best E below ``eps``) or ``n_iter`` iterations passed.
+    Inactive lanes compute but change nothing that is read back."""
+    (parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index, joint_flags,
+     marker_joint, marker_local, slide_index) = body
+    kind, P, K, dist, R, t = cams
+    n_free = free_idx.shape[0]
+    nl = e.shape[0]
+    e_acc = np.empty(nl)
+    ev = np.empty(nl)
+    dmin = np.empty(nl)
+    arg = np.empty(nl, np.int64)
+    matched = np.empty(nl, np.bool_)
+    xs = np.empty(nl)
+    ok = np.empty(nl, np.bool_)
+    pending = np.empty(nl, np.bool_)
+    accept = np.empty(nl, np.bool_)
+    better = np.empty(nl, np.bool_)
+    done = False
+    n = 0
+    while n < n_iter and not done:
+        for ln in range(nl):
+            st = rs[ln] + _GOLDEN
+            rs[ln] = st
+            u = np.float64(mix64(st) >> _S11) * _TWO_M53
+            e_acc[ln] = e_cur[ln] + tau[ln] * -np.log(u)
+        for q in range(n_free):
+            i = free_idx[q]
+            use_hist = q < n_hist
+            nb = nbins[i]
+            nf = float(nb)
+            s_i = step[i]
+            lo_i = lo[i]
+            hi_i = hi[i]
+            for ln in range(nl):
+                xs[ln] = cur[i, ln]
+                ok[ln] = False
+                pending[ln] = True
+            tries = 0
+            any_pending = True
+            while any_pending and tries <= max_redraws:
+                any_pending = False
+                if use_hist:
+                    for ln in range(nl):
+                        st = rs[ln] + _GOLDEN
+                        u = np.float64(mix64(st) >> _S11) * _TWO_M53
+                        x = cur[i, ln] + (length[ln] * s_i) * (2.0 * u - 1.0)
+                        # hist_at without a branch: the bin index wrapped by a float modulo
+                        kf = np.floor(x * (nf * (0.5 / np.pi)) + 0.5 * nf)
+                        inside = (kf >= 0.0) & (kf < nf)
+                        kf = kf if inside else kf - nf * np.floor(kf / nf)
+                        good = hist[i, int(kf)] >= th
+                        take = pending[ln]
+                        rs[ln] = st if take else rs[ln]
+                        xs[ln] = x if take else xs[ln]
+                        ok[ln] = good if take else ok[ln]
+                        pending[ln] = take & (not good)
+                        any_pending = any_pending | pending[ln]
+                else:
+                    for ln in range(nl):
+                        st = rs[ln] + _GOLDEN
+                        u = np.float64(mix64(st) >> _S11) * _TWO_M53
+                        x = cur[i, ln] + (length[ln] * s_i) * (2.0 * u - 1.0)
+                        good = (lo_i <= x) & (x <= hi_i)
+                        take = pending[ln]
+                        rs[ln] = st if take else rs[ln]
+                        xs[ln] = x if take else xs[ln]
+                        ok[ln] = good if take else ok[ln]
+                        pending[ln] = take & (not good)
+                        any_pending = any_pending | pending[ln]
+                tries += 1
+            for ln in range(nl):
+                x = xs[ln] if ok[ln] else cur[i, ln]
+                cand[i, ln] = x
+                sn[i, ln], cs[i, ln] = _sincos(x)
+        project_lanes(cand, cs, sn, rpos, rrot, parent, chain, pre_rot, pre_trans, post_trans,
+                      elem_axis, elem_index, joint_flags, marker_joint, marker_local,
+                      slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj)
+        error_lanes(proj, dx, dy, ndet, cmax, bidirectional, weight, cap, penalty_cap,
+                    nearest, ev, dmin, arg, matched, e)
+        for ln in range(nl):
+            acc = (e[ln] <= e_cur[ln]) | (e[ln] < e_acc[ln])
+            accept[ln] = acc
+            e_cur[ln] = e[ln] if acc else e_cur[ln]
+            better[ln] = e[ln] < e_best[ln]
+            e_best[ln] = e[ln] if better[ln] else e_best[ln]
+        for q in range(n_free):
+            i = free_idx[q]
+            for ln in range(nl):
+                cur[i, ln] = cand[i, ln] if accept[ln] else cur[i, ln]
+                best[i, ln] = cand[i, ln] if better[ln] else best[i, ln]
+        for ln in range(nl):
+            it[ln] += 1
+            to_tau[ln] -= 1
+            cool = to_tau[ln] == 0
+            tau[ln] = tau[ln] * c_tau if cool else tau[ln]
+            to_tau[ln] = n_tau if cool else to_tau[ln]
+            to_l[ln] -= 1
+            shrink = to_l[ln] == 0
+            length[ln] = length[ln] * c_l if shrink else length[ln]
+            to_l[ln] = n_l if shrink else to_l[ln]
+            done = done | (active[ln] & ((it[ln] >= n_end) | (e_best[ln] < eps)))
+        n += 1
+    return n
+
+
+# -- the frame procedure (fit_frames' runs, re-analysis and candidates) ----------------------
+@njit(parallel=True, **_OPTS)
+def fit_frames_lanes(group_off, frame_ids, root_pos, root_rot, start, body, cams, dofs,
+                     schedule, error, obs, claim_gate, n_lanes, out):
+    """Fit many frames, their runs packed into lanes: the scalar ``fit_frames`` for
+    independent frames (``start_previous`` false, one partition, unlabelled points), with the
+    same outputs to the last bit. Frames ``group_off[g]:group_off[g + 1]`` are fitted by one
+    thread (``prange`` over groups) with ``n_lanes`` lanes; ``claim_gate`` is the
+    partitions' (detections farther from every marker are unexplained); every other argument
+    is ``fit_frames``'."""
+    for g in prange(group_off.shape[0] - 1):
+        _fit_group(group_off[g], group_off[g + 1], frame_ids, root_pos, root_rot, start, body,
+                   cams, dofs, schedule, error, obs, claim_gate, n_lanes, out)
+
+
+@njit(**_OPTS)
+def _fit_group(f0, f1, frame_ids, root_pos, root_rot, start, body, cams, dofs, schedule,
+               error, obs, claim_gate, nl, out):
+    (parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index, joint_flags,
+     marker_joint, marker_local, slide_index) = body
+    kind, P, K, dist, R, t = cams
+    free_idx, step, hist, nbins, dof_kind, lo, hi = dofs
+    (th, max_redraws, n_end, n_l, n_tau, tau0, l0, c_l, c_tau, eps, seed,
+     reanalysis_threshold, max_runs, refine_steps, refine_gate, _, max_unexplained,
+     min_runs) = schedule
+    bidirectional, weight, cap, penalty_cap = error
+    objective, det_points, det_conf, det_off, obs3 = obs
+    (out_angles, out_error, out_view_error, out_runs, out_iterations, out_pairs,
+     out_run_angles, out_run_error) = out
+    nv = kind.shape[0]
+    nj = parent.shape[0]
+    nm = marker_joint.shape[0]
+    na = start.shape[0]
+    nc = root_pos.shape[1]
+    n = f1 - f0
+    n_hist = 0
+    while n_hist < free_idx.shape[0] and dof_kind[free_idx[n_hist]] == 0:
+        n_hist += 1
+    c_cap = 1
+    for f in range(f0, f1):
+        for v in range(nv):
+            c_cap = max(c_cap, det_off[f * nv + v + 1] - det_off[f * nv + v])
+    # lane state
+    cur = np.empty((na, nl))
+    cand = np.empty((na, nl))
+    best = np.empty((na, nl))
+    cs = np.empty((na, nl))
+    sn = np.empty((na, nl))
+    rot = np.empty((nj, 9, nl))
+    pos = np.empty((nj, 3, nl))
+    mk = np.empty((nm, 3, nl))
+    proj = np.empty((nv, nm, 2, nl))
+    nearest = np.empty((nm, nl), np.int64)
+    e = np.empty(nl)
+    rpos = np.zeros((nc, 3, nl))
+    rrot = np.zeros((nc, 9, nl))
+    dx = np.full((nv, c_cap, nl), PAD)
+    dy = np.full((nv, c_cap, nl), PAD)
+    ndet = np.zeros((nv, nl), np.int64)
+    cmax = np.zeros(nv, np.int64)
+    active = np.zeros(nl, np.bool_)
+    rs = np.zeros(nl, np.uint64)
+    it = np.zeros(nl, np.int64)
+    tau = np.ones(nl)
+    length = np.ones(nl)
+    to_tau = np.ones(nl, np.int64)
+    to_l = np.ones(nl, np.int64)
+    e_cur = np.zeros(nl)
+    e_best = np.zeros(nl)
+    lane_frame = np.zeros(nl, np.int64)
+    lane_run = np.zeros(nl, np.int64)
+    for ln in range(nl):
+        for k in range(na):
+            cur[k, ln] = start[k]
+            cand[k, ln] = start[k]
+            best[k, ln] = start[k]
+    # scalar scratch (loading, refinement, scoring)
+    s_state = np.empty(na)
+    s_annealed = np.empty(na)
+    s_cs = np.empty(na)
+    s_sn = np.empty(na)
+    s_rot = np.empty((nj, 3, 3))
+    s_pos = np.empty((nj, 3))
+    s_mk = np.empty((nm, 3))
+    s_proj = np.empty((nv, nm, 2))
+    s_view = np.empty(nv)
+    s_near = np.empty(nm, np.int64)
+    # per-frame bookkeeping (local index f - f0)
+    issued = np.zeros(n, np.int64)
+    finished = np.zeros(n, np.int64)
+    e_keep = np.full(n, np.inf)
+    u_keep = np.full(n, 1 << 30)
+    keep_run = np.zeros(n, np.int64)
+    run_u = np.zeros((n, max_runs), np.int64)
+    run_pairs = np.zeros((n, max_runs), np.int64)
+    u_limit = max_unexplained if max_unexplained >= 0 else 1 << 30
+    queue = np.empty(n * max_runs, np.int64)  # tasks: local frame * max_runs + run
+    head = 0
+    tail = 0
+    first_runs = min(max(min_runs, 1), max_runs)
+    for f in range(f0, f1):
+        out_runs[f] = 0
+        out_iterations[f] = 0
+        out_pairs[f] = 0
+        out_error[f] = np.nan
+        out_angles[f, :] = np.nan
+        out_view_error[f, :] = np.nan
+        out_run_angles[f, :, :] = np.nan
+        out_run_error[f, :] = np.nan
+        if det_off[f * nv + nv] > det_off[f * nv]:
+            for r in range(first_runs):
+                queue[tail] = (f - f0) * max_runs + r
+                tail += 1
+            issued[f - f0] = first_runs
+    while True:
+        # load idle lanes with waiting runs
+        for ln in range(nl):
+            if not active[ln] and head < tail:
+                task = queue[head]
+                head += 1
+                fl = task // max_runs
+                f = f0 + fl
+                run = task - fl * max_runs
+                vo = det_off[f * nv: f * nv + nv + 1]
+                for v in range(nv):
+                    a = vo[v]
+                    b = vo[v + 1]
+                    ndet[v, ln] = b - a
+                    for c in range(c_cap):
+                        dx[v, c, ln] = det_points[a + c, 0] if c < b - a else PAD
+                        dy[v, c, ln] = det_points[a + c, 1] if c < b - a else PAD
+                for c in range(nc):
+                    for k in range(3):
+                        rpos[c, k, ln] = root_pos[f, c, k]
+                        for k2 in range(3):
+                            rrot[c, 3 * k + k2, ln] = root_rot[f, c, k, k2]
+                for k in range(na):
+                    cur[k, ln] = start[k]
+                    cand[k, ln] = start[k]
+                    best[k, ln] = start[k]
+                    sn[k, ln], cs[k, ln] = _sincos(start[k])
+                project_posture(start, root_pos[f], root_rot[f], parent, chain, pre_rot,
+                                pre_trans, post_trans, elem_axis, elem_index, joint_flags,
+                                marker_joint, marker_local, slide_index, kind, P, K, dist, R,
+                                t, s_cs, s_sn, s_rot, s_pos, s_mk, s_proj)
+                e0 = evaluate(objective, s_proj, s_mk, det_points, det_conf, vo, obs3[f],
+                              bidirectional, weight, cap, penalty_cap, s_view, s_near)
+                e_cur[ln] = e0
+                e_best[ln] = e0
+                tau[ln] = tau0
+                length[ln] = l0
+                to_tau[ln] = n_tau
+                to_l[ln] = n_l
+                it[ln] = 0
+                rs[ln] = stream_state(seed, frame_ids[f], run)
+                lane_frame[ln] = f
+                lane_run[ln] = run
+                active[ln] = True
+        any_active = False
+        for ln in range(nl):
+            any_active = any_active or active[ln]
+        if not any_active:
+            break
+        for v in range(nv):
+            cm = 0
+            for ln in range(nl):
+                cm = max(cm, ndet[v, ln] if active[ln] else 0)
+            cmax[v] = cm
+        # finish the runs that are done; anneal the others until the next one is
+        any_done = False
+        for ln in range(nl):
+            if active[ln] and (it[ln] >= n_end or e_best[ln] < eps):
+                any_done = True
+                active[ln] = False
+                f = lane_frame[ln]
+                fl = f - f0
+                run = lane_run[ln]
+                vo = det_off[f * nv: f * nv + nv + 1]
+                for k in range(na):
+                    s_state[k] = best[k, ln]
+                e_run = e_best[ln]
+                out_iterations[f] += it[ln]
+                pairs = 0
+                if refine_steps > 0:
+                    s_annealed[:] = s_state
+                    _, pairs = _rk.refine_posture(
+                        s_state, free_idx, lo, hi, dof_kind, refine_steps, refine_gate,
+                        root_pos[f], root_rot[f], parent, chain, pre_rot, pre_trans,
+                        post_trans, elem_axis, elem_index, joint_flags, marker_joint,
+                        marker_local, slide_index, kind, P, K, dist, R, t, objective,
+                        det_points, det_conf, vo, obs3[f])
+                    project_posture(s_state, root_pos[f], root_rot[f], parent, chain, pre_rot,
+                                    pre_trans, post_trans, elem_axis, elem_index, joint_flags,
+                                    marker_joint, marker_local, slide_index, kind, P, K, dist,
+                                    R, t, s_cs, s_sn, s_rot, s_pos, s_mk, s_proj)
+                    e_ref = evaluate(objective, s_proj, s_mk, det_points, det_conf, vo,
+                                     obs3[f], bidirectional, weight, cap, penalty_cap, s_view,
+                                     s_near)
+                    if e_ref <= e_run:
+                        e_run = e_ref
+                    else:
+                        s_state[:] = s_annealed
+                        pairs = 0
+                u = 0
+                if max_unexplained >= 0:
+                    project_posture(s_state, root_pos[f], root_rot[f], parent, chain, pre_rot,
+                                    pre_trans, post_trans, elem_axis, elem_index, joint_flags,
+                                    marker_joint, marker_local, slide_index, kind, P, K, dist,
+                                    R, t, s_cs, s_sn, s_rot, s_pos, s_mk, s_proj)
+                    u = count_unexplained(s_proj, det_points, vo, claim_gate)
+                out_run_angles[f, run, :] = s_state
+                out_run_error[f, run] = e_run
+                run_u[fl, run] = u
+                run_pairs[fl, run] = pairs
+                finished[fl] += 1
+                if finished[fl] == issued[fl]:
+                    _settle(fl, f, issued, e_keep, u_keep, keep_run, run_u, run_pairs,
+                            out_run_error, out_pairs, max_unexplained)
+                    nxt = issued[fl]
+                    if nxt < max_runs and (nxt < min_runs or not (
+                            e_keep[fl] <= reanalysis_threshold and u_keep[fl] <= u_limit)):
+                        queue[tail] = fl * max_runs + nxt
+                        tail += 1
+                        issued[fl] = nxt + 1
+                    else:
+                        s_state[:] = out_run_angles[f, keep_run[fl], :]
+                        project_posture(s_state, root_pos[f], root_rot[f], parent, chain,
+                                        pre_rot, pre_trans, post_trans, elem_axis, elem_index,
+                                        joint_flags, marker_joint, marker_local, slide_index,
+                                        kind, P, K, dist, R, t, s_cs, s_sn, s_rot, s_pos, s_mk,
+                                        s_proj)
+                        out_error[f] = evaluate(objective, s_proj, s_mk, det_points, det_conf,
+                                                vo, obs3[f], bidirectional, weight, cap,
+                                                penalty_cap, s_view, s_near)
+                        out_view_error[f, :] = s_view
+                        out_angles[f, :] = s_state
+                        out_runs[f] = issued[fl]
+        if any_done:
+            continue  # refill the freed lanes first
+        iterate_lanes(1 << 30, free_idx, n_hist, step, hist, nbins, th, dof_kind, lo, hi,
+                      max_redraws, n_end, n_l, n_tau, c_l, c_tau, eps, active, rs, it, tau,
+                      length, to_tau, to_l, e_cur, e_best, cur, cand, best, cs, sn, rpos,
+                      rrot, body, cams, dx, dy, ndet, cmax, bidirectional, weight, cap,
+                      penalty_cap, rot, pos, mk, proj, nearest, e)
+
+
+@njit(**_OPTS)
+def _settle(fl, f, issued, e_keep, u_keep, keep_run, run_u, run_pairs, run_error, out_pairs,
+            max_unexplained):
+    """Take the frame's finished runs in run order, as the scalar kernel does after each
+    (runs taken before change nothing: ties keep the earlier run)."""
+    for run in range(issued[fl]):
+        e = run_error[f, run]
+        u = run_u[fl, run]
+        better = u < u_keep[fl] or (u == u_keep[fl] and e < e_keep[fl])
+        if (max_unexplained < 0 and e < e_keep[fl]) or (max_unexplained >= 0 and better):
+            e_keep[fl] = e
+            u_keep[fl] = u
+            keep_run[fl] = run
+            out_pairs[f] = run_pairs[fl, run]

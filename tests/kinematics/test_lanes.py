@@ -1,0 +1,147 @@
+"""The lane backend (many annealing runs in SIMD lanes) against the scalar kernel: the same
+results to the last bit, whatever the lane and thread counts."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numba
+import numpy as np
+import pytest
+
+from kinematics import _anneal_kernels as _ak
+from kinematics import _lane_kernels as _lk
+from kinematics.anneal import AnnealParams, Fitter
+from kinematics.errors import KinematicsError
+from kinematics.problem import FitOutputs, error_args, partitions_of, schedule_of
+from videotrack.motion import smooth_random_motion
+from videotrack.paper_setup import locust_cameras
+
+from .test_anneal import planted
+from .test_free_root import mouse_like, planted_frames, three_pinholes
+
+
+def fit_both(body, cams, detections, params):
+    """Results of the scalar and the lane backend for the same frames."""
+    out = []
+    for backend in ("scalar", "lanes"):
+        out.append(Fitter(body, cams, replace(params, backend=backend)).fit(detections))
+    return out
+
+
+def assert_same(scalar, lanes):
+    assert len(scalar) == len(lanes)
+    for a, b in zip(scalar, lanes, strict=True):
+        np.testing.assert_array_equal(a.angles_deg, b.angles_deg)
+        np.testing.assert_array_equal(a.root_positions, b.root_positions)
+        assert (a.error, a.runs, a.iterations, a.status) == (b.error, b.runs, b.iterations,
+                                                              b.status) or (
+            np.isnan(a.error) and np.isnan(b.error))
+        np.testing.assert_array_equal(a.error_per_view, b.error_per_view)
+        assert len(a.candidates) == len(b.candidates)
+        for ca, cb in zip(a.candidates, b.candidates, strict=True):
+            np.testing.assert_array_equal(ca.angles_deg, cb.angles_deg)
+            assert ca.error == cb.error
+
+
+def test_sincos_is_the_scalar_kernels_to_the_bit():
+    x = np.concatenate([np.linspace(-20, 20, 4001), np.random.default_rng(0).normal(0, 50,
+                                                                                    2000)])
+    s, c = np.empty_like(x), np.empty_like(x)
+    _lk.sincos_lanes(x, s, c)
+    ref = np.array([_ak.sincos(v) for v in x])  # the scalar kernel, compiled per call
+    np.testing.assert_array_equal(s, ref[:, 0])
+    np.testing.assert_array_equal(c, ref[:, 1])
+
+
+def test_paper_profile_identical(locust):
+    truth = smooth_random_motion(locust, 20, 1, seed=4)
+    dets = planted(locust, locust_cameras(), truth, ghosts=1)
+    scalar, lanes = fit_both(locust, locust_cameras(), dets,
+                             AnnealParams.paper().with_schedule(3000))
+    assert_same(scalar, lanes)
+    assert max(r.runs for r in lanes) > 1  # re-analysis happened, and matched
+
+
+def test_defaults_identical_with_ghosts_and_an_empty_frame(locust):
+    truth = smooth_random_motion(locust, 24, 1, seed=5)
+    dets = planted(locust, locust_cameras(), truth, ghosts=2)
+    dets[7] = [np.zeros((0, 2)), np.zeros((0, 2))]  # nothing detected
+    dets[9][1] = np.zeros((0, 2))  # one view empty
+    params = AnnealParams().with_schedule(2000)
+    scalar, lanes = fit_both(locust, locust_cameras(), dets, params)
+    assert_same(scalar, lanes)
+    assert lanes[7].status == "no-detections" and lanes[7].runs == 0
+    assert any(len(r.candidates) > 1 for r in lanes)
+
+
+def test_free_root_and_distorted_pinholes_identical():
+    body = mouse_like(translation_window=4.0, rotation_window_deg=30.0)
+    cams = three_pinholes()
+    _, _, frames = planted_frames(body, cams, n=10, seed=7)
+    params = AnnealParams(max_unexplained=0).with_schedule(1500)
+    scalar, lanes = fit_both(body, cams, frames, params)
+    assert_same(scalar, lanes)
+
+
+def _kernel_outputs(fitter, dets, n_lanes, groups):
+    p = fitter.params
+    pr = fitter.problem
+    obs = fitter.observations(dets)
+    idx = np.arange(len(dets))
+    roots, rots = fitter._place(obs, idx)
+    out = FitOutputs.empty(len(idx), pr.n_state, fitter.n_views, max(p.max_runs, p.candidates))
+    _lk.fit_frames_lanes(np.asarray(groups, np.int64), idx, roots, rots, pr.start, pr.folded,
+                         pr.cams, pr.dofs, schedule_of(p), error_args(p.error),
+                         obs.arrays(idx), float(p.claim_gate_px), n_lanes, out)
+    return out
+
+
+def test_same_results_for_any_lane_and_thread_count(locust):
+    truth = smooth_random_motion(locust, 12, 1, seed=6)
+    dets = planted(locust, locust_cameras(), truth, ghosts=1)
+    fitter = Fitter(locust, locust_cameras(), AnnealParams(threshold_mode="absolute",
+                                                           reanalysis_threshold=2.0
+                                                           ).with_schedule(1000))
+    ref = _kernel_outputs(fitter, dets, 32, [0, 12])
+    before = numba.get_num_threads()
+    try:
+        for n_lanes, groups, threads in ((8, [0, 5, 12], 2), (3, [0, 1, 2, 12], 1),
+                                         (64, [0, 12], 1)):
+            numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+            other = _kernel_outputs(fitter, dets, n_lanes, groups)
+            for name in ref._fields:
+                np.testing.assert_array_equal(getattr(ref, name), getattr(other, name),
+                                              err_msg=f"{name}, {n_lanes} lanes")
+    finally:
+        numba.set_num_threads(before)
+    assert ref.runs.max() > 2  # some frames were re-analysed
+
+
+def test_locked_axes_untouched(locust):
+    dets = planted(locust, locust_cameras(), smooth_random_motion(locust, 4, 1, seed=1))
+    res = Fitter(locust, locust_cameras(), AnnealParams(backend="lanes").with_schedule(500)
+                 ).fit(dets)
+    locked = locust.locked_mask()
+    start = Fitter(locust, locust_cameras()).start_posture_deg
+    for r in res:
+        np.testing.assert_array_equal(r.angles_deg[locked], start[locked])
+
+
+def test_auto_uses_lanes_only_where_valid(locust):
+    f = Fitter(locust, locust_cameras(), AnnealParams())
+    parts = partitions_of(f.problem)
+    many = _lk.LANES * numba.get_num_threads()
+    assert f._use_lanes(f.params, _ak.OBJ_NEAREST, parts, many)
+    assert not f._use_lanes(f.params, _ak.OBJ_NEAREST, parts, 1)  # a single frame (GUI)
+    assert not f._use_lanes(f.params, _ak.OBJ_LABELLED, parts, many)
+    assert not f._use_lanes(replace(f.params, backend="scalar"), _ak.OBJ_NEAREST, parts, many)
+    with pytest.raises(KinematicsError, match="backend"):
+        f._use_lanes(replace(f.params, backend="lanes", start="previous"), _ak.OBJ_NEAREST,
+                     parts, many)
+
+
+def test_bad_backend_is_named():
+    with pytest.raises(KinematicsError) as err:
+        AnnealParams(backend="gpu")
+    assert err.value.field == "backend"
