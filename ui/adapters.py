@@ -102,6 +102,20 @@ def view_overlays(body: Body, cameras: Sequence, angles_deg, roots=None) -> list
     return project_geometry(posture_geometry(body, angles_deg, roots), cameras)
 
 
+def marker_residuals(overlays: Sequence[ViewOverlay], detections: Sequence) -> np.ndarray:
+    """(n_views, n_markers) distance in pixels from each drawn model marker to its nearest
+    detection in each view (Eq. 5's term; NaN where the view has no detection): which
+    marker is off, for the posture shown (a preview or a correction included)."""
+    n_markers = max((len(o.markers) for o in overlays), default=0)
+    out = np.full((len(overlays), n_markers), np.nan)
+    for v, (overlay, pts) in enumerate(zip(overlays, detections, strict=False)):
+        pts = np.asarray(pts, float).reshape(-1, 2)
+        if len(pts) and len(overlay.markers):
+            d = np.asarray(overlay.markers, float)[:, None] - pts[None]
+            out[v, :len(overlay.markers)] = np.hypot(d[..., 0], d[..., 1]).min(axis=1)
+    return out
+
+
 def body_reach(body: Body) -> float:
     """How far any point of the body can get from its chain's root (world units): the sum of
     segment lengths and joint translations plus the largest marker offset."""
@@ -163,11 +177,26 @@ def bad_frames(results: Mapping, threshold: float) -> list[int]:
     return sorted(f for f, r in results.items() if bool(is_bad(r.error, threshold)))
 
 
+#: Statuses that need a look even within the threshold.
+ATTENTION_STATUSES = ("failed", "reanalysed", "ambiguous")
+
+
 def frames_to_check(results: Mapping, threshold: float) -> list[int]:
-    """Frames a person should look at, ascending: the bad ones and the ambiguous ones (a
-    posture another candidate fits about as well)."""
-    return sorted(f for f, r in results.items()
-                  if bool(is_bad(r.error, threshold)) or r.status == "ambiguous")
+    """Frames a person should look at, ascending: those above the threshold or whose fit
+    failed, needed re-runs or is ambiguous (another candidate fits about as well); never
+    the ones corrected or accepted by hand."""
+    return sorted(f for f, r in results.items() if r.status != "corrected" and (
+        bool(is_bad(r.error, threshold)) or r.status in ATTENTION_STATUSES))
+
+
+def next_to_check(results: Mapping, threshold: float, frame: int, direction: int
+                  ) -> int | None:
+    """The nearest frame after (``direction`` > 0) or before ``frame`` that needs a look."""
+    todo = frames_to_check(results, threshold)
+    later = [f for f in todo if (f - frame) * direction > 0]
+    if not later:
+        return None
+    return later[0] if direction > 0 else later[-1]
 
 
 @dataclass(frozen=True)

@@ -94,6 +94,18 @@ def fit_chunk_size() -> int:
     return 2 * numba.get_num_threads()
 
 
+def concurrent_fits() -> bool:
+    """Whether two fits may run at once: numba's OpenMP and TBB threading layers take
+    parallel kernels from several threads, its workqueue layer aborts the process (and
+    before the first parallel kernel the layer is not known)."""
+    import numba
+
+    try:
+        return numba.threading_layer() in ("omp", "tbb")
+    except ValueError:
+        return False
+
+
 def manual_result(frame: int, angles_deg, roots, error: float, error_per_view, seed: int
                   ) -> FrameResult:
     """A :data:`CORRECTED` result for a posture set by hand without re-fitting."""

@@ -4,10 +4,16 @@ Moving a slider shows the posture at once; releasing it pins that axis at the va
 re-fits the rest of the chain to the detections (:meth:`ui.session.Session.correct`).
 Dragging a model marker in a video view does the same for the axis that moves it best
 (:meth:`ui.session.Session.drag_marker`). Pinned axes are shown in bold; undo reverts.
+
+Steps (nudge keys, a focused slider's keys or wheel, a number box's arrows) show at once but
+re-fit only once they rest for :data:`SETTLE_MS`: one re-fit for a run of key presses, and no
+key press is lost to a re-fit in progress.
 """
 
 from __future__ import annotations
 
+import numpy as np
+from PySide6.QtCore import QTimer
 from PySide6.QtWidgets import (
     QCheckBox,
     QGroupBox,
@@ -20,6 +26,9 @@ from PySide6.QtWidgets import (
 
 from ui import adapters
 from ui.axis_sliders import AxisSliders
+
+#: Quiet time after the last step before the frame is re-fitted (milliseconds).
+SETTLE_MS = 300
 
 
 class CorrectionPanel(QGroupBox):
@@ -55,6 +64,13 @@ class CorrectionPanel(QGroupBox):
         layout.addWidget(hint)
         self.sliders.moved.connect(self._moved)
         self.sliders.committed.connect(self._committed)
+        self.sliders.stepped.connect(self._stepped)
+        #: Steps not yet committed: (frame, {axis: degrees}).
+        self.pending: tuple[int, dict[int, float]] | None = None
+        self.settle = QTimer(self, singleShot=True, interval=SETTLE_MS)
+        self.settle.timeout.connect(self.flush)
+        session.frameChanged.connect(lambda *_: self.flush())
+        session.resultsChanged.connect(self._show_pending)
         for sig in (session.projectChanged, session.bodyChanged):
             sig.connect(self.rebuild)
         for sig in (session.frameChanged, session.resultsChanged, session.postureChanged,
@@ -87,9 +103,74 @@ class CorrectionPanel(QGroupBox):
         self.release.setEnabled(bool(pins))
 
     def _moved(self, index: int, value: float) -> None:
+        self.sliders.select(index)
         angles, _, _ = self.session.posture()
         angles[index] = value
         self.session.set_preview_angles(angles)
 
     def _committed(self, index: int, value: float) -> None:
-        self.session.correct({index: value}, refit=self.refit.isChecked())
+        """A slider released or a number entered: re-fit now (with any steps pending)."""
+        self._queue(index, value)
+        self.flush()
+
+    def _stepped(self, index: int, value: float) -> None:
+        self._queue(index, value)
+        self.settle.start()  # restarted by every step
+
+    def _queue(self, index: int, value: float) -> None:
+        frame = self.session.frame
+        if self.pending is not None and self.pending[0] != frame:
+            self.flush()
+        values = {} if self.pending is None else self.pending[1]
+        values[index] = float(value)
+        self.pending = (frame, values)
+
+    # -- keys ---------------------------------------------------------------------------
+    def select_axis(self, step: int) -> None:
+        """Select the next (``step`` 1) or previous (-1) axis for the nudge keys."""
+        axes = list(self.sliders.rows)
+        if not axes:
+            return
+        k = axes.index(self.sliders.selected) if self.sliders.selected in axes else -step
+        self.sliders.select(axes[(k + step) % len(axes)])
+        label = self.sliders.rows[self.sliders.selected][0].text()
+        self.session.status.emit(f"nudge keys move {label}")
+
+    def nudge(self, delta_deg: float) -> None:
+        """Turn the selected axis by ``delta_deg`` (shown at once, re-fitted once the keys
+        rest)."""
+        s, index = self.session, self.sliders.selected
+        if index is None or s.body is None:
+            return
+        pending = self.pending[1] if self.pending and self.pending[0] == s.frame else {}
+        base = pending.get(index, s.posture()[0][index])
+        lo, hi = s.body.ranges_deg()[index]
+        value = float(np.clip(round(base + delta_deg, 6), lo, hi))
+        self._queue(index, value)
+        self._show_pending()
+        self.settle.start()
+
+    def _show_pending(self, *_) -> None:
+        """Draw the pending steps over the frame's posture (also after a re-fit arrived)."""
+        s = self.session
+        if self.pending is None or self.pending[0] != s.frame or s.body is None:
+            return
+        angles, _, _ = s.posture()
+        for k, v in self.pending[1].items():
+            angles[k] = v
+        s.set_preview_angles(angles)
+        self.refresh()
+
+    def flush(self) -> None:
+        """Commit the pending steps now (a re-fit waits for a running task to end)."""
+        if self.pending is None or self.session.closed:
+            self.pending = None
+            return
+        if self.session.busy:
+            self.settle.start()
+            return
+        self.settle.stop()
+        (frame, values), self.pending = self.pending, None
+        labels = ", ".join(self.session.body.axis_labels[k] for k in values)
+        self.session.correct(values, refit=self.refit.isChecked(), frame=frame,
+                             label=f"set {labels}")

@@ -31,20 +31,31 @@ class FrameTableModel(QAbstractTableModel):
         self.session = session
         self.table = adapters.frame_table({}, 0, 0)
         self.views: list[str] = []
+        self.headers: list[str] = self._headers()
+        self.bad = np.zeros(0, bool)  # the highlight rule per row, kept with the table
         session.projectChanged.connect(self.reset)
         session.detectionsChanged.connect(self.reset)
         session.resultsChanged.connect(self.update_frames)
 
-    @property
-    def headers(self) -> list[str]:
+    def _headers(self) -> list[str]:
         return ["frame", "error", *self.views, "runs", "status"]
 
     def reset(self) -> None:
+        """Rebuild every row (a project, detections or threshold changed)."""
         self.beginResetModel()
         self.views = self.session.view_names
+        self.headers = self._headers()
         self.table = adapters.frame_table(self.session.results, self.session.n_frames,
                                           len(self.views))
+        self.bad = self._bad(slice(None))
         self.endResetModel()
+
+    def _bad(self, rows) -> np.ndarray:
+        """Shaded as bad: above the threshold and not corrected (computed once per change,
+        not per cell: the view asks for thousands of cells while results stream in)."""
+        status = np.asarray(self.table.status, dtype=object)[rows]
+        return adapters.is_bad(self.table.error[rows], self.session.threshold) & (
+            status != "corrected")
 
     def update_frames(self, frames) -> None:
         """Refresh the rows of these frames only (results arrive while fitting)."""
@@ -55,6 +66,7 @@ class FrameTableModel(QAbstractTableModel):
             t.error[f], t.error_per_view[f], t.runs[f], t.status[f] = adapters.table_row(
                 self.session.results.get(f), len(self.views))
         if frames:
+            self.bad[frames] = self._bad(frames)
             self.dataChanged.emit(self.index(min(frames), 0),
                                   self.index(max(frames), self.columnCount() - 1))
 
@@ -96,28 +108,27 @@ class FrameTableModel(QAbstractTableModel):
         if not index.isValid():
             return None
         row, col = index.row(), index.column()
-        value = self.value(row, col)
         if role == Qt.ItemDataRole.DisplayRole:
+            value = self.value(row, col)
             if isinstance(value, float):
                 return "–" if not np.isfinite(value) else f"{value:.2f}"
             if col == 2 + len(self.views) and value == 0:
                 return "–"
             return str(value)
         if role == SORT_ROLE:
+            value = self.value(row, col)
             if isinstance(value, float) and not np.isfinite(value):
                 return float("inf")  # unfitted frames sort after the worst
             return value
         if role == Qt.ItemDataRole.BackgroundRole:
-            status = self.table.status[row]
-            if status == "corrected":
+            if self.table.status[row] == "corrected":
                 return style.CORRECTED_ROW
-            if bool(adapters.is_bad(self.table.error[row], self.session.threshold)):
-                return style.BAD_ROW
-            return None
+            return style.BAD_ROW if self.bad[row] else None
         if role == Qt.ItemDataRole.ForegroundRole:
-            if self.table.status[row] == adapters.NOT_FITTED:
+            status = self.table.status[row]
+            if status == adapters.NOT_FITTED:
                 return style.UNFITTED_TEXT
-            if self.data(index, Qt.ItemDataRole.BackgroundRole) is not None:
+            if status == "corrected" or self.bad[row]:
                 return style.TEXT_ON_SHADE  # shaded rows stay readable in a dark theme
             return None
         if role == Qt.ItemDataRole.TextAlignmentRole and col < len(self.headers) - 1:
@@ -126,9 +137,7 @@ class FrameTableModel(QAbstractTableModel):
 
     def highlighted_rows(self) -> list[int]:
         """Frames shaded as bad (for tests and the status bar)."""
-        return [int(r) for r in np.flatnonzero(adapters.is_bad(self.table.error,
-                                                               self.session.threshold))
-                if self.table.status[r] != "corrected"]
+        return [int(r) for r in np.flatnonzero(self.bad)]
 
 
 class FrameTable(QTableView):
@@ -149,12 +158,23 @@ class FrameTable(QTableView):
         self.setEditTriggers(QAbstractItemView.EditTrigger.NoEditTriggers)
         self.verticalHeader().setVisible(False)
         self.verticalHeader().setDefaultSectionSize(20)
-        self.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.ResizeToContents)
+        # sized once per reset: sizing to contents on every change would read every row
+        # each time a batch of results arrives
+        self.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.Interactive)
         self.horizontalHeader().setStretchLastSection(True)
+        self.source.modelReset.connect(self._size_columns)
         self.setAlternatingRowColors(False)
         self._clicking = False
         self.clicked.connect(self._clicked)
         session.frameChanged.connect(self.follow)
+
+    def _size_columns(self) -> None:
+        self.horizontalHeader().setResizeContentsPrecision(64)
+        self.resizeColumnsToContents()
+        # numbers not yet fitted must fit later: at least "00000.00"
+        wide = self.fontMetrics().horizontalAdvance("00000.00") + 12
+        for c in range(1, self.source.columnCount() - 1):
+            self.setColumnWidth(c, max(self.columnWidth(c), wide))
 
     def row_of(self, frame: int) -> int:
         """The row where ``frame`` is shown (after sorting)."""

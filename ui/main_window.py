@@ -13,9 +13,8 @@ from pathlib import Path
 
 import numpy as np
 from PySide6.QtCore import Qt, QTimer
-from PySide6.QtGui import QAction, QKeySequence
+from PySide6.QtGui import QAction
 from PySide6.QtWidgets import (
-    QDoubleSpinBox,
     QFileDialog,
     QGridLayout,
     QGroupBox,
@@ -28,7 +27,6 @@ from PySide6.QtWidgets import (
     QPushButton,
     QSizePolicy,
     QSlider,
-    QSpinBox,
     QSplitter,
     QStyle,
     QToolButton,
@@ -37,16 +35,32 @@ from PySide6.QtWidgets import (
 )
 
 from kinematics.errors import LocatedError
-from ui import adapters, style
+from ui import adapters, shortcuts, style
+from ui.axis_sliders import FocusSpinBox, FrameSpinBox
 from ui.correction_panel import CorrectionPanel
 from ui.frame_table import FrameTable
+from ui.marker_table import MarkerTable
 from ui.posture_view import PostureView
 from ui.session import Session
 from ui.timeline import TimelineView
 from ui.video_view import VideoView
 
 #: Playback never asks for more frames per second than this.
-MAX_PLAY_FPS = 30.0
+MAX_PLAY_FPS = 50.0
+
+#: The menus: action names of :data:`ui.shortcuts.COMMANDS` (None: a separator).
+MENUS = {
+    "&File": ("open", "save", None, "chain_file", None, "quit"),
+    "&Edit": ("undo", "redo", None, "chain_editor", "settings"),
+    "&Analysis": ("detect", None, "fit_all", "fit_current", "fit_range", "fit_selected",
+                  "fit_bad", None, "cancel", None, "histograms"),
+    "&View": ("play", "prev", "next", "prev10", "next10", "first", "last", None, "prev_bad",
+              "next_bad"),
+    "&Correct": ("accept_next", "accept_selected", "swap", None, "prev_axis", "next_axis",
+                 "nudge_down", "nudge_up", "nudge_down_big", "nudge_up_big", None,
+                 "refit_forward", "refit_backward", "interpolate"),
+    "&Help": ("help",),
+}
 
 
 class MainWindow(QMainWindow):
@@ -74,75 +88,29 @@ class MainWindow(QMainWindow):
         self._update_actions()
 
     # -- construction -------------------------------------------------------------------
-    def _action(self, text: str, slot, shortcut=None, tip: str = "") -> QAction:
-        action = QAction(text, self)
-        action.triggered.connect(lambda *_: slot())
-        if shortcut is not None:
-            action.setShortcut(QKeySequence(shortcut))
-        action.setStatusTip(tip)
-        action.setToolTip(tip or text)
-        return action
-
     def _build_actions(self) -> None:
-        s = self.session
-        a = self._action
-        self.act_open = a("&Open project…", self.choose_project, QKeySequence.StandardKey.Open,
-                          "Open a project file (TOML)")
-        self.act_save = a("&Save", s.save, QKeySequence.StandardKey.Save,
-                          "Save the project config, chain and results that changed")
-        self.act_chain_file = a("Choose &chain file…", self.choose_chain_file, None,
-                                "Use another chain XML for this project")
-        self.act_quit = a("&Quit", self.close, QKeySequence.StandardKey.Quit)
-        self.act_undo = a("&Undo", s.undo, QKeySequence.StandardKey.Undo)
-        self.act_redo = a("&Redo", s.redo, QKeySequence.StandardKey.Redo)
-        self.act_chain_editor = a("Chain &editor…", self.open_chain_editor, "Ctrl+E",
-                                  "Edit lengths, orientations, markers and ranges")
-        self.act_settings = a("&Project settings…", self.open_project_dialog, "Ctrl+P",
-                              "Views, filters with live preview, chain and fitting")
-        self.act_detect = a("&Detect markers", s.detect, "Ctrl+D",
-                            "Run the filter chain on every frame and save the detections")
-        self.act_fit_all = a("Fit &all frames", lambda: s.fit(label="fit all"), "F5",
-                             "Fit every frame that was not corrected by hand")
-        self.act_fit_current = a("Fit &current frame",
-                                 lambda: s.fit([s.frame], "fit frame"), "F6")
-        self.act_fit_range = a("Fit &range…", self.fit_range, None, "Fit frames A to B")
-        self.act_fit_selected = a("Fit &selected frames", self.fit_selected, "F7",
-                                  "Fit the frames selected in the table")
-        self.act_fit_bad = a("Re-fit &bad frames", s.fit_bad, "F8",
-                             "Fit again every frame above the error threshold")
-        self.act_cancel = a("Cancel", s.cancel, "Esc", "Stop the running task")
-        self.act_histograms = a("&Histograms…", self.open_histograms, "Ctrl+H",
-                                "Each axis' histogram with the current value")
-        self.act_play = a("Play", self.toggle_play, "Space")
-        self.act_next = a("Next frame", lambda: s.step(1), "Right")
-        self.act_prev = a("Previous frame", lambda: s.step(-1), "Left")
-        self.act_next_bad = a("Next bad frame", self.next_bad, "Ctrl+Right",
-                              "Jump to the next frame above the threshold or ambiguous")
-        self.act_swap = a("&Alternative posture", lambda: s.swap_candidate(), "A",
-                          "Replace this frame's posture by the next candidate the fit kept "
-                          "(an ambiguous frame's mirror posture); again to cycle")
-        for act in (self.act_play, self.act_next, self.act_prev, self.act_next_bad,
-                    self.act_swap):
-            act.setShortcutContext(Qt.ShortcutContext.WindowShortcut)
-            self.addAction(act)
+        """One action per row of :data:`ui.shortcuts.COMMANDS` (``self.act_<name>``); all
+        are window-wide, so a key works wherever the focus is, except that a focused text
+        field keeps the keys it edits with (Qt's shortcut override)."""
+        for command in shortcuts.COMMANDS:
+            if command.run is None:
+                continue
+            action = QAction(command.text, self)
+            action.triggered.connect(lambda *_, c=command: c.run(self))
+            action.setShortcuts(command.sequences())
+            action.setShortcutContext(Qt.ShortcutContext.WindowShortcut)
+            action.setStatusTip(command.tip)
+            action.setToolTip(command.tip or command.label)
+            self.addAction(action)
+            setattr(self, f"act_{command.name}", action)
 
     def _build_menus(self) -> None:
         bar = self.menuBar()
-        menus = {
-            "&File": (self.act_open, self.act_save, None, self.act_chain_file, None,
-                      self.act_quit),
-            "&Edit": (self.act_undo, self.act_redo, None, self.act_chain_editor,
-                      self.act_settings),
-            "&Analysis": (self.act_detect, None, self.act_fit_all, self.act_fit_current,
-                          self.act_fit_range, self.act_fit_selected, self.act_fit_bad, None,
-                          self.act_cancel, None, self.act_histograms),
-            "&View": (self.act_play, self.act_prev, self.act_next, self.act_next_bad),
-            "&Correct": (self.act_swap,),
-        }
-        for title, actions in menus.items():
+        for title, names in MENUS.items():
             menu = bar.addMenu(title)
-            for act in actions:
-                menu.addSeparator() if act is None else menu.addAction(act)
+            for name in names:
+                menu.addSeparator() if name is None else menu.addAction(
+                    getattr(self, f"act_{name}"))
 
     def _build_layout(self, use_opengl) -> None:
         s = self.session
@@ -162,7 +130,7 @@ class MainWindow(QMainWindow):
         for k, (act, text) in enumerate(buttons):
             grid.addWidget(_button(act, text), k // 2, k % 2)
         grid.addWidget(QLabel("Highlight error above"), 3, 0)
-        self.threshold = QDoubleSpinBox()
+        self.threshold = FocusSpinBox()
         self.threshold.setRange(0.0, 1e6)
         self.threshold.setDecimals(1)
         self.threshold.setSuffix(" px")
@@ -180,9 +148,13 @@ class MainWindow(QMainWindow):
         right = QSplitter(Qt.Orientation.Vertical)
         self.posture_view = PostureView(use_opengl=use_opengl)
         self.correction = CorrectionPanel(s)
+        self.marker_table = MarkerTable()
+        residuals = QGroupBox("Marker residuals (px)")
+        QVBoxLayout(residuals).addWidget(self.marker_table)
         right.addWidget(self.posture_view)
         right.addWidget(self.correction)
-        right.setSizes([520, 300])
+        right.addWidget(residuals)
+        right.setSizes([420, 300, 160])
         top = QSplitter(Qt.Orientation.Horizontal)
         for w in (left, self.views_splitter, right):
             top.addWidget(w)
@@ -206,7 +178,7 @@ class MainWindow(QMainWindow):
         self.slider = QSlider(Qt.Orientation.Horizontal)
         self.slider.valueChanged.connect(s.set_frame)
         row.addWidget(self.slider, 1)
-        self.frame_box = QSpinBox()
+        self.frame_box = FrameSpinBox()
         self.frame_box.setPrefix("frame ")
         self.frame_box.setKeyboardTracking(False)
         self.frame_box.valueChanged.connect(s.set_frame)
@@ -241,6 +213,10 @@ class MainWindow(QMainWindow):
         self.cancel_button.setVisible(False)
         for w in (self.rate, self.progress, self.cancel_button):
             bar.addPermanentWidget(w)
+        # room for the Cancel button from the start: showing it must not change the bar's
+        # height, which would lay out and repaint every view when a task starts and ends
+        bar.setMinimumHeight(max(self.cancel_button.sizeHint().height(),
+                                 self.progress.sizeHint().height()) + 4)
         bar.showMessage("Open a project (File ▸ Open project…)")
 
     def _connect(self) -> None:
@@ -306,6 +282,9 @@ class MainWindow(QMainWindow):
             for k, name in enumerate(s.view_names):
                 view = VideoView(k, name)
                 view.markerDragged.connect(self._marker_dragged)
+                view.detectionRemoved.connect(self._detection_removed)
+                view.detectionAdded.connect(self._detection_added)
+                view.detectionMoved.connect(self._detection_moved)
                 self.views_splitter.addWidget(view)
                 self.video_views.append(view)
         n = s.n_frames
@@ -345,8 +324,10 @@ class MainWindow(QMainWindow):
         ready = has_project and not s.busy
         can_fit = ready and s.model is not None and s.detections is not None
         for act in (self.act_fit_all, self.act_fit_current, self.act_fit_range,
-                    self.act_fit_selected, self.act_fit_bad):
+                    self.act_fit_selected, self.act_fit_bad, self.act_refit_forward,
+                    self.act_refit_backward, self.act_interpolate):
             act.setEnabled(can_fit)
+        self.act_accept_selected.setEnabled(ready)
         self.act_detect.setEnabled(ready)
         for act in (self.act_settings, self.act_chain_file):
             act.setEnabled(ready and s.editable)
@@ -396,6 +377,8 @@ class MainWindow(QMainWindow):
                              + (" (previous chain)" if s.frame in s.stale else ""))
             view.set_info("  ".join(lines))
         self.posture_view.set_geometry(s.geometry())
+        self.marker_table.set_residuals(adapters.marker_residuals(overlays, detections),
+                                        names, s.view_names)
 
     def _results_changed(self, frames) -> None:
         if self.session.frame in frames:
@@ -424,6 +407,22 @@ class MainWindow(QMainWindow):
     def _marker_dragged(self, view: int, marker: int, x: float, y: float) -> None:
         self.session.drag_marker(view, marker, (x, y), refit=self.correction.refit.isChecked())
 
+    def _snapped(self, view: int, x: float, y: float) -> tuple[float, float]:
+        """A click moved to the intensity centroid of the marker under it."""
+        from videotrack.detection_edits import snap_to_centroid
+
+        images = self.session.view_images()
+        return snap_to_centroid(images[view], (x, y)) if view < len(images) else (x, y)
+
+    def _detection_removed(self, view: int, x: float, y: float) -> None:
+        self.session.edit_detection(view, remove=(x, y))
+
+    def _detection_added(self, view: int, x: float, y: float) -> None:
+        self.session.edit_detection(view, add=self._snapped(view, x, y))
+
+    def _detection_moved(self, view: int, x0: float, y0: float, x: float, y: float) -> None:
+        self.session.edit_detection(view, remove=(x0, y0), add=self._snapped(view, x, y))
+
     def _threshold_changed(self, value: float) -> None:
         s = self.session
         if s.params is not None and value > 0:
@@ -451,11 +450,60 @@ class MainWindow(QMainWindow):
         if frames:
             self.session.fit(frames, "fit selected")
 
-    def next_bad(self) -> None:
+    def next_attention(self, direction: int) -> bool:
+        """Go to the next (``direction`` > 0) or previous frame needing attention."""
         s = self.session
-        later = [f for f in adapters.frames_to_check(s.results, s.threshold) if f > s.frame]
-        if later:
-            s.set_frame(later[0])
+        frame = adapters.next_to_check(s.results, s.threshold, s.frame, direction)
+        if frame is None:
+            s.status.emit("no frame needing attention "
+                          + ("after" if direction > 0 else "before") + " this one")
+            return False
+        s.set_frame(frame)
+        return True
+
+    def accept_and_next(self) -> None:
+        """Accept the frame shown (status corrected) and go to the next needing attention."""
+        s = self.session
+        result = s.results.get(s.frame)
+        set_by_hand = self.correction.pending is not None or (
+            result is not None and result.status == "corrected")
+        self.correction.flush()  # pending steps are re-fitted as a correction: set by hand
+        if not set_by_hand:
+            s.accept()
+        self.next_attention(1)
+
+    def accept_selected(self) -> None:
+        self.session.accept(self.table.selected_frames() or [self.session.frame])
+
+    def refit_from(self, direction: int) -> None:
+        self.correction.flush()
+        self.session.refit_from(direction)
+
+    def interpolate(self) -> None:
+        """Interpolate over the table selection, or from the previous corrected frame to
+        the frame shown."""
+        s = self.session
+        frames = self.table.selected_frames()
+        if len(frames) >= 2:
+            first, last = frames[0], frames[-1]
+        else:
+            before = [f for f, r in s.results.items()
+                      if f < s.frame and r.status == "corrected"]
+            if not before:
+                s.error.emit("interpolation needs a corrected frame before this one (or "
+                             "select the range in the table)")
+                return
+            first, last = max(before), s.frame
+        s.interpolate(first, last, refit=self.correction.refit.isChecked())
+
+    def show_shortcuts(self):
+        """The shortcut sheet, made from :data:`ui.shortcuts.COMMANDS`."""
+        from ui.shortcut_sheet import ShortcutSheet
+
+        dialog = ShortcutSheet(self)
+        dialog.setAttribute(Qt.WidgetAttribute.WA_DeleteOnClose)
+        dialog.show()
+        return dialog
 
     def toggle_play(self) -> None:
         if self._play_timer.isActive():
@@ -480,7 +528,7 @@ class MainWindow(QMainWindow):
 
     def _busy_changed(self, busy: bool) -> None:
         for view in self.video_views:
-            view.markers.draggable = not busy
+            view.editable = not busy
         self.progress.setVisible(busy)
         self.cancel_button.setVisible(busy)
         self.progress.setRange(0, 0)  # busy indicator until the first progress report

@@ -78,6 +78,7 @@ class PostureView(QWidget):
             w.setAspectLocked(True)
             w.showGrid(True, True, alpha=0.25)
             w.invertY(invert)
+            style.cache_axes(w.getPlotItem())
             lines = pg.PlotCurveItem(pen=style.skeleton_pen(), connect="pairs")
             markers = pg.ScatterPlotItem(**style.marker_style())
             w.addItem(lines)

@@ -22,6 +22,7 @@ from kinematics.errors import LocatedError
 from kinematics.model import Body
 from ui import adapters, backend
 from ui.workers import FitWorker, TaskWorker, error_text
+from videotrack import detection_edits
 from videotrack.config import read_toml
 from videotrack.errors import VideoTrackError, VideoTrackWarning
 
@@ -41,6 +42,7 @@ class Edit:
     pins: dict[int, tuple] = field(default_factory=dict)
     body: tuple[Body, Body] | None = None
     stale: tuple[frozenset, frozenset] | None = None  # Session.stale before and after
+    detection_edits: tuple[dict, dict] | None = None  # Session.detection_edits
 
     def record_result(self, frame: int, before, after) -> None:
         old = self.results.get(frame, (before, None))[0]
@@ -51,7 +53,34 @@ class Edit:
         self.pins[frame] = (old, after)
 
     def __bool__(self) -> bool:
-        return bool(self.results or self.pins or self.body)
+        return bool(self.results or self.pins or self.body or self.detection_edits)
+
+
+def pinned_result(fitter, body: Body, dets, n_views: int, frame: int, angles, roots,
+                  pins: Mapping[int, float], refit: bool) -> backend.FrameResult:
+    """The ``corrected`` result of a frame set by hand (thread-safe: no session state).
+
+    ``pins`` (posture index -> degrees, clipped to the ranges) are held while the other free
+    axes are fitted from ``angles`` (:meth:`kinematics.anneal.Fitter.with_pins`); without
+    ``refit``, or with nothing left free, the posture is taken as it is and only E is
+    computed. A frame without detections keeps the user's posture.
+    """
+    angles = adapters.clamp_to_range(body, angles)
+    lo, hi = body.ranges_deg().T
+    for k, v in pins.items():
+        angles[k] = float(np.clip(v, lo[k], hi[k]))
+    seed = fitter.params.seed
+    result = None
+    if refit and any(k not in pins for k in adapters.free_axes(body)):
+        result = fitter.with_pins(pins).fit_frame(dets, frame, start_deg=angles,
+                                                  root_positions=roots)
+    if result is None or result.status == "no-detections":
+        if any(len(d) for d in dets):
+            error, per_view = fitter.error(angles, dets, roots)
+        else:
+            error, per_view = np.nan, np.full(n_views, np.nan)
+        result = backend.manual_result(frame, angles, roots, error, per_view, seed)
+    return backend.with_status(result, backend.CORRECTED)
 
 
 class Session(QObject):
@@ -103,6 +132,7 @@ class Session(QObject):
         self._clear()
 
     def _clear(self) -> None:
+        self.closed = False
         self.config = None
         self.trial: str | None = None
         self.raw_config: dict = {}
@@ -117,6 +147,10 @@ class Session(QObject):
         self.results_path: Path | None = None
         self.results: dict[int, backend.FrameResult] = {}
         self.pins: dict[int, dict[int, float]] = {}
+        #: The user's edits of the detections, ``{(record, view): ViewEdit}``.
+        self.detection_edits: dict = {}
+        self._edited = (None, None, None)  # (detections, edits, edited detections)
+        self._means: tuple = (None, None, None)  # (body, mean posture, locked mask)
         #: Frames whose results (error, status) were computed with an earlier chain.
         self.stale: set[int] = set()
         self.frame = 0
@@ -128,6 +162,7 @@ class Session(QObject):
         self._frames: OrderedDict[int, tuple] = OrderedDict()
         self._task = None
         self._edit: Edit | None = None
+        self._released: list = getattr(self, "_released", [])  # fits let go, still running
 
     # -- project ------------------------------------------------------------------------
     @property
@@ -230,6 +265,11 @@ class Session(QObject):
                 self.detections = det
             except LocatedError as err:
                 self.error.emit(str(err))
+        try:
+            self.detection_edits = detection_edits.load_edits(
+                detection_edits.edits_path(self.results_path), self.view_names)
+        except LocatedError as err:
+            self.error.emit(str(err))
         if self.results_path.exists() and self.body is not None:
             try:
                 self.results = backend.read_project_results(self.results_path, self.body,
@@ -319,9 +359,12 @@ class Session(QObject):
             self.videos.close()
 
     def close(self) -> None:
-        """Cancel running work and release the video."""
+        """Cancel running work and release the video; nothing new starts until a project
+        is opened again (:attr:`closed`)."""
         self.cancel(wait=True)
+        self.wait_released()
         self._close_videos()
+        self.closed = True
 
     # -- what there is ------------------------------------------------------------------
     @property
@@ -398,10 +441,20 @@ class Session(QObject):
         index = self.video_frame(self.frame if record is None else record)
         return self._frames.get(index, ())
 
+    @property
+    def fit_detections(self):
+        """The detections the fit and E use: the detections file with the user's edits."""
+        det, edits, edited = self._edited
+        if det is not self.detections or edits is not self.detection_edits:
+            edited = (None if self.detections is None else
+                      detection_edits.edited_detections(self.detections, self.detection_edits))
+            self._edited = (self.detections, self.detection_edits, edited)
+        return edited
+
     def frame_detections(self, record: int | None = None) -> list[np.ndarray]:
         """Detected centroids of a record, one (n, 2) array per view."""
         record = self.frame if record is None else record
-        return adapters.frame_detections(self.detections, record, len(self.views))
+        return adapters.frame_detections(self.fit_detections, record, len(self.views))
 
     def posture(self, record: int | None = None) -> tuple[np.ndarray, np.ndarray, str]:
         """``(angles_deg, roots, source)`` drawn for a record; source is ``preview``,
@@ -411,14 +464,22 @@ class Session(QObject):
         result = self.results.get(record)
         roots = (np.asarray(result.root_positions) if result is not None
                  else body.root_positions())
+        mean, locked = self._mean_posture(body)
         if record == self.frame and self.preview_angles is not None:
             angles, source = self.preview_angles, "preview"
         elif result is not None and np.all(np.isfinite(result.angles_deg)):
             angles, source = np.asarray(result.angles_deg, float), "fit"
         else:
-            return body.mean_posture_deg(), roots, "start"
+            return mean.copy(), roots, "start"
         # locked axes at the drawn chain's values (the chain editor may have moved a lock)
-        return np.where(body.locked_mask(), body.mean_posture_deg(), angles), roots, source
+        return np.where(locked, mean, angles), roots, source
+
+    def _mean_posture(self, body: Body) -> tuple[np.ndarray, np.ndarray]:
+        """The histogram means and locked mask of a body, kept while the body is the same
+        object (bodies are immutable; the means cost milliseconds, asked on every step)."""
+        if self._means[0] is not body:
+            self._means = (body, body.mean_posture_deg(), body.locked_mask())
+        return self._means[1], self._means[2]
 
     def geometry(self, record: int | None = None) -> adapters.PostureGeometry | None:
         """3D points and skeleton of the drawn posture (None without a chain)."""
@@ -452,7 +513,8 @@ class Session(QObject):
 
     @property
     def unsaved(self) -> list[str]:
-        """What has unsaved changes: ``config``, ``chain`` and/or ``results``."""
+        """What has unsaved changes: ``config``, ``chain``, ``detection edits`` and/or
+        ``results``."""
         return sorted(self._dirty)
 
     def _mark(self, *parts: str) -> None:
@@ -482,6 +544,10 @@ class Session(QObject):
             self.body = edit.body[which]
             self._mark("chain")
             self.bodyChanged.emit()
+        if edit.detection_edits is not None:
+            self.detection_edits = edit.detection_edits[which]
+            self._mark("detection edits")
+            self.frameChanged.emit(self.frame)  # redraw the detections
 
     def _freshen(self, edit: Edit, frames) -> None:
         """These frames' results are now of the current chain (recorded in ``edit``)."""
@@ -571,22 +637,28 @@ class Session(QObject):
         return self._task is not None
 
     def _start(self, worker, what: str) -> None:
+        if self.closed:  # e.g. a correction timer firing after the window closed
+            worker.deleteLater()
+            return
         self._task = worker
-        worker.finished.connect(self._task_finished)
+        worker.finished.connect(lambda: self._task_finished(worker))
         self.busyChanged.emit(True)
         self.undoChanged.emit()
         self.status.emit(what)
         worker.start()
 
-    def _task_finished(self) -> None:
-        worker, self._task = self._task, None
-        if worker is not None:
-            worker.deleteLater()
+    def _task_finished(self, worker) -> None:
+        worker.deleteLater()
+        if worker in self._released:
+            self._released.remove(worker)
+            return  # let go at a cancel: the session has moved on
+        self._task = None
         self.busyChanged.emit(False)
         self.undoChanged.emit()
 
     def cancel(self, wait: bool = False) -> None:
-        """Ask the running task to stop (a fit stops after its current batch of frames)."""
+        """Stop the running task. A fit is let go at once where threads allow it
+        (:meth:`_let_go`); other tasks stop at their next check (a frame)."""
         task = self._task
         if task is None:
             return
@@ -594,11 +666,34 @@ class Session(QObject):
         self.status.emit("cancelling …")
         if wait:
             task.wait()
+        elif isinstance(task, FitWorker) and backend.concurrent_fits():
+            self._let_go(task)
+
+    def _let_go(self, worker: FitWorker) -> None:
+        """End a cancelled fit now, keeping the results that arrived (one undo step).
+
+        The fitter can only be stopped where it hands results over, which with candidates
+        is every 32 frames along the path through time; rather than wait for that, the
+        window moves on and the worker finishes the frames in hand in the background, its
+        results discarded. Only where numba runs parallel kernels of two threads at once
+        (:func:`ui.backend.concurrent_fits`), since a new fit may start meanwhile.
+        """
+        worker.released = True
+        self._released.append(worker)
+        self._task = None
+        self._fit_done(worker)
+        self.busyChanged.emit(False)
+        self.undoChanged.emit()
 
     def wait(self, timeout_ms: int = 60000) -> bool:
         """Block until the running task ends (tests and closing); True when it ended."""
         task = self._task
         return True if task is None else task.wait(timeout_ms)
+
+    def wait_released(self) -> None:
+        """Block until fits let go at a cancel have finished (closing)."""
+        for worker in list(self._released):
+            worker.wait()
 
     def run_task(self, fn: Callable, on_done: Callable[[object], None], what: str) -> bool:
         """Run ``fn(worker)`` in a thread and ``on_done(result)`` in the GUI thread."""
@@ -649,31 +744,57 @@ class Session(QObject):
             self.error.emit(str(err))
             return False
         self._edit = Edit(f"{label} ({len(frames)} frames)")
-        worker = FitWorker(fitter, self.detections, frames, backend.fit_chunk_size())
-        worker.resultsReady.connect(self._fit_results)
-        worker.progressed.connect(self.progress)
-        worker.failed.connect(self._failed)
-        worker.finished.connect(lambda: self._fit_done(worker))
+        worker = FitWorker(fitter, self.fit_detections, frames, backend.fit_chunk_size())
+        # a fit let go at a cancel (_let_go) reports nothing more
+        worker.resultsReady.connect(lambda b: None if worker.released else self._fit_results(b))
+        worker.progressed.connect(lambda *a: None if worker.released else self.progress.emit(*a))
+        worker.failed.connect(lambda m: None if worker.released else self._failed(m))
+        worker.finished.connect(lambda: None if worker.released else self._fit_done(worker))
         self._start(worker, f"fitting {len(frames)} frames …")
         return True
 
     def _fit_results(self, batch: list) -> None:
+        """Store results as they arrive (part of the running task's undo step). An item is a
+        result (a fit: the frame's pins are released) or ``(result, pins)`` (a correction
+        that pins those axes)."""
         edit = self._edit
-        for r in batch:
+        for item in batch:
+            r, pins = item if isinstance(item, tuple) else (item, None)
             edit.record_result(r.frame, self.results.get(r.frame), r)
             self.results[r.frame] = r
-            if r.frame in self.pins:
-                edit.record_pins(r.frame, self.pins.pop(r.frame), None)
-        self._freshen(edit, [r.frame for r in batch])
+            if pins or r.frame in self.pins:
+                edit.record_pins(r.frame, self.pins.pop(r.frame, None), pins)
+                if pins:
+                    self.pins[r.frame] = dict(pins)
+        frames = [(i[0] if isinstance(i, tuple) else i).frame for i in batch]
+        self._freshen(edit, frames)
         self._mark("results")
-        self.resultsChanged.emit([r.frame for r in batch])
+        self.resultsChanged.emit(frames)
 
-    def _fit_done(self, worker: FitWorker) -> None:
+    def _fit_done(self, worker) -> None:
         edit, self._edit = self._edit, None
         if edit is not None:
             self._push(edit)
-        verb = "cancelled after" if worker.cancelled else "fitted"
-        self.status.emit(f"{verb} {worker.count} frames")
+        verb = "cancelled after" if worker.cancelled or worker.released else "fitted"
+        count = worker.count if edit is None else len(edit.results)
+        summary = getattr(worker, "summary", "")
+        self.status.emit(f"{verb} {count} frames" + (f"; {summary}" if summary else ""))
+
+    def _run_frames(self, work: Callable, label: str, what: str) -> bool:
+        """Run ``work(worker)``, which publishes results frame by frame (items as in
+        :meth:`_fit_results`), in the background: results show as they arrive, the run is
+        one undo step, a cancel keeps what arrived."""
+        if self.busy:
+            self.error.emit("another task is running; wait for it or cancel it")
+            return False
+        self._edit = Edit(label)
+        worker = TaskWorker(work)
+        worker.published.connect(self._fit_results)
+        worker.progressed.connect(self.progress)
+        worker.failed.connect(self._failed)
+        worker.finished.connect(lambda: self._fit_done(worker))
+        self._start(worker, what)
+        return True
 
     def fit_bad(self) -> bool:
         """Fit again the frames whose error is above the threshold."""
@@ -698,20 +819,16 @@ class Session(QObject):
             return False
         angles, roots, _ = self.posture(frame)
         pins = {**self.pins.get(frame, {}), **{int(k): float(v) for k, v in values_deg.items()}}
-        angles = adapters.clamp_to_range(self.body, angles)
-        lo, hi = self.body.ranges_deg().T
-        for k, v in pins.items():
-            angles[k] = float(np.clip(v, lo[k], hi[k]))
-        left_free = [k for k in adapters.free_axes(self.body) if k not in pins]
-        dets = self.frame_detections(frame)
-        seed = self.params.seed
         label = label or "set " + ", ".join(self.body.axis_labels[k] for k in values_deg)
+        try:
+            fitter = self._fitter()
+        except LocatedError as err:
+            self.error.emit(str(err))
+            return False
+        dets = self.frame_detections(frame)
+        n_views = len(self.views)
 
         def finish(result) -> None:
-            if result.status == "no-detections":  # nothing to fit: keep the user's posture
-                result = backend.manual_result(frame, angles, roots, np.nan,
-                                               np.full(len(self.views), np.nan), seed)
-            result = backend.with_status(result, backend.CORRECTED)
             edit = Edit(label)
             edit.record_result(frame, self.results.get(frame), result)
             edit.record_pins(frame, self.pins.get(frame), pins)
@@ -721,19 +838,141 @@ class Session(QObject):
             self._push(edit)
             self.status.emit(f"frame {frame} corrected: error {result.error:.2f} px")
 
+        def work(_worker):
+            return pinned_result(fitter, self.body, dets, n_views, frame, angles, roots, pins,
+                                 refit)
+
+        if refit and any(k not in pins for k in adapters.free_axes(self.body)):
+            return self.run_task(work, finish,
+                                 f"re-fitting frame {frame} around the correction …")
         try:
-            if refit and left_free:
-                fitter = self._fitter().with_pins(pins)
-                return self.run_task(
-                    lambda _w: fitter.fit_frame(dets, frame, start_deg=angles,
-                                                root_positions=roots),
-                    finish, f"re-fitting frame {frame} around the correction …")
-            error, per_view = self._fitter().error(angles, dets, roots)
+            finish(work(None))
         except LocatedError as err:
             self.error.emit(str(err))
             return False
-        finish(backend.manual_result(frame, angles, roots, error, per_view, seed))
         return True
+
+    def accept(self, frames: Iterable[int] | None = None) -> int:
+        """Mark the postures of fitted frames right (status ``corrected``: *Fit all* leaves
+        them alone, a re-fit forward stops there); one undo step. Returns how many."""
+        if self.busy:
+            self.status.emit("wait for the running task to finish (or cancel it) first")
+            return 0
+        frames = [self.frame] if frames is None else [int(f) for f in frames]
+        edit = Edit("")
+        for f in frames:
+            r = self.results.get(f)
+            if r is not None and r.status != backend.CORRECTED and np.all(
+                    np.isfinite(r.angles_deg)):
+                edit.record_result(f, r, backend.with_status(r, backend.CORRECTED))
+        n = len(edit.results)
+        edit.label = f"accept frame {frames[0]}" if frames == [min(edit.results, default=-1)] \
+            else f"accept {n} frames"
+        self._apply(edit, 1)
+        self._push(edit)
+        self.status.emit(f"accepted {n} frame{'s' if n != 1 else ''}" if n else
+                         "nothing to accept (frames not fitted, or already corrected)")
+        return n
+
+    def _held(self) -> set[int]:
+        """Frames the user has set or accepted: corrected, or with pinned axes."""
+        return ({f for f, r in self.results.items() if r.status == backend.CORRECTED}
+                | {f for f, p in self.pins.items() if p})
+
+    def refit_from(self, direction: int, frame: int | None = None) -> bool:
+        """Carry the frame's posture to its neighbours (``direction`` +1 forward, -1
+        backward): each next frame is fitted starting from the previous frame's result, in
+        the background, until a frame's error exceeds the threshold (that frame is left as
+        it was), a frame corrected, accepted or pinned by hand, or the end of the video.
+        One undo step; a cancel keeps the frames done."""
+        frame = self.frame if frame is None else int(frame)
+        step = 1 if direction > 0 else -1
+        angles, _, source = self.posture(frame)
+        if source != "fit":
+            self.error.emit(f"frame {frame} has no posture to carry: fit or correct it first")
+            return False
+        if self.detections is None:
+            self.error.emit("no detections: run Detect markers first")
+            return False
+        try:
+            fitter = self._fitter()
+        except LocatedError as err:
+            self.error.emit(str(err))
+            return False
+        frames = list(range(frame + step, self.n_frames if step > 0 else -1, step))
+        if not frames:
+            self.status.emit("no frame beyond this one")
+            return False
+        held, threshold = self._held(), self.threshold
+        detections = self.fit_detections
+        known = {f: np.asarray(r.root_positions) for f, r in self.results.items()}
+
+        def work(worker: TaskWorker):
+            prev_angles = angles
+            tracked = None
+            for k, f in enumerate(frames):
+                worker.check_cancel()
+                if f in held:
+                    worker.summary = f"stopped at frame {f} (set by hand)"
+                    return
+                if f not in known and tracked is None:  # roots of frames never fitted
+                    tracked = fitter.track_roots(detections)
+                root = known[f] if f in known else tracked[f]
+                r = fitter.fit_frame(adapters.frame_detections(detections, f, fitter.n_views),
+                                     f, start_deg=prev_angles, root_positions=root)
+                if not r.error <= threshold:
+                    worker.summary = (f"stopped at frame {f}: error {r.error:.2f} px above the "
+                                      f"threshold, left as it was")
+                    return
+                worker.publish([r])
+                worker.report(k + 1, len(frames))
+                prev_angles = r.angles_deg
+            worker.summary = "reached the end"
+
+        where = "forward" if step > 0 else "backward"
+        return self._run_frames(work, f"re-fit {where} from frame {frame}",
+                                f"re-fitting {where} from frame {frame} …")
+
+    def interpolate(self, first: int, last: int, refit: bool = True) -> bool:
+        """Set the frames between two corrected frames by linear interpolation of their
+        pinned axes (of every free axis when neither end pins one) and, with ``refit``, fit
+        the other axes of each frame with those held (background, one undo step). The
+        frames get status ``corrected`` with the interpolated axes pinned."""
+        first, last = sorted((int(first), int(last)))
+        ends = [self.results.get(first), self.results.get(last)]
+        if any(r is None or r.status != backend.CORRECTED for r in ends):
+            self.error.emit(f"interpolation needs corrected frames at both ends; frames "
+                            f"{first} and {last} are not both corrected")
+            return False
+        if last - first < 2:
+            self.status.emit("no frame between the two ends")
+            return False
+        axes = sorted(set(self.pins.get(first, {})) | set(self.pins.get(last, {}))
+                      ) or adapters.free_axes(self.body)
+        try:
+            fitter = self._fitter()
+        except LocatedError as err:
+            self.error.emit(str(err))
+            return False
+        (a0, r0, _), (a1, r1, _) = self.posture(first), self.posture(last)
+        plan = []
+        for f in range(first + 1, last):
+            t = (f - first) / (last - first)
+            angles, _, source = self.posture(f)
+            roots = (self.posture(f)[1] if source == "fit" else (1 - t) * r0 + t * r1)
+            pins = {k: float((1 - t) * a0[k] + t * a1[k]) for k in axes}
+            plan.append((f, angles, roots, pins, self.frame_detections(f)))
+        body, n_views = self.body, len(self.views)
+
+        def work(worker: TaskWorker):
+            for k, (f, angles, roots, pins, dets) in enumerate(plan):
+                worker.check_cancel()
+                r = pinned_result(fitter, body, dets, n_views, f, angles, roots, pins, refit)
+                worker.publish([(r, pins)])
+                worker.report(k + 1, len(plan))
+
+        return self._run_frames(work, f"interpolate frames {first}–{last}",
+                                f"interpolating {len(plan)} frames …")
 
     def swap_candidate(self, frame: int | None = None) -> bool:
         """Replace the frame's posture by its next candidate posture (the alternatives the
@@ -797,6 +1036,49 @@ class Session(QObject):
             self._apply(edit, 1)
             self._push(edit)
             self.postureChanged.emit()
+
+    # -- detection edits ----------------------------------------------------------------
+    def edit_detection(self, view: int, remove=None, add=None, frame: int | None = None
+                       ) -> bool:
+        """Remove the detection at ``remove``, add one at ``add`` (both: move it) in a view
+        of a frame (undoable). The fit and E use the edited detections at once: the frame's
+        error is computed again for its posture (status kept)."""
+        frame = self.frame if frame is None else int(frame)
+        if self.detections is None or not 0 <= frame < self.detections.n_records:
+            self.error.emit("no detections to edit: run Detect markers first")
+            return False
+        if self.busy:  # a running fit has taken the detections as they were
+            self.status.emit("wait for the running task to finish (or cancel it) first")
+            return False
+        edits = self.detection_edits
+        if remove is not None:
+            edits = detection_edits.remove_point(edits, frame, view, remove)
+        if add is not None:
+            edits = detection_edits.add_point(edits, frame, view, add)
+        what = "move" if remove is not None and add is not None else (
+            "remove" if remove is not None else "add")
+        edit = Edit(f"{what} a detection in {self.view_names[view]}, frame {frame}",
+                    detection_edits=(self.detection_edits, edits))
+        result = self.results.get(frame)
+        if result is not None and self.model is not None and np.all(
+                np.isfinite(result.angles_deg)):
+            dets = [detection_edits.apply_edit(self.detections.points_of(frame, v),
+                                               edits.get((frame, v)))
+                    for v in range(len(self.views))]
+            try:
+                error, per_view = self._fitter().error(result.angles_deg, dets,
+                                                       result.root_positions)
+            except LocatedError as err:
+                self.error.emit(str(err))
+                return False
+            edit.record_result(frame, result, replace(result, error=error,
+                                                      error_per_view=per_view,
+                                                      marker_residuals=None))
+        self._apply(edit, 1)
+        self._push(edit)
+        self.status.emit(edit.label + (f": error {self.results[frame].error:.2f} px"
+                                       if frame in self.results else ""))
+        return True
 
     # -- histograms ---------------------------------------------------------------------
     def learn_histograms(self, within_threshold: bool = True) -> int:
@@ -894,6 +1176,10 @@ class Session(QObject):
                 atomic_write_text(self.config.path, updated_toml_text(text, self.raw_config))
             if "chain" in self._dirty and self.model is not None:
                 save_body(self.model.chain_path, self.body)
+            if "detection edits" in self._dirty and self.results_path is not None:
+                path = detection_edits.edits_path(self.results_path)
+                if self.detection_edits or path.exists():
+                    detection_edits.save_edits(path, self.detection_edits, self.view_names)
             if "results" in self._dirty and self.model is not None:
                 model = replace(self.model, body=self.body, params=self.params)
                 backend.save_project_results(self.results_path, model, self.body,

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import pyqtgraph as pg
 from PySide6.QtGui import QColor
+from PySide6.QtWidgets import QGraphicsItem
 
 DETECTION = "#39ff14"
 MARKER = "#ff7f0e"
@@ -54,3 +55,16 @@ def marker_style() -> dict:
 
 def skeleton_pen():
     return pg.mkPen(SKELETON, width=LINE_WIDTH)
+
+
+def cache_drawing(*items) -> None:
+    """Keep what these items draw as a pixmap until they change: a frame step then repaints
+    axes (tick labels, grids) and long curves from the cache instead of drawing them again
+    (most of a frame step's time without it)."""
+    for item in items:
+        item.setCacheMode(QGraphicsItem.CacheMode.DeviceCoordinateCache)
+
+
+def cache_axes(plot) -> None:
+    """:func:`cache_drawing` for a plot's visible axes."""
+    cache_drawing(*(plot.getAxis(side) for side in ("left", "bottom")))

@@ -41,6 +41,9 @@ class TimelineView(pg.GraphicsLayoutWidget):
         self.error_curve = self.error_plot.plot(pen=pg.mkPen(style.ERROR_CURVE, width=1.5))
         self.bad = pg.ScatterPlotItem(size=7, pen=None, brush=pg.mkBrush(style.THRESHOLD))
         self.error_plot.addItem(self.bad)
+        for plot in (self.angles_plot, self.error_plot):
+            style.cache_axes(plot)
+        style.cache_drawing(self.error_curve, self.bad)
         self.threshold_line = pg.InfiniteLine(angle=0, movable=False, pen=pg.mkPen(
             style.THRESHOLD, width=1, style=Qt.PenStyle.DashLine))
         self.error_plot.addItem(self.threshold_line)
@@ -67,6 +70,7 @@ class TimelineView(pg.GraphicsLayoutWidget):
             self.curves = [self.angles_plot.plot(pen=pg.mkPen(style.colour(k), width=1.5),
                                                  connect="finite")
                            for k in range(len(names))]
+            style.cache_drawing(*self.curves)
             for curve, name in zip(self.curves, names, strict=True):
                 self.legend.addItem(curve, name)
             self._labels = names

@@ -54,6 +54,10 @@ class DraggableScatter(pg.ScatterPlotItem):
             self.moving.emit(self._drag, pos.x(), pos.y())
 
 
+#: A click picks a detection within this many screen pixels.
+PICK_PX = 10.0
+
+
 class VideoView(pg.GraphicsLayoutWidget):
     """The image of one view with its overlays.
 
@@ -61,9 +65,18 @@ class VideoView(pg.GraphicsLayoutWidget):
     -------
     markerDragged(view, marker, x, y)
         A model marker was dropped at (x, y) in view pixels.
+    detectionRemoved(view, x, y)
+        Shift+click on the detection at (x, y): remove it (a ghost).
+    detectionAdded(view, x, y)
+        Ctrl+click at (x, y): add a detection there (the window snaps it to the marker).
+    detectionMoved(view, x0, y0, x1, y1)
+        The detection at (x0, y0) was dragged to (x1, y1).
     """
 
     markerDragged = Signal(int, int, float, float)
+    detectionRemoved = Signal(int, float, float)
+    detectionAdded = Signal(int, float, float)
+    detectionMoved = Signal(int, float, float, float, float)
 
     def __init__(self, index: int, name: str, parent=None) -> None:
         super().__init__(parent)
@@ -77,9 +90,13 @@ class VideoView(pg.GraphicsLayoutWidget):
         self.plot.showGrid(False, False)
         for side in ("left", "bottom"):
             self.plot.getAxis(side).setStyle(tickFont=_small_font())
+        style.cache_axes(self.plot)
         self.image = pg.ImageItem()
         self.plot.addItem(self.image)
-        self.detected = pg.ScatterPlotItem(**style.detection_style())
+        self.detected = DraggableScatter(**style.detection_style())
+        self.detected.dragged.connect(self._detection_dropped)
+        self.detected.moving.connect(self._detection_moving)
+        self._detected_xy = np.empty((0, 2))
         self.lines = pg.PlotCurveItem(pen=style.skeleton_pen(), connect="pairs")
         self.markers = DraggableScatter(**style.marker_style())
         self.markers.setZValue(10)
@@ -93,6 +110,7 @@ class VideoView(pg.GraphicsLayoutWidget):
         self.plot.addItem(self.info)
         self._marker_xy = np.empty((0, 2))
         self._size: tuple[int, int] | None = None
+        self.scene().sigMouseClicked.connect(self._clicked)
 
     # -- content ------------------------------------------------------------------------
     def set_image(self, image: np.ndarray | None) -> None:
@@ -108,8 +126,17 @@ class VideoView(pg.GraphicsLayoutWidget):
         self.info.setPos(-0.5, -0.5)
 
     def set_detections(self, points: np.ndarray) -> None:
-        pts = np.asarray(points, float).reshape(-1, 2)
-        self.detected.setData(pos=pts)
+        self._detected_xy = np.asarray(points, float).reshape(-1, 2)
+        self.detected.setData(pos=self._detected_xy, data=np.arange(len(self._detected_xy)))
+
+    @property
+    def editable(self) -> bool:
+        """Whether markers and detections may be dragged and detections edited."""
+        return self.markers.draggable
+
+    @editable.setter
+    def editable(self, on: bool) -> None:
+        self.markers.draggable = self.detected.draggable = bool(on)
 
     def set_overlay(self, overlay, names=()) -> None:
         """Draw a :class:`ui.adapters.ViewOverlay` (None clears), with marker names."""
@@ -150,6 +177,48 @@ class VideoView(pg.GraphicsLayoutWidget):
     def _dropped(self, index: int, x: float, y: float) -> None:
         self.markers.setData(pos=self._marker_xy, data=np.arange(len(self._marker_xy)))
         self.markerDragged.emit(self.index, index, x, y)
+
+    # -- editing detections -------------------------------------------------------------
+    def scene_pos(self, x: float, y: float):
+        """Scene position of view pixel (x, y) (for mouse events)."""
+        from PySide6.QtCore import QPointF
+
+        return self.plot.vb.mapViewToScene(QPointF(x, y))
+
+    def pick_detection(self, scene_pos) -> int | None:
+        """The detection within :data:`PICK_PX` screen pixels of a scene position."""
+        best, best_d = None, PICK_PX
+        for k, (x, y) in enumerate(self._detected_xy):
+            p = self.scene_pos(x, y)
+            d = float(np.hypot(p.x() - scene_pos.x(), p.y() - scene_pos.y()))
+            if d <= best_d:
+                best, best_d = k, d
+        return best
+
+    def _clicked(self, ev) -> None:
+        mods = ev.modifiers()
+        if (ev.button() != Qt.MouseButton.LeftButton or not self.editable
+                or not self.plot.vb.sceneBoundingRect().contains(ev.scenePos())):
+            return
+        if mods & Qt.KeyboardModifier.ShiftModifier:
+            k = self.pick_detection(ev.scenePos())
+            if k is not None:
+                ev.accept()
+                self.detectionRemoved.emit(self.index, *map(float, self._detected_xy[k]))
+        elif mods & Qt.KeyboardModifier.ControlModifier:
+            ev.accept()
+            p = self.plot.vb.mapSceneToView(ev.scenePos())
+            self.detectionAdded.emit(self.index, p.x(), p.y())
+
+    def _detection_moving(self, index: int, x: float, y: float) -> None:
+        xy = self._detected_xy.copy()
+        xy[index] = (x, y)
+        self.detected.setData(pos=xy, data=np.arange(len(xy)))
+
+    def _detection_dropped(self, index: int, x: float, y: float) -> None:
+        x0, y0 = map(float, self._detected_xy[index])
+        self.detected.setData(pos=self._detected_xy, data=np.arange(len(self._detected_xy)))
+        self.detectionMoved.emit(self.index, x0, y0, x, y)
 
     # -- for tests and screenshots ------------------------------------------------------
     def drawn(self) -> dict[str, np.ndarray]:

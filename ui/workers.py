@@ -34,13 +34,16 @@ Cancelled = backend.Cancelled
 class TaskWorker(QThread):
     """Runs ``fn(worker)`` in a thread; ``done(result)`` or ``failed(message)`` follows.
 
-    ``fn`` may call :meth:`report` to announce progress and should call
-    :meth:`check_cancel` now and then (it raises :class:`Cancelled`).
+    ``fn`` may call :meth:`report` to announce progress, :meth:`publish` to hand on partial
+    results (e.g. each frame of a re-fit that runs frame after frame) and should call
+    :meth:`check_cancel` now and then (it raises :class:`Cancelled`). It may set
+    :attr:`summary`, a line for the status bar when it ends.
     """
 
     done = Signal(object)
     failed = Signal(str)
     progressed = Signal(int, int, float)  # done, total, items per second
+    published = Signal(object)  # a list of partial results
 
     def __init__(self, fn: Callable[[TaskWorker], object], parent=None) -> None:
         super().__init__(parent)
@@ -48,9 +51,16 @@ class TaskWorker(QThread):
         self._cancel = False
         self._t0 = time.perf_counter()
         self.cancelled = False
+        self.count = 0  # items published
+        self.summary = ""
+        self.released = False  # only fits are let go (Session._let_go)
 
     def cancel(self) -> None:
         self._cancel = True
+
+    def publish(self, items: list) -> None:
+        self.count += len(items)
+        self.published.emit(list(items))
 
     def cancel_requested(self) -> bool:
         return self._cancel
@@ -99,6 +109,7 @@ class FitWorker(QThread):
         self._chunk = chunk_size
         self._cancel = False
         self.cancelled = False
+        self.released = False  # the session let go of it at a cancel (Session._let_go)
         self.count = 0
 
     def cancel(self) -> None:

@@ -82,3 +82,21 @@ def wait_idle(qtbot):
         qtbot.waitUntil(lambda: not session.busy, timeout=timeout)
 
     return wait
+
+
+@pytest.fixture
+def wheel():
+    """``wheel(widget, dy=120)`` sends a mouse-wheel event to the middle of a widget."""
+    from PySide6.QtCore import QPoint, QPointF, Qt
+    from PySide6.QtGui import QWheelEvent
+    from PySide6.QtWidgets import QApplication
+
+    def send(widget, dy: int = 120) -> None:
+        pos = QPointF(widget.rect().center())
+        event = QWheelEvent(pos, QPointF(widget.mapToGlobal(pos.toPoint())), QPoint(0, 0),
+                            QPoint(0, dy), Qt.MouseButton.NoButton,
+                            Qt.KeyboardModifier.NoModifier, Qt.ScrollPhase.NoScrollPhase,
+                            False)
+        QApplication.sendEvent(widget, event)
+
+    return send

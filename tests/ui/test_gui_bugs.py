@@ -5,8 +5,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
-from PySide6.QtCore import QEvent, QPoint, QPointF, Qt
-from PySide6.QtGui import QWheelEvent
+from PySide6.QtCore import QEvent, Qt
 from PySide6.QtWidgets import QApplication, QPushButton
 
 from ui import adapters
@@ -37,23 +36,15 @@ def test_closed_histogram_dialog_leaves_frame_steps_alone(window, qtbot):
     dialog.close()
 
 
-def _wheel(widget, dy: int = 120) -> None:
-    pos = QPointF(widget.rect().center())
-    event = QWheelEvent(pos, QPointF(widget.mapToGlobal(pos.toPoint())), QPoint(0, 0),
-                        QPoint(0, dy), Qt.MouseButton.NoButton, Qt.KeyboardModifier.NoModifier,
-                        Qt.ScrollPhase.NoScrollPhase, False)
-    QApplication.sendEvent(widget, event)
-
-
-def test_wheel_over_unfocused_correction_sliders_changes_nothing(window, qtbot):
+def test_wheel_over_unfocused_correction_sliders_changes_nothing(window, qtbot, wheel):
     s = window.session
     window.table.setFocus()
     for _label, slider, box in window.correction.sliders.rows.values():
         before = (slider.value(), box.value())
         for w in (slider, box):
             assert not w.hasFocus()
-            _wheel(w)
-            _wheel(w, -240)
+            wheel(w)
+            wheel(w, -240)
         assert (slider.value(), box.value()) == before
     assert not s.busy and not s.can_undo and not s.dirty
     # a focused slider still takes the wheel
@@ -61,7 +52,7 @@ def test_wheel_over_unfocused_correction_sliders_changes_nothing(window, qtbot):
     slider.setFocus()
     qtbot.waitUntil(slider.hasFocus)
     before = slider.value()
-    _wheel(slider)
+    wheel(slider)
     assert slider.value() != before
 
 
