@@ -41,9 +41,10 @@ from kinematics._anneal_kernels import (
 )
 from kinematics._camera_kernels import ORTHOGRAPHIC
 
-#: Runs annealed together: four 512-bit registers of float64 (bench/bench_lanes.py: 16 and
-#: 64 lanes are slower; 8 leave LLVM's vector loop unused).
-LANES = 32
+#: Runs annealed together per thread: eight 512-bit registers of float64. More lanes spread
+#: each loop's fixed cost (bench/bench_lanes.py: 32 and 128 were slower); fewer than 16
+#: leave LLVM's vector loop unused.
+LANES = 64
 
 #: Coordinate of a padding detection: farther than any real one, finite when squared.
 PAD = 1.0e30
@@ -90,63 +91,34 @@ def sincos_lanes(x, s, c):
 
 # -- forward kinematics and projection of all lanes ----------------------------------------
 @njit(inline="always", **_OPTS)
-def _turn_lanes(b, cs, sn, a):
-    """Right-multiply every lane's A'_j (``b``, (9, L)) by its rotation about world axis
-    ``a`` (cosines ``cs``, sines ``sn``): the scalar kernel's column mixing (x mixes
-    columns 1, 2; y 2, 0; z 0, 1), in place."""
-    u = 1 if a == 0 else (2 if a == 1 else 0)
-    w = 2 if a == 0 else (0 if a == 1 else 1)
-    for ln in range(b.shape[1]):
-        c = cs[ln]
-        s = sn[ln]
-        u0, w0, u1, w1, u2, w2 = b[u, ln], b[w, ln], b[3 + u, ln], b[3 + w, ln], b[6 + u, ln], b[
-            6 + w, ln]
-        b[u, ln] = c * u0 + s * w0
-        b[w, ln] = c * w0 - s * u0
-        b[3 + u, ln] = c * u1 + s * w1
-        b[3 + w, ln] = c * w1 - s * u1
-        b[6 + u, ln] = c * u2 + s * w2
-        b[6 + w, ln] = c * w2 - s * u2
-
-
-@njit(inline="always", **_OPTS)
-def project_lanes(vals, cs, sn, rpos, rrot, parent, chain, pre_rot, pre_trans, post_trans,
-                  elem_axis, elem_index, joint_flags, marker_joint, marker_local, slide_index,
-                  kind, P, K, dist, R, t, rot, pos, mk, proj):
+def project_lanes(vals, cs, sn, parent, chain, pre_rot, pre_trans, post_trans, elem_axis,
+                  elem_index, joint_flags, marker_joint, marker_local, slide_index, kind, P, K,
+                  dist, R, t, rot, pos, mk, proj):
     """Markers of every lane's posture projected into every view (the scalar
     ``_project_cs`` per lane, the same values to the last bit): fills ``proj``
-    (nv, nm, 2, L), ``rot``, ``pos``, ``mk``. ``rpos`` (n_chains, 3, L), ``rrot``
-    (n_chains, 9, L) are each lane's root positions and seed rotations.
+    (nv, nm, 2, L), ``rot`` (nj + n_chains, 9, L), ``pos`` (nj + n_chains, 3, L) and ``mk``.
+    Rows ``nj + c`` of ``rot`` and ``pos`` hold chain c's root: each lane's seed rotation
+    (the identity for a root without one) and root position, set when a run is loaded.
 
-    Each joint is one loop over lanes with every intermediate in registers. The scalar
-    kernel's shortcuts (identity G_j, zero h_j, absent rotations) are done here as full
-    products, which give the same numbers exactly for finite values and keep the loop free
-    of branches.
+    LLVM vectorises a loop over lanes only if it has no branch around a load, at most nine
+    stores and its loads before its stores; and an array view (``rot[j]``) costs atomic
+    reference counts. So every loop below indexes whole arrays, roots read their slot rows
+    instead of branching, and the scalar kernel's shortcuts (identity G_j, zero h_j) are
+    full products here, which give the same numbers exactly for finite values.
     """
     nl = vals.shape[1]  # a run-time count: LLVM vectorises the loops instead of unrolling
-    for j in range(parent.shape[0]):
+    nj = parent.shape[0]
+    for j in range(nj):
         p = parent[j]
         m00, m01, m02 = pre_rot[j, 0, 0], pre_rot[j, 0, 1], pre_rot[j, 0, 2]
         m10, m11, m12 = pre_rot[j, 1, 0], pre_rot[j, 1, 1], pre_rot[j, 1, 2]
         m20, m21, m22 = pre_rot[j, 2, 0], pre_rot[j, 2, 1], pre_rot[j, 2, 2]
-        g0, g1, g2 = pre_trans[j, 0], pre_trans[j, 1], pre_trans[j, 2]
-        h0, h1, h2 = post_trans[j, 0], post_trans[j, 1], post_trans[j, 2]
-        c = chain[j]
-        posed = p < 0 and joint_flags[j] & ROOT_POSE
-        k = slide_index[j] if posed else 0
-        # q: the parent's A' (a root: its seed rotation, or the identity)
-        qs = rot[p] if p >= 0 else rrot[c]
-        ident = p < 0 and not posed
-        # A'_j = q · G_j, then each turn in place. LLVM vectorises a loop over lanes only
-        # without branches (turns are specialised outside the loop) and with at most nine
-        # stores, loads before stores.
+        q = p if p >= 0 else nj + chain[j]  # the parent's A' and p (or the root's slot)
+        # A'_j = A'_q · G_j
         for ln in range(nl):
-            q00, q01, q02 = qs[0, ln], qs[1, ln], qs[2, ln]
-            q10, q11, q12 = qs[3, ln], qs[4, ln], qs[5, ln]
-            q20, q21, q22 = qs[6, ln], qs[7, ln], qs[8, ln]
-            if ident:
-                q00, q01, q02, q10, q11, q12, q20, q21, q22 = (
-                    1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
+            q00, q01, q02 = rot[q, 0, ln], rot[q, 1, ln], rot[q, 2, ln]
+            q10, q11, q12 = rot[q, 3, ln], rot[q, 4, ln], rot[q, 5, ln]
+            q20, q21, q22 = rot[q, 6, ln], rot[q, 7, ln], rot[q, 8, ln]
             b00 = q00 * m00 + q01 * m10 + q02 * m20
             b01 = q00 * m01 + q01 * m11 + q02 * m21
             b02 = q00 * m02 + q01 * m12 + q02 * m22
@@ -159,16 +131,47 @@ def project_lanes(vals, cs, sn, rpos, rrot, parent, chain, pre_rot, pre_trans, p
             rot[j, 0, ln], rot[j, 1, ln], rot[j, 2, ln] = b00, b01, b02
             rot[j, 3, ln], rot[j, 4, ln], rot[j, 5, ln] = b10, b11, b12
             rot[j, 6, ln], rot[j, 7, ln], rot[j, 8, ln] = b20, b21, b22
+        # each rotation about world axis a mixes two columns of A'_j (x: 1, 2; y: 2, 0;
+        # z: 0, 1), in place, as the scalar kernel does
         for e in range(3):
-            if elem_axis[j, e] >= 0:
-                _turn_lanes(rot[j], cs[elem_index[j, e]], sn[elem_index[j, e]],
-                            elem_axis[j, e])
-        # p_j = p_parent + q · g_j + A'_j · h_j (a root: its position, moved by the state)
+            a = elem_axis[j, e]
+            if a >= 0:
+                i = elem_index[j, e]
+                u = 1 if a == 0 else (2 if a == 1 else 0)
+                w = 2 if a == 0 else (0 if a == 1 else 1)
+                for ln in range(nl):
+                    c = cs[i, ln]
+                    s = sn[i, ln]
+                    u0, w0 = rot[j, u, ln], rot[j, w, ln]
+                    u1, w1 = rot[j, 3 + u, ln], rot[j, 3 + w, ln]
+                    u2, w2 = rot[j, 6 + u, ln], rot[j, 6 + w, ln]
+                    rot[j, u, ln] = c * u0 + s * w0
+                    rot[j, w, ln] = c * w0 - s * u0
+                    rot[j, 3 + u, ln] = c * u1 + s * w1
+                    rot[j, 3 + w, ln] = c * w1 - s * u1
+                    rot[j, 6 + u, ln] = c * u2 + s * w2
+                    rot[j, 6 + w, ln] = c * w2 - s * u2
+        # p_j = p_parent + A'_parent · g_j + A'_j · h_j; a root: its position, moved by the
+        # state's translation entries if it is free
+        g0, g1, g2 = pre_trans[j, 0], pre_trans[j, 1], pre_trans[j, 2]
+        h0, h1, h2 = post_trans[j, 0], post_trans[j, 1], post_trans[j, 2]
         if p >= 0:
             for ln in range(nl):
-                px = pos[p, 0, ln] + qs[0, ln] * g0 + qs[1, ln] * g1 + qs[2, ln] * g2
-                py = pos[p, 1, ln] + qs[3, ln] * g0 + qs[4, ln] * g1 + qs[5, ln] * g2
-                pz = pos[p, 2, ln] + qs[6, ln] * g0 + qs[7, ln] * g1 + qs[8, ln] * g2
+                px = pos[p, 0, ln] + rot[p, 0, ln] * g0 + rot[p, 1, ln] * g1 + rot[p, 2, ln] * g2
+                py = pos[p, 1, ln] + rot[p, 3, ln] * g0 + rot[p, 4, ln] * g1 + rot[p, 5, ln] * g2
+                pz = pos[p, 2, ln] + rot[p, 6, ln] * g0 + rot[p, 7, ln] * g1 + rot[p, 8, ln] * g2
+                px = px + (rot[j, 0, ln] * h0 + rot[j, 1, ln] * h1 + rot[j, 2, ln] * h2)
+                py = py + (rot[j, 3, ln] * h0 + rot[j, 4, ln] * h1 + rot[j, 5, ln] * h2)
+                pz = pz + (rot[j, 6, ln] * h0 + rot[j, 7, ln] * h1 + rot[j, 8, ln] * h2)
+                pos[j, 0, ln] = px
+                pos[j, 1, ln] = py
+                pos[j, 2, ln] = pz
+        elif joint_flags[j] & ROOT_POSE:
+            k = slide_index[j]
+            for ln in range(nl):
+                px = pos[q, 0, ln] + vals[k, ln]
+                py = pos[q, 1, ln] + vals[k + 1, ln]
+                pz = pos[q, 2, ln] + vals[k + 2, ln]
                 px = px + (rot[j, 0, ln] * h0 + rot[j, 1, ln] * h1 + rot[j, 2, ln] * h2)
                 py = py + (rot[j, 3, ln] * h0 + rot[j, 4, ln] * h1 + rot[j, 5, ln] * h2)
                 pz = pz + (rot[j, 6, ln] * h0 + rot[j, 7, ln] * h1 + rot[j, 8, ln] * h2)
@@ -176,13 +179,13 @@ def project_lanes(vals, cs, sn, rpos, rrot, parent, chain, pre_rot, pre_trans, p
                 pos[j, 1, ln] = py
                 pos[j, 2, ln] = pz
         else:
-            for ln in range(nl):  # roots: few, left as they come
-                px = rpos[c, 0, ln] + vals[k, ln] if posed else rpos[c, 0, ln]
-                py = rpos[c, 1, ln] + vals[k + 1, ln] if posed else rpos[c, 1, ln]
-                pz = rpos[c, 2, ln] + vals[k + 2, ln] if posed else rpos[c, 2, ln]
-                pos[j, 0, ln] = px + (rot[j, 0, ln] * h0 + rot[j, 1, ln] * h1 + rot[j, 2, ln] * h2)
-                pos[j, 1, ln] = py + (rot[j, 3, ln] * h0 + rot[j, 4, ln] * h1 + rot[j, 5, ln] * h2)
-                pos[j, 2, ln] = pz + (rot[j, 6, ln] * h0 + rot[j, 7, ln] * h1 + rot[j, 8, ln] * h2)
+            for ln in range(nl):
+                px = pos[q, 0, ln] + (rot[j, 0, ln] * h0 + rot[j, 1, ln] * h1 + rot[j, 2, ln] * h2)
+                py = pos[q, 1, ln] + (rot[j, 3, ln] * h0 + rot[j, 4, ln] * h1 + rot[j, 5, ln] * h2)
+                pz = pos[q, 2, ln] + (rot[j, 6, ln] * h0 + rot[j, 7, ln] * h1 + rot[j, 8, ln] * h2)
+                pos[j, 0, ln] = px
+                pos[j, 1, ln] = py
+                pos[j, 2, ln] = pz
     nv = kind.shape[0]
     for m in range(marker_joint.shape[0]):
         j = marker_joint[m]
@@ -291,9 +294,9 @@ def error_lanes(proj, dx, dy, ndet, cmax, bidirectional, weight, cap, penalty_ca
 @njit(**_OPTS)
 def iterate_lanes(n_iter, free_idx, n_hist, step, hist, nbins, th, dof_kind, lo, hi,
                   max_redraws, n_end, n_l, n_tau, c_l, c_tau, eps, active, rs, it, tau,
-                  length, to_tau, to_l, e_cur, e_best, cur, cand, best, cs, sn, rpos, rrot,
-                  body, cams, dx, dy, ndet, cmax, bidirectional, weight, cap,
-                  penalty_cap, rot, pos, mk, proj, nearest, e):
+                  length, to_tau, to_l, e_cur, e_best, cur, cand, best, cs, sn, body, cams, dx,
+                  dy, ndet, cmax, bidirectional, weight, cap, penalty_cap, rot, pos, mk, proj,
+                  nearest, e):
     """Anneal every lane (scalar ``anneal_chain``'s iteration, per lane) until an active lane
     has finished (``it >= n_end`` or best E below ``eps``) or ``n_iter`` iterations passed.
     Inactive lanes compute but change nothing that is read back."""
@@ -369,7 +372,7 @@ def iterate_lanes(n_iter, free_idx, n_hist, step, hist, nbins, th, dof_kind, lo,
                 x = xs[ln] if ok[ln] else cur[i, ln]
                 cand[i, ln] = x
                 sn[i, ln], cs[i, ln] = _sincos(x)
-        project_lanes(cand, cs, sn, rpos, rrot, parent, chain, pre_rot, pre_trans, post_trans,
+        project_lanes(cand, cs, sn, parent, chain, pre_rot, pre_trans, post_trans,
                       elem_axis, elem_index, joint_flags, marker_joint, marker_local,
                       slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj)
         error_lanes(proj, dx, dy, ndet, cmax, bidirectional, weight, cap, penalty_cap,
@@ -448,14 +451,12 @@ def _fit_group(f0, f1, frame_ids, root_pos, root_rot, start, body, cams, dofs, s
     best = np.empty((na, nl))
     cs = np.empty((na, nl))
     sn = np.empty((na, nl))
-    rot = np.empty((nj, 9, nl))
-    pos = np.empty((nj, 3, nl))
+    rot = np.zeros((nj + nc, 9, nl))  # rows nj + c: chain c's root (project_lanes)
+    pos = np.zeros((nj + nc, 3, nl))
     mk = np.empty((nm, 3, nl))
     proj = np.empty((nv, nm, 2, nl))
     nearest = np.empty((nm, nl), np.int64)
     e = np.empty(nl)
-    rpos = np.zeros((nc, 3, nl))
-    rrot = np.zeros((nc, 9, nl))
     dx = np.full((nv, c_cap, nl), PAD)
     dy = np.full((nv, c_cap, nl), PAD)
     ndet = np.zeros((nv, nl), np.int64)
@@ -531,11 +532,15 @@ def _fit_group(f0, f1, frame_ids, root_pos, root_rot, start, body, cams, dofs, s
                     for c in range(c_cap):
                         dx[v, c, ln] = det_points[a + c, 0] if c < b - a else PAD
                         dy[v, c, ln] = det_points[a + c, 1] if c < b - a else PAD
-                for c in range(nc):
-                    for k in range(3):
-                        rpos[c, k, ln] = root_pos[f, c, k]
-                        for k2 in range(3):
-                            rrot[c, 3 * k + k2, ln] = root_rot[f, c, k, k2]
+                for j in range(nj):  # the roots' slots (project_lanes)
+                    if parent[j] < 0:
+                        c = chain[j]
+                        seeded = joint_flags[j] & ROOT_POSE
+                        for k in range(3):
+                            pos[nj + c, k, ln] = root_pos[f, c, k]
+                            for k2 in range(3):
+                                q = root_rot[f, c, k, k2] if seeded else (1.0 if k == k2 else 0.0)
+                                rot[nj + c, 3 * k + k2, ln] = q
                 for k in range(na):
                     cur[k, ln] = start[k]
                     cand[k, ln] = start[k]
@@ -641,8 +646,8 @@ def _fit_group(f0, f1, frame_ids, root_pos, root_rot, start, body, cams, dofs, s
             continue  # refill the freed lanes first
         iterate_lanes(1 << 30, free_idx, n_hist, step, hist, nbins, th, dof_kind, lo, hi,
                       max_redraws, n_end, n_l, n_tau, c_l, c_tau, eps, active, rs, it, tau,
-                      length, to_tau, to_l, e_cur, e_best, cur, cand, best, cs, sn, rpos,
-                      rrot, body, cams, dx, dy, ndet, cmax, bidirectional, weight, cap,
+                      length, to_tau, to_l, e_cur, e_best, cur, cand, best, cs, sn, body,
+                      cams, dx, dy, ndet, cmax, bidirectional, weight, cap,
                       penalty_cap, rot, pos, mk, proj, nearest, e)
 
 

@@ -826,8 +826,9 @@ class Fitter:
         for chunk in chunks:
             pending.extend(chunk)
             while len(pending) > 2 * lag:
-                decided = self._decide(obs, idx, roots, rots, pending, done, images, scale,
-                                       previous, starts, p)
+                # a window of fixed length, so the choice does not depend on the chunk size
+                decided = self._decide(obs, idx, roots, rots, pending[:2 * lag], done, images,
+                                       scale, previous, starts, p)
                 out, pending = decided[:lag], pending[lag:]
                 done += lag
                 previous = out[-1]

@@ -145,3 +145,13 @@ def test_bad_backend_is_named():
     with pytest.raises(KinematicsError) as err:
         AnnealParams(backend="gpu")
     assert err.value.field == "backend"
+
+
+def test_choice_over_time_does_not_depend_on_chunk_size(locust):
+    # the lane backend fits bigger chunks than the scalar one; the path must not notice
+    truth = smooth_random_motion(locust, 90, 1, seed=8)
+    dets = planted(locust, locust_cameras(), truth, ghosts=1)
+    fitter = Fitter(locust, locust_cameras(), AnnealParams(backend="scalar").with_schedule(400))
+    small = list(fitter.iter_fit(dets, chunk_size=8))
+    large = list(fitter.iter_fit(dets, chunk_size=90))
+    assert_same(small, large)

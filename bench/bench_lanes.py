@@ -1,0 +1,155 @@
+"""The lane backend against the scalar kernel, measured in one run: ns per chain-iteration on
+the paper's protocol, fitted frames/s with the defaults, and how the cost grows.
+
+Run from the repository root::
+
+    python bench/bench_lanes.py [--frames 128] [--repeats 3] [--threads 1]
+
+Problems (detections: every marker projected with 0.2 px noise, plus ``--ghosts`` random
+points per view):
+
+* the paper's protocol: the locust leg in its two orthographic views, Table 1 schedule run
+  to the end (ε = 0), one run per frame, Eq. 5 — ns per chain-iteration of each backend on
+  ``--threads`` numba threads (time × threads / iterations);
+* the defaults (refinement, the bounded error, two candidates, the threshold measured on the
+  video): fitted frames/s of each backend on 2 threads, and whether the results agree;
+* the growth table: ns per chain-iteration against detections per view (locust) and against
+  markers and views (the stick insect's leg and body with 2 or 4 pinhole views).
+
+Both backends give the same results to the last bit (tests/kinematics/test_lanes.py); the
+table says so again for the frames timed here.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numba
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / "bench"))
+sys.path.insert(0, str(REPO))
+
+from _report import machine, print_table  # noqa: E402
+
+from kinematics.anneal import AnnealParams, Fitter  # noqa: E402
+from kinematics.cameras import PinholeCamera  # noqa: E402
+from kinematics.chain_xml import load_body  # noqa: E402
+from kinematics.fk import forward_kinematics  # noqa: E402
+from kinematics.rotations import euler_yxz  # noqa: E402
+from videotrack.motion import smooth_random_motion  # noqa: E402
+from videotrack.paper_setup import bundled_chain, locust_cameras  # noqa: E402
+
+
+def detections(body, cams, angles, ghosts: int, seed: int = 0) -> list:
+    rng = np.random.default_rng(seed)
+    lo, hi = 20.0, 280.0
+    out = []
+    for a in angles:
+        mk = forward_kinematics(body, a).markers
+        views = []
+        for cam in cams.values():
+            p = cam.project(mk)
+            if np.isfinite(p).any():
+                lo, hi = np.nanmin(p) - 20, np.nanmax(p) + 20
+            views.append(np.concatenate([p + rng.normal(0, 0.2, p.shape),
+                                         rng.uniform(lo, hi, (ghosts, 2))]))
+        out.append(views)
+    return out
+
+
+def timed_fit(body, cams, dets, params, repeats: int):
+    """(best seconds, results) of fitting every frame; the first call compiles."""
+    fitter = Fitter(body, cams, params)
+    fitter.fit(dets[:2])
+    best, res = np.inf, None
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        res = fitter.fit(dets)
+        best = min(best, time.perf_counter() - t0)
+    return best, res
+
+
+def same(a, b) -> bool:
+    return all(np.array_equal(x.angles_deg, y.angles_deg) and (
+        x.error == y.error or (np.isnan(x.error) and np.isnan(y.error))) for x, y in zip(a, b))
+
+
+def per_iteration(body, cams, dets, params, repeats, threads):
+    """ns per chain-iteration of each backend, and whether they agree."""
+    out = {}
+    for backend in ("scalar", "lanes"):
+        dt, res = timed_fit(body, cams, dets, replace(params, backend=backend), repeats)
+        out[backend] = (dt * threads / sum(r.iterations for r in res) * 1e9, res)
+    return out["scalar"][0], out["lanes"][0], same(out["scalar"][1], out["lanes"][1])
+
+
+def pinholes(n: int) -> dict:
+    k = [[900.0, 0.0, 400.0], [0.0, 900.0, 300.0], [0.0, 0.0, 1.0]]
+    cams = {}
+    for i in range(n):
+        r = euler_yxz(2 * np.pi * i / n, 0.3, 0.0).T
+        centre = euler_yxz(2 * np.pi * i / n, 0.3, 0.0) @ np.array([0.0, 0.0, -200.0])
+        cams[f"cam{i}"] = PinholeCamera(f"cam{i}", k, R=r, t=-r @ centre)
+    return cams
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--frames", type=int, default=128)
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--threads", type=int, default=1, help="numba threads of the ns rows")
+    ap.add_argument("--ghosts", type=int, default=1)
+    args = ap.parse_args(argv)
+    with bundled_chain("locust_hindleg.xml") as p:
+        locust = load_body(p)
+    cams = locust_cameras()
+    truth = smooth_random_motion(locust, args.frames, 1, seed=0)
+    dets = detections(locust, cams, truth, args.ghosts)
+    rows = []
+    numba.set_num_threads(args.threads)
+    paper = AnnealParams.paper(epsilon=0.0, max_runs=1)
+    s, lane, ok = per_iteration(locust, cams, dets, paper, args.repeats, args.threads)
+    rows.append((f"paper protocol, locust 2 views: ns per chain-iteration ({args.threads} "
+                 "thread)", f"{s:.0f}", f"{lane:.1f}", f"{s / lane:.2f}x",
+                 "same" if ok else "DIFFERENT", "lanes <= 25"))
+    numba.set_num_threads(min(2, numba.config.NUMBA_NUM_THREADS))
+    fps = {}
+    results = {}
+    for backend in ("scalar", "lanes"):
+        dt, res = timed_fit(locust, cams, dets, AnnealParams(backend=backend), args.repeats)
+        fps[backend], results[backend] = len(dets) / dt, res
+    rows.append(("defaults, locust 2 views: fitted frames/s (2 threads)",
+                 f"{fps['scalar']:.0f}", f"{fps['lanes']:.0f}",
+                 f"{fps['lanes'] / fps['scalar']:.2f}x",
+                 "same" if same(results["scalar"], results["lanes"]) else "DIFFERENT", ""))
+    numba.set_num_threads(args.threads)
+    short = paper.with_schedule(5000)
+    for ghosts in (10, 30, 100):
+        d = detections(locust, cams, truth[:32], ghosts - 4, seed=1)
+        s, lane, ok = per_iteration(locust, cams, d, short, 1, args.threads)
+        rows.append((f"locust, 2 views, {ghosts} detections per view: ns per iteration",
+                     f"{s:.0f}", f"{lane:.1f}", f"{s / lane:.2f}x",
+                     "same" if ok else "DIFFERENT", ""))
+    with bundled_chain("stick_insect_frontleg.xml") as p:
+        stick = load_body(p)
+    st = smooth_random_motion(stick, 32, 1, seed=2)
+    for n_views in (2, 4):
+        c = pinholes(n_views)
+        d = detections(stick, c, st, 1, seed=3)
+        s, lane, ok = per_iteration(stick, c, d, short, 1, args.threads)
+        rows.append((f"stick insect ({len(stick.marker_names)} markers), {n_views} pinhole "
+                     "views: ns per iteration", f"{s:.0f}", f"{lane:.1f}", f"{s / lane:.2f}x",
+                     "same" if ok else "DIFFERENT", ""))
+    print(f"machine: {machine()}; numba threads for ns rows: {args.threads}")
+    print_table(rows, results=("scalar", "lanes", "speed-up", "results"))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
