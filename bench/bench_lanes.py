@@ -76,8 +76,9 @@ def timed_fit(body, cams, dets, params, repeats: int):
 
 
 def same(a, b) -> bool:
-    return all(np.array_equal(x.angles_deg, y.angles_deg) and (
-        x.error == y.error or (np.isnan(x.error) and np.isnan(y.error))) for x, y in zip(a, b))
+    return len(a) == len(b) and all(np.array_equal(x.angles_deg, y.angles_deg) and (
+        x.error == y.error or (np.isnan(x.error) and np.isnan(y.error)))
+        for x, y in zip(a, b, strict=True))
 
 
 def per_iteration(body, cams, dets, params, repeats, threads):
