@@ -239,11 +239,11 @@ def _pinhole_lanes(K, dist, R, t, v, mk, m, proj):
 # -- Eq. 5 and its variants for all lanes ----------------------------------------------------
 @njit(inline="always", **_OPTS)
 def error_lanes(proj, dx, dy, ndet, cmax, bidirectional, weight, cap, penalty_cap, nearest,
-                ev, best, arg, matched, out):
+                ev, best, arg, matched, near, out):
     """E of every lane (the scalar ``projection_error``, same operations in the same order)
-    into ``out`` (L,). ``nearest`` (nm, L) int64, ``ev``, ``best`` (L,), ``arg`` (L,) int64
-    and ``matched`` (L,) bool are scratch (allocating them here would cost more than the
-    arithmetic)."""
+    into ``out`` (L,). ``nearest`` (nm, L) int64, ``ev``, ``best`` (L,), ``arg`` (L,) int64,
+    ``matched`` (4, L) bool and ``near`` (4, L) are scratch (allocating them here would cost
+    more than the arithmetic)."""
     nv = proj.shape[0]
     nm = proj.shape[1]
     missing = cap if cap < np.inf else NAN_MARKER_COST
@@ -259,7 +259,24 @@ def error_lanes(proj, dx, dy, ndet, cmax, bidirectional, weight, cap, penalty_ca
                 for ln in range(nl):
                     best[ln] = np.inf
                     arg[ln] = -1
-                for c in range(cm):
+                c = 0
+                while c + 4 <= cm:  # four detections per loop: a fourth of the loop entries
+                    for ln in range(nl):
+                        px = proj[v, i, 0, ln]
+                        py = proj[v, i, 1, ln]
+                        b = best[ln]
+                        k = arg[ln]
+                        for cc in range(c, c + 4):  # unrolled; strict <: the first minimum
+                            ex = px - dx[v, cc, ln]
+                            ey = py - dy[v, cc, ln]
+                            d2 = ex * ex + ey * ey
+                            closer = d2 < b
+                            b = d2 if closer else b
+                            k = cc if closer else k
+                        best[ln] = b
+                        arg[ln] = k
+                    c += 4
+                while c < cm:
                     for ln in range(nl):
                         ex = proj[v, i, 0, ln] - dx[v, c, ln]
                         ey = proj[v, i, 1, ln] - dy[v, c, ln]
@@ -267,25 +284,37 @@ def error_lanes(proj, dx, dy, ndet, cmax, bidirectional, weight, cap, penalty_ca
                         closer = d2 < best[ln]
                         best[ln] = d2 if closer else best[ln]
                         arg[ln] = c if closer else arg[ln]
+                    c += 1
                 for ln in range(nl):
                     nearest[i, ln] = arg[ln]
                     d = np.sqrt(best[ln]) if arg[ln] >= 0 else missing
                     ev[ln] += min(d, cap)
             if bidirectional:
-                for c in range(cm):
+                c = 0
+                while c < cm:
+                    nb = min(4, cm - c)  # detections c .. c + nb together
                     for ln in range(nl):
-                        matched[ln] = False
-                        best[ln] = np.inf
+                        for q in range(4):
+                            matched[q, ln] = False
+                            near[q, ln] = np.inf
                     for i in range(nm):
                         for ln in range(nl):
-                            matched[ln] = matched[ln] | (nearest[i, ln] == c)
-                            ex = proj[v, i, 0, ln] - dx[v, c, ln]
-                            ey = proj[v, i, 1, ln] - dy[v, c, ln]
-                            best[ln] = min(best[ln], ex * ex + ey * ey)
+                            px = proj[v, i, 0, ln]
+                            py = proj[v, i, 1, ln]
+                            k = nearest[i, ln]
+                            for q in range(nb):
+                                matched[q, ln] = matched[q, ln] | (k == c + q)
+                                ex = px - dx[v, c + q, ln]
+                                ey = py - dy[v, c + q, ln]
+                                near[q, ln] = min(near[q, ln], ex * ex + ey * ey)
                     for ln in range(nl):
-                        d = np.sqrt(best[ln]) if best[ln] < np.inf else missing
-                        add = (not matched[ln]) & (c < ndet[v, ln])
-                        ev[ln] = ev[ln] + weight * min(d, penalty_cap) if add else ev[ln]
+                        acc = ev[ln]
+                        for q in range(nb):
+                            d = np.sqrt(near[q, ln]) if near[q, ln] < np.inf else missing
+                            add = (not matched[q, ln]) & (c + q < ndet[v, ln])
+                            acc = acc + weight * min(d, penalty_cap) if add else acc
+                        ev[ln] = acc
+                    c += nb
         for ln in range(nl):
             out[ln] += ev[ln] if ndet[v, ln] > 0 else 0.0
 
@@ -309,7 +338,8 @@ def iterate_lanes(n_iter, free_idx, n_hist, step, hist, nbins, th, dof_kind, lo,
     ev = np.empty(nl)
     dmin = np.empty(nl)
     arg = np.empty(nl, np.int64)
-    matched = np.empty(nl, np.bool_)
+    matched = np.empty((4, nl), np.bool_)
+    near = np.empty((4, nl))
     xs = np.empty(nl)
     ok = np.empty(nl, np.bool_)
     pending = np.empty(nl, np.bool_)
@@ -376,7 +406,7 @@ def iterate_lanes(n_iter, free_idx, n_hist, step, hist, nbins, th, dof_kind, lo,
                       elem_axis, elem_index, joint_flags, marker_joint, marker_local,
                       slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj)
         error_lanes(proj, dx, dy, ndet, cmax, bidirectional, weight, cap, penalty_cap,
-                    nearest, ev, dmin, arg, matched, e)
+                    nearest, ev, dmin, arg, matched, near, e)
         for ln in range(nl):
             acc = (e[ln] <= e_cur[ln]) | (e[ln] < e_acc[ln])
             accept[ln] = acc
