@@ -133,6 +133,74 @@ def frame_detections(detections, record: int, n_views: int) -> list[np.ndarray]:
     return [np.asarray(detections.points_of(record, v)) for v in range(n_views)]
 
 
+def frame_keypoints(mapped, record: int, marker_names: Sequence[str]) -> list[np.ndarray]:
+    """A keypoint project's 2D keypoints of one record, one (n_markers, 3) array of x, y,
+    score per view, rows in the order of ``marker_names`` (the chain's markers); NaN where
+    missing, filtered out, below the score threshold or without a keypoint.
+
+    ``mapped`` is a :class:`videotrack.markerless.MappedKeypoints`.
+    """
+    where = {name: k for k, name in enumerate(marker_names)}
+    rows = [where.get(m, -1) for m in mapped.markers]
+    keep = [k for k, r in enumerate(rows) if r >= 0]
+    out = []
+    for v in range(len(mapped.view_names)):
+        kp = np.full((len(marker_names), 3), np.nan)
+        if 0 <= record < mapped.xy.shape[1]:
+            kp[[rows[k] for k in keep], :2] = mapped.xy[v, record, keep]
+            kp[[rows[k] for k in keep], 2] = mapped.score[v, record, keep]
+        kp[~np.isfinite(kp[:, :2]).all(axis=1)] = np.nan
+        out.append(kp)
+    return out
+
+
+def keypoint_residuals(overlays: Sequence[ViewOverlay], keypoints: Sequence) -> np.ndarray:
+    """(n_views, n_markers) distance in pixels from each drawn model marker to its own
+    keypoint in each view (the labelled objective's term; NaN where the keypoint is
+    missing): :func:`marker_residuals` for labelled keypoints."""
+    n_markers = max((len(o.markers) for o in overlays), default=0)
+    out = np.full((len(overlays), n_markers), np.nan)
+    for v, (overlay, kp) in enumerate(zip(overlays, keypoints, strict=False)):
+        m = min(len(overlay.markers), len(kp))
+        d = np.asarray(overlay.markers, float)[:m] - np.asarray(kp, float)[:m, :2]
+        out[v, :m] = np.hypot(d[:, 0], d[:, 1])
+    return out
+
+
+def keypoint_box(xy, margin: float = 0.25) -> tuple[float, float, float, float] | None:
+    """(x0, x1, y0, y1) around every keypoint ``xy`` (..., 2) of a view, widened by
+    ``margin`` of its size on each side (at least 20 px): where the animal is; None
+    without keypoints."""
+    pts = np.asarray(xy, float).reshape(-1, 2)
+    pts = pts[np.isfinite(pts).all(axis=1)]
+    if len(pts) == 0:
+        return None
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    pad = np.maximum(margin * (hi - lo), 20.0)
+    return float(lo[0] - pad[0]), float(hi[0] + pad[0]), float(lo[1] - pad[1]), \
+        float(hi[1] + pad[1])
+
+
+#: Grey level of the blank canvas a keypoint project is drawn on without its video.
+CANVAS_GREY = 40
+#: Blank canvas size without a calibrated image size or keypoints (VGA).
+CANVAS_DEFAULT = (640, 480)
+
+
+def canvas_size(image_size, xy=None, margin: float = 0.05) -> tuple[int, int]:
+    """(width, height) of the blank canvas of a view without video: the camera's image size
+    when calibrated with one, else the keypoints' extent (``xy`` (..., 2) pixels from the
+    image's top-left corner) with a margin, else :data:`CANVAS_DEFAULT`."""
+    if image_size is not None:
+        return int(image_size[0]), int(image_size[1])
+    pts = np.empty((0, 2)) if xy is None else np.asarray(xy, float).reshape(-1, 2)
+    pts = pts[np.isfinite(pts).all(axis=1)]
+    if len(pts) == 0:
+        return CANVAS_DEFAULT
+    far = np.maximum(pts.max(axis=0), 1.0) * (1 + margin)
+    return int(np.ceil(far[0])) + 1, int(np.ceil(far[1])) + 1
+
+
 # -- error table and timeline ---------------------------------------------------------------
 @dataclass(frozen=True)
 class FrameTable:

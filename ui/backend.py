@@ -19,6 +19,16 @@ import numpy as np
 
 from kinematics.anneal import AnnealParams, Fitter, FrameResult
 from kinematics.model import Body
+from kinematics.observations import Observations
+from ui.adapters import frame_detections
+from videotrack.markerless import (
+    KeypointInput,
+    MappedKeypoints,
+    fitting_model,
+    is_markerless,
+    keypoint_input,
+    read_mapped_keypoints,
+)
 from videotrack.pipeline import (
     Cancelled,
     ProjectModel,
@@ -47,17 +57,26 @@ __all__ = [
     "Cancelled",
     "Fitter",
     "FrameResult",
+    "KeypointInput",
+    "MappedKeypoints",
     "ProjectModel",
     "ProjectRun",
     "anneal_params",
     "attach_candidates",
     "check_detection_views",
     "detect_markers",
+    "fitting_model",
+    "frame_input",
     "frame_results",
+    "has_observations",
+    "is_markerless",
+    "keypoint_input",
     "load_model",
     "load_project_config",
     "make_fitter",
     "output_paths",
+    "posture_error",
+    "read_mapped_keypoints",
     "read_project_results",
     "save_project_results",
     "with_status",
@@ -133,10 +152,63 @@ def load_project_config(path: str | os.PathLike, trial: str | None = None):
     return command_config(path, trial)
 
 
-def output_paths(config) -> tuple[Path, Path]:
-    """Where the project's (or trial's) detections and results files live."""
+def output_paths(config) -> tuple[Path | None, Path]:
+    """Where the project's (or trial's) detections and results files live (no detections
+    for a project of keypoint files)."""
+    if is_markerless(config):
+        from videotrack.markerless import default_results_path
+
+        return None, default_results_path(config)
     outputs = trial_outputs(config)
     return outputs.detections, outputs.results
+
+
+def frame_input(data, record: int, n_views: int):
+    """What the fitter takes for one record of ``data``: the detected points of each view
+    (detections), or that record's :class:`Observations` (keypoints, 3D points)."""
+    if not isinstance(data, Observations):
+        return frame_detections(data, record, n_views)
+    one = np.array([record], np.int64)
+    points, conf, offsets, points3d = data.select(one)
+    return Observations(data.kind, data.view_names, 1, points, conf, offsets, points3d,
+                        data.dropped[one])
+
+
+def has_observations(frame) -> bool:
+    """Whether one record's fitting input (:func:`frame_input`) observes anything."""
+    if not isinstance(frame, Observations):
+        return any(len(d) for d in frame)
+    if frame.kind == "points3d":
+        return bool((frame.points3d[..., 3] > 0).any())
+    return bool((frame.conf > 0).any())
+
+
+def posture_error(fitter: Fitter, angles_deg, frame, root_positions=None
+                  ) -> tuple[float, np.ndarray]:
+    """E of a posture for one record's fitting input (:func:`frame_input`) and E per view:
+    the fitter's Eq. 5 for detections; for labelled keypoints or 3D points the objective the
+    fit used, from its NumPy specification (:mod:`kinematics.error_function`), which the
+    fitter's kernels are tested against."""
+    if not isinstance(frame, Observations):
+        return fitter.error(angles_deg, frame, root_positions)
+    from kinematics import error_function
+
+    options = fitter.params.error
+    if frame.kind == "points3d":
+        from kinematics.fk import forward_kinematics
+
+        markers = forward_kinematics(fitter.body, np.asarray(angles_deg, float),
+                                     root_positions).markers
+        return error_function.points3d_error(markers, frame.points3d[0], options), np.empty(0)
+    proj = fitter.project(angles_deg, root_positions)
+    nm = proj.shape[1]
+    keypoints = np.full((frame.n_views, nm, 3), np.nan)
+    keypoints[..., 2] = 0.0
+    for v, rows in enumerate(np.split(np.column_stack([frame.points, frame.conf]),
+                                      frame.offsets[1:-1])):
+        if len(rows):  # a view without keypoints holds no rows
+            keypoints[v] = rows
+    return error_function.labelled_error(proj, keypoints, options)
 
 
 def read_project_results(path: str | os.PathLike, body: Body,
@@ -163,15 +235,18 @@ def read_project_results(path: str | os.PathLike, body: Body,
 
 def save_project_results(path: str | os.PathLike, model: ProjectModel, body: Body,
                          results: Mapping[int, FrameResult], detections,
-                         detections_path: str | os.PathLike) -> Path:
+                         detections_path: str | os.PathLike | None) -> Path:
     """Write the fitted frames (in frame order) and the sidecar, atomically.
 
     ``body`` is the session's chain (it may carry learned histograms or edits); the sidecar
     records the files of ``model`` as the command line does, so save the chain first.
+    ``detections`` may be a :class:`KeypointInput` (with ``model`` the one it is fitted
+    with, :func:`fitting_model`); the sidecar then records the keypoint files.
     """
     ordered = [results[k] for k in sorted(results)]
     table = results_from_fit(body, ordered, model.view_names, detections)
-    sidecar = {**results_sidecar(model, Path(detections_path)), "source": "videotrack gui"}
+    source = detections if isinstance(detections, KeypointInput) else Path(detections_path)
+    sidecar = {**results_sidecar(model, source), "source": "videotrack gui"}
     written = _write_results(path, table, sidecar)
     write_candidates(path, body, ordered)
     return written

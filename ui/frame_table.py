@@ -43,7 +43,7 @@ class FrameTableModel(QAbstractTableModel):
     def reset(self) -> None:
         """Rebuild every row (a project, detections or threshold changed)."""
         self.beginResetModel()
-        self.views = self.session.view_names
+        self.views = self.session.error_views
         self.headers = self._headers()
         self.table = adapters.frame_table(self.session.results, self.session.n_frames,
                                           len(self.views))
@@ -84,7 +84,8 @@ class FrameTableModel(QAbstractTableModel):
         if role == Qt.ItemDataRole.ToolTipRole:
             nv = len(self.views)
             if section == 1:
-                return "error E of the fitted posture (Eq. 5), pixels"
+                return ("error E of the fitted posture (Eq. 5), pixels (a keypoint project "
+                        "fitted to 3D points: the chain's length units)")
             if 2 <= section < 2 + nv:
                 return f"part of E from view '{self.views[section - 2]}', pixels"
             if section == 2 + nv:

@@ -285,6 +285,9 @@ class MainWindow(QMainWindow):
                 view.detectionRemoved.connect(self._detection_removed)
                 view.detectionAdded.connect(self._detection_added)
                 view.detectionMoved.connect(self._detection_moved)
+                view.set_marker_colours(s.mapped is not None)
+                if s.mapped is not None:  # start where the animal is
+                    view.home = adapters.keypoint_box(s.mapped.xy[k])
                 self.views_splitter.addWidget(view)
                 self.video_views.append(view)
         n = s.n_frames
@@ -293,6 +296,10 @@ class MainWindow(QMainWindow):
             w.setRange(0, max(n - 1, 0))
             w.blockSignals(False)
         self.threshold.blockSignals(True)
+        # the 3D route's error is a distance in the chain's length units
+        units = s.body.units if (s.body is not None and s.keypoints is not None
+                                 and not s.error_views) else "px"
+        self.threshold.setSuffix(f" {units}")
         self.threshold.setValue(s.threshold if np.isfinite(s.threshold) else 0.0)
         self.threshold.blockSignals(False)
         if s.body is not None:
@@ -322,15 +329,18 @@ class MainWindow(QMainWindow):
         s = self.session
         has_project = s.config is not None
         ready = has_project and not s.busy
-        can_fit = ready and s.model is not None and s.detections is not None
+        markerless = s.keypoint_project
+        can_fit = ready and s.model is not None and s.fit_detections is not None
         for act in (self.act_fit_all, self.act_fit_current, self.act_fit_range,
                     self.act_fit_selected, self.act_fit_bad, self.act_refit_forward,
                     self.act_refit_backward, self.act_interpolate):
             act.setEnabled(can_fit)
         self.act_accept_selected.setEnabled(ready)
-        self.act_detect.setEnabled(ready)
-        for act in (self.act_settings, self.act_chain_file):
-            act.setEnabled(ready and s.editable)
+        self.act_detect.setEnabled(ready and not markerless)
+        # the settings dialog edits views and filters of marker videos; a keypoint
+        # project's [keypoints] are edited in its file
+        self.act_settings.setEnabled(ready and s.editable and not markerless)
+        self.act_chain_file.setEnabled(ready and s.editable)
         for act in (self.act_chain_editor, self.act_histograms):
             act.setEnabled(ready and s.body is not None)
         self.act_save.setEnabled(has_project and not s.busy)
@@ -353,13 +363,12 @@ class MainWindow(QMainWindow):
         self.timeline.set_frame(frame)
         images = s.view_images()
         detections = s.frame_detections()
+        keypoints = s.frame_keypoints()
         for k, view in enumerate(self.video_views):
             view.set_image(images[k] if k < len(images) else None)
             view.set_detections(detections[k])
-        if s.detections is not None and frame < s.detections.n_records:
-            self.time_label.setText(f"{s.detections.times[frame]:.3f} s")
-        else:
-            self.time_label.setText(f"{frame / s.fps:.3f} s" if s.fps else "")
+            view.set_keypoints(keypoints[k] if keypoints is not None else None)
+        self.time_label.setText(f"{s.time_of(frame):.3f} s")
         self.refresh_overlays()
 
     def refresh_overlays(self) -> None:
@@ -368,17 +377,25 @@ class MainWindow(QMainWindow):
         overlays = s.overlays()
         names = s.display_body.marker_names if s.display_body is not None else []
         detections = s.frame_detections()
+        keypoints = s.frame_keypoints()
         result = s.results.get(s.frame)
         for k, view in enumerate(self.video_views):
             view.set_overlay(overlays[k] if k < len(overlays) else None, names)
-            lines = [f"{len(detections[k])} detected"]
-            if result is not None and np.isfinite(result.error_per_view[k]):
-                lines.append(f"error {result.error_per_view[k]:.2f} px"
+            if keypoints is None:
+                lines = [f"{len(detections[k])} detected"]
+            else:
+                lines = [f"{int(np.isfinite(keypoints[k][:, 0]).sum())} keypoints"]
+            per_view = np.asarray(result.error_per_view) if result is not None else ()
+            if k < len(per_view) and np.isfinite(per_view[k]):
+                lines.append(f"error {per_view[k]:.2f} px"
                              + (" (previous chain)" if s.frame in s.stale else ""))
+            if s.canvas is not None:
+                lines.append("(no video)")
             view.set_info("  ".join(lines))
         self.posture_view.set_geometry(s.geometry())
-        self.marker_table.set_residuals(adapters.marker_residuals(overlays, detections),
-                                        names, s.view_names)
+        residuals = (adapters.marker_residuals(overlays, detections) if keypoints is None
+                     else adapters.keypoint_residuals(overlays, keypoints))
+        self.marker_table.set_residuals(residuals, names, s.view_names)
 
     def _results_changed(self, frames) -> None:
         if self.session.frame in frames:

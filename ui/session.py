@@ -25,6 +25,7 @@ from ui.workers import FitWorker, TaskWorker, error_text
 from videotrack import detection_edits
 from videotrack.config import read_toml
 from videotrack.errors import VideoTrackError, VideoTrackWarning
+from videotrack.markerless import DEFAULT_FPS
 
 #: Video frames kept decoded for scrubbing back and forth.
 FRAME_CACHE = 48
@@ -56,14 +57,15 @@ class Edit:
         return bool(self.results or self.pins or self.body or self.detection_edits)
 
 
-def pinned_result(fitter, body: Body, dets, n_views: int, frame: int, angles, roots,
+def pinned_result(fitter, body: Body, dets, frame: int, angles, roots,
                   pins: Mapping[int, float], refit: bool) -> backend.FrameResult:
     """The ``corrected`` result of a frame set by hand (thread-safe: no session state).
 
-    ``pins`` (posture index -> degrees, clipped to the ranges) are held while the other free
-    axes are fitted from ``angles`` (:meth:`kinematics.anneal.Fitter.with_pins`); without
+    ``dets`` is the frame's fitting input (:func:`ui.backend.frame_input`). ``pins``
+    (posture index -> degrees, clipped to the ranges) are held while the other free axes
+    are fitted from ``angles`` (:meth:`kinematics.anneal.Fitter.with_pins`); without
     ``refit``, or with nothing left free, the posture is taken as it is and only E is
-    computed. A frame without detections keeps the user's posture.
+    computed. A frame without observations keeps the user's posture.
     """
     angles = adapters.clamp_to_range(body, angles)
     lo, hi = body.ranges_deg().T
@@ -75,10 +77,10 @@ def pinned_result(fitter, body: Body, dets, n_views: int, frame: int, angles, ro
         result = fitter.with_pins(pins).fit_frame(dets, frame, start_deg=angles,
                                                   root_positions=roots)
     if result is None or result.status == "no-detections":
-        if any(len(d) for d in dets):
-            error, per_view = fitter.error(angles, dets, roots)
+        if backend.has_observations(dets):
+            error, per_view = backend.posture_error(fitter, angles, dets, roots)
         else:
-            error, per_view = np.nan, np.full(n_views, np.nan)
+            error, per_view = np.nan, np.full(fitter.n_views, np.nan)
         result = backend.manual_result(frame, angles, roots, error, per_view, seed)
     return backend.with_status(result, backend.CORRECTED)
 
@@ -143,6 +145,13 @@ class Session(QObject):
         self.body: Body | None = None
         self.params: backend.AnnealParams | None = None
         self.detections = None
+        #: A keypoint project's input (instead of detections): the 2D keypoints as mapped to
+        #: the chain's markers (drawn) and what the fit takes (:class:`KeypointInput`).
+        self.mapped: backend.MappedKeypoints | None = None
+        self.keypoints: backend.KeypointInput | None = None
+        #: Blank view images of a keypoint project without its video, and why.
+        self.canvas: list[np.ndarray] | None = None
+        self.notice = ""
         self.detections_path: Path | None = None
         self.results_path: Path | None = None
         self.results: dict[int, backend.FrameResult] = {}
@@ -170,6 +179,11 @@ class Session(QObject):
         return None if self.config is None else self.config.path
 
     @property
+    def keypoint_project(self) -> bool:
+        """The project is fitted to keypoint files (``[keypoints] files``), not markers."""
+        return self.config is not None and backend.is_markerless(self.config)
+
+    @property
     def editable(self) -> bool:
         """Whether the settings come from one project file the session can edit and save (a
         trial's config is merged from the project's config.toml files, shared by trials)."""
@@ -193,11 +207,6 @@ class Session(QObject):
         except LocatedError as err:
             self.error.emit(str(err))
             return False
-        if config["keypoints"]["files"]:
-            self.error.emit(f"{path}: a project of the markerless route ([keypoints] files): "
-                            "the window shows projects of marker videos only; fit it with "
-                            "'videotrack fit' (see docs/markerless.md)")
-            return False
         self._close_videos()
         self._clear()
         self.raw_config, self.trial = raw, trial
@@ -206,7 +215,8 @@ class Session(QObject):
             problems = self._install(config, keep_body=False)
             self._load_data()
         self.status.emit(f"opened {path.name}: {self.n_frames} frames, views "
-                         f"{', '.join(self.view_names)}")
+                         f"{', '.join(self.view_names)}"
+                         + (f"; {self.notice}" if self.notice else ""))
         self.projectChanged.emit()
         self.dirtyChanged.emit(False)
         self.undoChanged.emit()
@@ -224,22 +234,77 @@ class Session(QObject):
                 self.status.emit(f"warning: {w.message}")
 
     def _install(self, config, keep_body: bool) -> list[str]:
-        """Build video, views and model from a validated config; returns the problems met."""
-        from videotrack.detect import settings_from_config, video_paths
+        """Build video, views and model (and a keypoint project's keypoints) from a
+        validated config; returns the problems met."""
+        self.config = config
+        self._frames.clear()
+        if backend.is_markerless(config):  # the views are the cameras: model first
+            problems = self._install_model(config, keep_body)
+            return problems + self._install_keypoints(config)
+        from videotrack.detect import settings_from_config
+
+        problems = []
+        try:
+            self.settings = settings_from_config(config)
+            self._open_video(config, self.settings.views)
+        except LocatedError as err:
+            problems.append(str(err.located(file=config.path)))
+        return problems + self._install_model(config, keep_body)
+
+    def _open_video(self, config, views) -> None:
+        """Open the project's video(s) (kept when open) and resolve ``views`` on them."""
+        from videotrack.detect import video_paths
         from videotrack.video import open_videos
         from videotrack.views import check_views
 
+        if self.videos is None:
+            self.videos = open_videos(video_paths(config), colour=True,
+                                      fps=config["video"]["fps"] or None)
+        self.views = check_views(views, [(s.width, s.height) for s in self.videos.sources])
+
+    def _install_keypoints(self, config) -> list[str]:
+        """A keypoint project's keypoints, and its views: one per camera (or its
+        ``[[views]]``), cut from ``[video] path`` when given, else drawn on a blank canvas
+        sized from the calibration (or the keypoints' extent)."""
+        from videotrack.detect import settings_from_config
+        from videotrack.views import View
+
+        self.settings = self.mapped = self.keypoints = self.canvas = None
+        self.notice = ""
+        if self.model is None:  # no cameras: no views, nothing to fit
+            self.views = ()
+            return []
         problems = []
-        self.config = config
         try:
-            self.settings = settings_from_config(config)
-            if self.videos is None:
-                self.videos = open_videos(video_paths(config), colour=True,
-                                          fps=config["video"]["fps"] or None)
-            self.views = check_views(self.settings.views,
-                                     [(s.width, s.height) for s in self.videos.sources])
+            self.mapped = backend.read_mapped_keypoints(config, self.model)
+            self.keypoints = backend.keypoint_input(config, self.model, self.mapped)
         except LocatedError as err:
-            problems.append(str(err.located(file=config.path)))
+            problems.append(str(err))
+        views = tuple(View(name, video=k) for k, name in enumerate(self.model.view_names))
+        why = "no video ([video] path)"
+        try:
+            if config["views"]:  # the cameras' names and videos as the views give them
+                views = settings_from_config(config).views
+            self.views = views
+            if config["video"]["path"]:
+                self._open_video(config, views)
+                return problems
+        except LocatedError as err:
+            self._close_videos()
+            self.videos, self.views = None, views
+            why = f"video not shown ({err.message})"
+        sizes = [adapters.canvas_size(
+            getattr(cam, "image_size", None),
+            None if self.mapped is None else self.mapped.xy[k])
+            for k, cam in enumerate(self.cameras)]
+        self.canvas = [np.full((h, w), adapters.CANVAS_GREY, np.uint8) for w, h in sizes]
+        self.notice = f"{why}: keypoints drawn on a blank canvas"
+        return problems
+
+    def _install_model(self, config, keep_body: bool) -> list[str]:
+        """Chain, cameras and parameters; the chain with its edits is kept with
+        ``keep_body`` when its axes are the same."""
+        problems = []
         old_body = self.body
         try:
             self.model = backend.load_model(config)
@@ -249,7 +314,6 @@ class Session(QObject):
         except LocatedError as err:
             problems.append(str(err))
             self.model = None
-        self._frames.clear()
         return problems
 
     def _load_data(self) -> None:
@@ -257,7 +321,7 @@ class Session(QObject):
         from videotrack.detections import load_detections
 
         self.detections_path, self.results_path = backend.output_paths(self.config)
-        if self.detections_path.exists():
+        if self.detections_path is not None and self.detections_path.exists():
             try:
                 det = load_detections(self.detections_path)
                 if self.model is not None:
@@ -266,14 +330,15 @@ class Session(QObject):
             except LocatedError as err:
                 self.error.emit(str(err))
         try:
-            self.detection_edits = detection_edits.load_edits(
-                detection_edits.edits_path(self.results_path), self.view_names)
+            if self.keypoints is None:  # labelled keypoints are not edited
+                self.detection_edits = detection_edits.load_edits(
+                    detection_edits.edits_path(self.results_path), self.view_names)
         except LocatedError as err:
             self.error.emit(str(err))
         if self.results_path.exists() and self.body is not None:
             try:
                 self.results = backend.read_project_results(self.results_path, self.body,
-                                                            self.view_names)
+                                                            self.error_views)
                 self.results = backend.attach_candidates(self.results, self.results_path)
             except LocatedError as err:
                 self.error.emit(str(err))
@@ -377,8 +442,19 @@ class Session(QObject):
         return [] if self.model is None else list(self.model.cameras.values())
 
     @property
+    def error_views(self) -> list[str]:
+        """The views of the fit's error columns: the views, or none when the fit is to
+        triangulated 3D points (a keypoint project of route "3d")."""
+        if self.keypoints is not None:
+            return list(self.keypoints.view_names)
+        return self.view_names
+
+    @property
     def n_frames(self) -> int:
-        """Records of the project: those of the detections, else the video's frames."""
+        """Records of the project: those of the detections (or keypoints), else the
+        video's frames."""
+        if self.keypoints is not None:
+            return self.keypoints.n_records
         if self.detections is not None:
             return self.detections.n_records
         return 0 if self.videos is None else self.videos.n_frames
@@ -395,15 +471,30 @@ class Session(QObject):
 
     @property
     def fps(self) -> float:
+        if self.keypoints is not None:
+            return float(self.config["video"]["fps"] or DEFAULT_FPS)
         if self.detections is not None:
             return self.detections.frame_rate
         return 25.0 if self.videos is None else self.videos.fps
 
+    def _records(self):
+        """What numbers the records: the keypoints, the detections or None."""
+        return self.keypoints if self.keypoints is not None else self.detections
+
     def video_frame(self, record: int) -> int:
-        """Video frame of a record (records are half-frames when de-interlacing)."""
-        if self.detections is not None and 0 <= record < self.detections.n_records:
-            return int(self.detections.video_frames[record])
+        """Video frame of a record (records are half-frames when de-interlacing; a keypoint
+        project's records are the frames its files have in common)."""
+        records = self._records()
+        if records is not None and 0 <= record < records.n_records:
+            return int(records.video_frames[record])
         return int(record)
+
+    def time_of(self, record: int) -> float:
+        """Seconds of a record, as the results file writes them."""
+        records = self._records()
+        if records is not None and 0 <= record < records.n_records:
+            return float(records.times[record])
+        return record / self.fps if self.fps else 0.0
 
     # -- current frame ------------------------------------------------------------------
     def set_frame(self, frame: int) -> None:
@@ -418,7 +509,10 @@ class Session(QObject):
         self.set_frame(self.frame + delta)
 
     def view_images(self, record: int | None = None) -> list[np.ndarray]:
-        """The image of each view of a record (ROI cut and mirrored as set), BGR or grey."""
+        """The image of each view of a record (ROI cut and mirrored as set), BGR or grey;
+        a keypoint project without video gets its blank canvases."""
+        if self.canvas is not None:
+            return self.canvas
         if self.videos is None or not self.views:
             return []
         index = self.video_frame(self.frame if record is None else record)
@@ -443,7 +537,10 @@ class Session(QObject):
 
     @property
     def fit_detections(self):
-        """The detections the fit and E use: the detections file with the user's edits."""
+        """What the fit and E use: the detections file with the user's edits, or a keypoint
+        project's :class:`~kinematics.observations.Observations` (None: nothing to fit)."""
+        if self.keypoints is not None:
+            return self.keypoints.observations
         det, edits, edited = self._edited
         if det is not self.detections or edits is not self.detection_edits:
             edited = (None if self.detections is None else
@@ -452,9 +549,25 @@ class Session(QObject):
         return edited
 
     def frame_detections(self, record: int | None = None) -> list[np.ndarray]:
-        """Detected centroids of a record, one (n, 2) array per view."""
+        """Detected centroids of a record, one (n, 2) array per view (none in a keypoint
+        project: see :meth:`frame_keypoints`)."""
         record = self.frame if record is None else record
-        return adapters.frame_detections(self.fit_detections, record, len(self.views))
+        return adapters.frame_detections(None if self.keypoints is not None else
+                                         self.fit_detections, record, len(self.views))
+
+    def frame_input(self, record: int | None = None):
+        """What the fitter takes for one record (:func:`ui.backend.frame_input`)."""
+        record = self.frame if record is None else record
+        return backend.frame_input(self.fit_detections, record, len(self.views))
+
+    def frame_keypoints(self, record: int | None = None) -> list[np.ndarray] | None:
+        """A keypoint project's 2D keypoints of a record, one (n_markers, 3) array (x, y,
+        score; NaN where missing) per view in the chain's marker order; None otherwise."""
+        if self.mapped is None or self.display_body is None:
+            return None
+        record = self.frame if record is None else record
+        return adapters.frame_keypoints(self.mapped, record,
+                                        self.display_body.marker_names)
 
     def posture(self, record: int | None = None) -> tuple[np.ndarray, np.ndarray, str]:
         """``(angles_deg, roots, source)`` drawn for a record; source is ``preview``,
@@ -712,11 +825,27 @@ class Session(QObject):
         self.error.emit(message)
 
     # -- fitting ------------------------------------------------------------------------
+    def _fit_model(self):
+        """The project model the fit uses: a keypoint project of route "3d" is fitted to
+        its triangulated points without cameras (:func:`videotrack.markerless.fitting_model`);
+        the views keep the cameras to draw."""
+        if self.keypoints is None:
+            return self.model
+        return backend.fitting_model(self.model, self.keypoints)
+
     def _fitter(self, body: Body | None = None):
         if self.model is None or self.body is None:
             raise VideoTrackError("no chain and cameras: set them under Project ▸ Settings",
                                   file=self.config_path)
-        return backend.make_fitter(body or self.body, self.model.cameras, self.params)
+        return backend.make_fitter(body or self.body, self._fit_model().cameras, self.params)
+
+    def _missing_input(self) -> str | None:
+        """Why there is nothing to fit, or None."""
+        if self.fit_detections is not None:
+            return None
+        if self.keypoint_project:
+            return "no keypoints: the project's [keypoints] files could not be read"
+        return "no detections: run Detect markers first"
 
     def fit(self, frames: Iterable[int] | None = None, label: str = "fit") -> bool:
         """Fit frames in the background (default: every frame not corrected by hand).
@@ -727,8 +856,9 @@ class Session(QObject):
         if self.busy:
             self.error.emit("another task is running; wait for it or cancel it")
             return False
-        if self.detections is None:
-            self.error.emit("no detections: run Detect markers first")
+        missing = self._missing_input()
+        if missing:
+            self.error.emit(missing)
             return False
         if frames is None:
             frames = [f for f in range(self.n_frames)
@@ -825,8 +955,7 @@ class Session(QObject):
         except LocatedError as err:
             self.error.emit(str(err))
             return False
-        dets = self.frame_detections(frame)
-        n_views = len(self.views)
+        dets = self.frame_input(frame)
 
         def finish(result) -> None:
             edit = Edit(label)
@@ -839,8 +968,7 @@ class Session(QObject):
             self.status.emit(f"frame {frame} corrected: error {result.error:.2f} px")
 
         def work(_worker):
-            return pinned_result(fitter, self.body, dets, n_views, frame, angles, roots, pins,
-                                 refit)
+            return pinned_result(fitter, self.body, dets, frame, angles, roots, pins, refit)
 
         if refit and any(k not in pins for k in adapters.free_axes(self.body)):
             return self.run_task(work, finish,
@@ -891,8 +1019,9 @@ class Session(QObject):
         if source != "fit":
             self.error.emit(f"frame {frame} has no posture to carry: fit or correct it first")
             return False
-        if self.detections is None:
-            self.error.emit("no detections: run Detect markers first")
+        missing = self._missing_input()
+        if missing:
+            self.error.emit(missing)
             return False
         try:
             fitter = self._fitter()
@@ -918,7 +1047,7 @@ class Session(QObject):
                 if f not in known and tracked is None:  # roots of frames never fitted
                     tracked = fitter.track_roots(detections)
                 root = known[f] if f in known else tracked[f]
-                r = fitter.fit_frame(adapters.frame_detections(detections, f, fitter.n_views),
+                r = fitter.fit_frame(backend.frame_input(detections, f, fitter.n_views),
                                      f, start_deg=prev_angles, root_positions=root)
                 if not r.error <= threshold:
                     worker.summary = (f"stopped at frame {f}: error {r.error:.2f} px above the "
@@ -961,13 +1090,13 @@ class Session(QObject):
             angles, _, source = self.posture(f)
             roots = (self.posture(f)[1] if source == "fit" else (1 - t) * r0 + t * r1)
             pins = {k: float((1 - t) * a0[k] + t * a1[k]) for k in axes}
-            plan.append((f, angles, roots, pins, self.frame_detections(f)))
-        body, n_views = self.body, len(self.views)
+            plan.append((f, angles, roots, pins, self.frame_input(f)))
+        body = self.body
 
         def work(worker: TaskWorker):
             for k, (f, angles, roots, pins, dets) in enumerate(plan):
                 worker.check_cancel()
-                r = pinned_result(fitter, body, dets, n_views, f, angles, roots, pins, refit)
+                r = pinned_result(fitter, body, dets, f, angles, roots, pins, refit)
                 worker.publish([(r, pins)])
                 worker.report(k + 1, len(plan))
 
@@ -986,9 +1115,9 @@ class Session(QObject):
         cycled = (*current.candidates[1:], current.candidates[0])
         chosen = cycled[0]
         try:
-            error, per_view = self._fitter().error(chosen.angles_deg,
-                                                   self.frame_detections(frame),
-                                                   chosen.root_positions)
+            error, per_view = backend.posture_error(self._fitter(), chosen.angles_deg,
+                                                    self.frame_input(frame),
+                                                    chosen.root_positions)
         except LocatedError as err:
             self.error.emit(str(err))
             return False
@@ -1044,6 +1173,11 @@ class Session(QObject):
         of a frame (undoable). The fit and E use the edited detections at once: the frame's
         error is computed again for its posture (status kept)."""
         frame = self.frame if frame is None else int(frame)
+        if self.keypoint_project:  # a keypoint is its tracker's label, not a blob
+            self.status.emit("keypoints are not edited here: correct the posture instead "
+                             "(sliders, drag a model marker), or fix the labels in the "
+                             "tracker")
+            return False
         if self.detections is None or not 0 <= frame < self.detections.n_records:
             self.error.emit("no detections to edit: run Detect markers first")
             return False
@@ -1140,6 +1274,9 @@ class Session(QObject):
     # -- detection ----------------------------------------------------------------------
     def detect(self) -> bool:
         """Detect markers in every frame (background) and save the detections file."""
+        if self.keypoint_project:
+            self.status.emit("a keypoint project has no markers to detect")
+            return False
         if self.settings is None:
             self.error.emit("the project's views or filters are not valid")
             return False
@@ -1181,9 +1318,9 @@ class Session(QObject):
                 if self.detection_edits or path.exists():
                     detection_edits.save_edits(path, self.detection_edits, self.view_names)
             if "results" in self._dirty and self.model is not None:
-                model = replace(self.model, body=self.body, params=self.params)
+                model = replace(self._fit_model(), body=self.body, params=self.params)
                 backend.save_project_results(self.results_path, model, self.body,
-                                             self.results, self.detections,
+                                             self.results, self._records(),
                                              self.detections_path)
         except LocatedError as err:
             self.error.emit(str(err))

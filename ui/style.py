@@ -53,6 +53,27 @@ def marker_style() -> dict:
             "brush": pg.mkBrush(MARKER), "pxMode": True}
 
 
+def keypoint_style() -> dict:
+    return {"symbol": "o", "size": DETECTION_SIZE, "brush": None, "pxMode": True}
+
+
+#: Opacity of a keypoint scored 0 (one scored 1 is opaque): faint, but still there.
+KEYPOINT_MIN_ALPHA = 0.25
+
+
+def keypoint_pen(marker: int, score: float):
+    """The ring of marker ``marker``'s keypoint: its colour, opacity by score."""
+    c = QColor(colour(marker))
+    s = float(score) if score == score else 1.0  # NaN (no score given): certain
+    c.setAlphaF(KEYPOINT_MIN_ALPHA + (1 - KEYPOINT_MIN_ALPHA) * min(max(s, 0.0), 1.0))
+    return pg.mkPen(c, width=2.2)
+
+
+def marker_brush(marker: int):
+    """A model marker filled with its keypoints' colour."""
+    return pg.mkBrush(colour(marker))
+
+
 def skeleton_pen():
     return pg.mkPen(SKELETON, width=LINE_WIDTH)
 

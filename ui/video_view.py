@@ -1,4 +1,5 @@
-"""One video view: the view image with detected centroids and the projected model.
+"""One video view: the view image with detected centroids (or a keypoint project's labelled
+keypoints) and the projected model.
 
 Coordinates are the view image's pixels, as the cameras project and the detections are
 stored: the image is placed so that pixel ``(i, j)`` is centred on ``(x, y) = (j, i)`` and
@@ -102,18 +103,29 @@ class VideoView(pg.GraphicsLayoutWidget):
         self.markers.setZValue(10)
         self.markers.dragged.connect(self._dropped)
         self.markers.moving.connect(self._moving)
-        for item in (self.detected, self.lines, self.markers):
+        # labelled keypoints: one colour per marker (the model marker's), faded by score
+        self.keypoints = pg.ScatterPlotItem(**style.keypoint_style())
+        self._keypoints = np.empty((0, 3))
+        for item in (self.detected, self.keypoints, self.lines, self.markers):
             self.plot.addItem(item)
         self.labels: list[pg.TextItem] = []
         self.info = pg.TextItem(anchor=(0, 0), color="#ffffff", fill=pg.mkBrush(0, 0, 0, 140))
         self.info.setZValue(20)
         self.plot.addItem(self.info)
         self._marker_xy = np.empty((0, 2))
+        self._marker_colours: list | None = None
         self._size: tuple[int, int] | None = None
+        #: (x0, x1, y0, y1) shown first instead of the whole image (a keypoint project's
+        #: keypoints: a small animal in a large frame), or None.
+        self.home: tuple[float, float, float, float] | None = None
+        self._shown: np.ndarray | None = None
         self.scene().sigMouseClicked.connect(self._clicked)
 
     # -- content ------------------------------------------------------------------------
     def set_image(self, image: np.ndarray | None) -> None:
+        if image is self._shown and image is not None:
+            return  # the same picture (a blank canvas): no redraw on a frame step
+        self._shown = image
         if image is None:
             self.image.clear()
             return
@@ -122,12 +134,28 @@ class VideoView(pg.GraphicsLayoutWidget):
         self.image.setRect(-0.5, -0.5, w, h)  # pixel centres on integer coordinates
         if self._size != (w, h):
             self._size = (w, h)
-            self.plot.setRange(xRange=(-0.5, w - 0.5), yRange=(-0.5, h - 0.5), padding=0.01)
-        self.info.setPos(-0.5, -0.5)
+            x0, x1, y0, y1 = self.home or (-0.5, w - 0.5, -0.5, h - 0.5)
+            self.plot.setRange(xRange=(x0, x1), yRange=(y0, y1), padding=0.01)
+            self.info.setPos(max(x0, -0.5), max(y0, -0.5))  # in sight at the start
 
     def set_detections(self, points: np.ndarray) -> None:
         self._detected_xy = np.asarray(points, float).reshape(-1, 2)
         self.detected.setData(pos=self._detected_xy, data=np.arange(len(self._detected_xy)))
+
+    def set_keypoints(self, keypoints: np.ndarray | None) -> None:
+        """Draw labelled keypoints, (n_markers, 3) x, y, score in the model's marker order
+        (NaN rows are missing and not drawn); None clears. Marker k gets the colour of
+        :func:`ui.style.colour` (k), its opacity the score."""
+        kp = np.empty((0, 3)) if keypoints is None else np.asarray(keypoints, float)
+        self._keypoints = kp
+        shown = np.flatnonzero(np.isfinite(kp[:, :2]).all(axis=1)) if len(kp) else []
+        pens = [style.keypoint_pen(k, kp[k, 2]) for k in shown]
+        self.keypoints.setData(pos=kp[shown, :2] if len(shown) else np.empty((0, 2)),
+                               pen=pens, data=np.asarray(shown, int))
+
+    def set_marker_colours(self, on: bool) -> None:
+        """Fill each model marker with its keypoints' colour (keypoint projects)."""
+        self._marker_colours = on or None
 
     @property
     def editable(self) -> bool:
@@ -147,7 +175,7 @@ class VideoView(pg.GraphicsLayoutWidget):
             self._set_labels([], [])
             return
         self._marker_xy = np.asarray(overlay.markers, float)
-        self.markers.setData(pos=self._marker_xy, data=np.arange(len(self._marker_xy)))
+        self._set_markers(self._marker_xy)
         lines = np.asarray(overlay.lines, float).reshape(-1, 2)
         self.lines.setData(lines[:, 0], lines[:, 1])
         self._set_labels(names, self._marker_xy)
@@ -169,13 +197,19 @@ class VideoView(pg.GraphicsLayoutWidget):
                 label.setPos(*xy[k])
 
     # -- dragging -----------------------------------------------------------------------
+    def _set_markers(self, xy: np.ndarray) -> None:
+        brush = ([style.marker_brush(k) for k in range(len(xy))] if self._marker_colours
+                 else None)
+        self.markers.setData(pos=xy, data=np.arange(len(xy)),
+                             **({"brush": brush} if brush is not None else {}))
+
     def _moving(self, index: int, x: float, y: float) -> None:
         xy = self._marker_xy.copy()
         xy[index] = (x, y)
-        self.markers.setData(pos=xy, data=np.arange(len(xy)))
+        self._set_markers(xy)
 
     def _dropped(self, index: int, x: float, y: float) -> None:
-        self.markers.setData(pos=self._marker_xy, data=np.arange(len(self._marker_xy)))
+        self._set_markers(self._marker_xy)
         self.markerDragged.emit(self.index, index, x, y)
 
     # -- editing detections -------------------------------------------------------------
@@ -222,13 +256,17 @@ class VideoView(pg.GraphicsLayoutWidget):
 
     # -- for tests and screenshots ------------------------------------------------------
     def drawn(self) -> dict[str, np.ndarray]:
-        """The data the items hold: ``markers``, ``lines`` (pairs) and ``detections``."""
+        """The data the items hold: ``markers``, ``lines`` (pairs), ``detections`` and
+        ``keypoints`` (x, y, marker index)."""
         mx, my = self.markers.getData()
         lx, ly = self.lines.getData()
         dx, dy = self.detected.getData()
+        kx, ky = self.keypoints.getData()
         return {"markers": np.column_stack([mx, my]),
                 "lines": np.column_stack([lx, ly]) if lx is not None else np.empty((0, 2)),
-                "detections": np.column_stack([dx, dy])}
+                "detections": np.column_stack([dx, dy]),
+                "keypoints": np.column_stack([kx, ky, np.asarray(
+                    self.keypoints.data["data"], float)])}
 
 
 def _small_font():

@@ -114,6 +114,27 @@ def _folder_sha256(folder: Path) -> str:
     return h.hexdigest()
 
 
+@dataclass(frozen=True, eq=False)
+class MappedKeypoints:
+    """A project's 2D keypoints as read, filtered, aligned and mapped to the chain's markers
+    (what both routes start from; the GUI draws them in the video views).
+
+    Attributes
+    ----------
+    view_names : the views (cameras), in the order of the files
+    frames : (n,) the aligned frame numbers of the keypoint files
+    markers : the chain's markers that have a keypoint, in the body's order
+    xy : (views, n, markers, 2) pixels; NaN where missing or scored below ``min_score``
+    score : (views, n, markers); NaN where missing
+    """
+
+    view_names: tuple[str, ...]
+    frames: np.ndarray
+    markers: tuple[str, ...]
+    xy: np.ndarray
+    score: np.ndarray
+
+
 def load_keypoints(config, model) -> KeypointInput:
     """The :class:`KeypointInput` of a project's ``[keypoints]`` for ``model``
     (a :class:`videotrack.pipeline.ProjectModel`: its views and body).
@@ -125,6 +146,13 @@ def load_keypoints(config, model) -> KeypointInput:
         offsets that do not match the files, a keypoint or marker name the files or the
         chain lack.
     """
+    return keypoint_input(config, model, read_mapped_keypoints(config, model))
+
+
+def read_mapped_keypoints(config, model) -> MappedKeypoints:
+    """The first half of :func:`load_keypoints`: each camera's file read (with its offsets),
+    filtered, the cameras put on common frames, the keypoints mapped to ``model``'s markers
+    and those below ``min_score`` dropped. Raises as :func:`load_keypoints`."""
     from videotrack.io.keypoints import align_cameras, marker_index, read_keypoints
 
     table = config["keypoints"]
@@ -154,17 +182,28 @@ def load_keypoints(config, model) -> KeypointInput:
     xy, score = xy[:, :, index[has]], score[:, :, index[has]]
     low = ~(score >= table["min_score"])  # NaN scores (missing) too
     xy[low], score[low] = np.nan, np.nan
+    return MappedKeypoints(tuple(views), frames, tuple(markers), xy, score)
+
+
+def keypoint_input(config, model, mapped: MappedKeypoints) -> KeypointInput:
+    """The second half of :func:`load_keypoints`: the Observations of ``mapped`` (the 2D
+    keypoints, or for route ``"3d"`` their triangulation) with frames, times and settings."""
+    table = config["keypoints"]
+    body = model.body
+    markers = list(mapped.markers)
+    xy, score = mapped.xy.copy(), mapped.score.copy()
     if table["route"] == "3d":
         obs = Observations.points_3d(_triangulate(model, xy, score, table, markers),
                                      markers, body.marker_names)
     else:
         kp = np.concatenate([xy, np.nan_to_num(score)[..., None]], axis=3)
-        obs = Observations.keypoints(kp.transpose(1, 0, 2, 3), views, markers,
-                                     body.marker_names)
+        obs = Observations.keypoints(kp.transpose(1, 0, 2, 3), list(mapped.view_names),
+                                     markers, body.marker_names)
+    frames = mapped.frames
     fps = config["video"]["fps"] or DEFAULT_FPS
     options = copy.deepcopy({k: v for k, v in table.items() if k != "files"})
-    return KeypointInput(obs, obs.view_names, frames, frames / fps, tuple(files), options,
-                         {"warnings": []})
+    return KeypointInput(obs, obs.view_names, frames, frames / fps,
+                         tuple(keypoint_files(config)), options, {"warnings": []})
 
 
 def fitting_model(model, data: KeypointInput):

@@ -330,13 +330,3 @@ def test_an_alternative_posture_is_one_key_away(session, wait_idle, tmp_path):
     assert s.results[3] is before
     assert not s.swap_candidate(4)  # no alternatives there
 
-
-def test_a_keypoint_project_is_refused_with_a_clear_message(qtbot, tmp_path):
-    from videotrack.synth_keypoints import write_session
-
-    project = write_session(tmp_path / "kps", 4, bad_share=0.0).project
-    s = Session()
-    errors = []
-    s.error.connect(errors.append)
-    assert not s.open_project(project)
-    assert len(errors) == 1 and "markerless route" in errors[0] and "videotrack fit" in errors[0]
