@@ -82,6 +82,15 @@ def _sincos(x):
     return s1, c1
 
 
+@njit(inline="always", **_OPTS)
+def _draw(state, x, scale):
+    """The stream's next draw as a step of Eq. 6: ``(state, x + scale · (2u - 1))``, as the
+    scalar kernel computes it."""
+    st = state + _GOLDEN
+    u = np.float64(mix64(st) >> _S11) * _TWO_M53
+    return st, x + scale * (2.0 * u - 1.0)
+
+
 @njit(**_OPTS)
 def sincos_lanes(x, s, c):
     """Fill ``s``, ``c`` with :func:`_sincos` of ``x`` (for tests)."""
@@ -340,8 +349,6 @@ def iterate_lanes(n_iter, free_idx, n_hist, step, hist, nbins, th, dof_kind, lo,
     arg = np.empty(nl, np.int64)
     matched = np.empty((4, nl), np.bool_)
     near = np.empty((4, nl))
-    xs = np.empty(nl)
-    ok = np.empty(nl, np.bool_)
     pending = np.empty(nl, np.bool_)
     accept = np.empty(nl, np.bool_)
     better = np.empty(nl, np.bool_)
@@ -361,47 +368,43 @@ def iterate_lanes(n_iter, free_idx, n_hist, step, hist, nbins, th, dof_kind, lo,
             s_i = step[i]
             lo_i = lo[i]
             hi_i = hi[i]
-            for ln in range(nl):
-                xs[ln] = cur[i, ln]
-                ok[ln] = False
-                pending[ln] = True
+            # One loop per try, the first included (most draws are plausible at once): a
+            # lane that takes this try draws, keeps a plausible value, else its axis stays
+            # where it is (cur) until a later try succeeds.
             tries = 0
             any_pending = True
             while any_pending and tries <= max_redraws:
+                first = tries == 0
                 any_pending = False
                 if use_hist:
                     for ln in range(nl):
-                        st = rs[ln] + _GOLDEN
-                        u = np.float64(mix64(st) >> _S11) * _TWO_M53
-                        x = cur[i, ln] + (length[ln] * s_i) * (2.0 * u - 1.0)
+                        take = first | pending[ln]
+                        st, x = _draw(rs[ln], cur[i, ln], length[ln] * s_i)
                         # hist_at without a branch: the bin index wrapped by a float modulo
                         kf = np.floor(x * (nf * (0.5 / np.pi)) + 0.5 * nf)
                         inside = (kf >= 0.0) & (kf < nf)
                         kf = kf if inside else kf - nf * np.floor(kf / nf)
                         good = hist[i, int(kf)] >= th
-                        take = pending[ln]
+                        kept = cur[i, ln] if first else cand[i, ln]
+                        x = (x if good else kept) if take else cand[i, ln]
                         rs[ln] = st if take else rs[ln]
-                        xs[ln] = x if take else xs[ln]
-                        ok[ln] = good if take else ok[ln]
+                        cand[i, ln] = x
+                        sn[i, ln], cs[i, ln] = _sincos(x)
                         pending[ln] = take & (not good)
-                        any_pending = any_pending | pending[ln]
+                        any_pending = any_pending | (take & (not good))
                 else:
                     for ln in range(nl):
-                        st = rs[ln] + _GOLDEN
-                        u = np.float64(mix64(st) >> _S11) * _TWO_M53
-                        x = cur[i, ln] + (length[ln] * s_i) * (2.0 * u - 1.0)
+                        take = first | pending[ln]
+                        st, x = _draw(rs[ln], cur[i, ln], length[ln] * s_i)
                         good = (lo_i <= x) & (x <= hi_i)
-                        take = pending[ln]
+                        kept = cur[i, ln] if first else cand[i, ln]
+                        x = (x if good else kept) if take else cand[i, ln]
                         rs[ln] = st if take else rs[ln]
-                        xs[ln] = x if take else xs[ln]
-                        ok[ln] = good if take else ok[ln]
+                        cand[i, ln] = x
+                        sn[i, ln], cs[i, ln] = _sincos(x)
                         pending[ln] = take & (not good)
-                        any_pending = any_pending | pending[ln]
+                        any_pending = any_pending | (take & (not good))
                 tries += 1
-            for ln in range(nl):
-                x = xs[ln] if ok[ln] else cur[i, ln]
-                cand[i, ln] = x
-                sn[i, ln], cs[i, ln] = _sincos(x)
         project_lanes(cand, cs, sn, parent, chain, pre_rot, pre_trans, post_trans,
                       elem_axis, elem_index, joint_flags, marker_joint, marker_local,
                       slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj)
