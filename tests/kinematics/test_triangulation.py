@@ -17,6 +17,7 @@ from kinematics.triangulation import (
     _inputs,
     _linearise_numpy,
     _matrices,
+    _mean_errors_numpy,
     _ransac_numpy,
     _residuals_numpy,
     triangulate_linear,
@@ -95,9 +96,9 @@ def test_undistortion_is_opencvs():
     px = rng.uniform([0, 0], [1280, 1024], (2, 500, 2))
     want = _linearise_numpy(cams, px, np.ones((2, 500)))
     packed = pack_cameras(cams)
-    got = np.array([[_k.linearise(packed.kind, packed.K, packed.dist, c, *px[c, i])
-                     for i in range(500)] for c in range(2)])
-    np.testing.assert_allclose(got, want, rtol=0, atol=1e-14)
+    x, y = _k.linearise_all(packed.kind, packed.K, packed.dist, px[..., 0].copy(),
+                            px[..., 1].copy())
+    np.testing.assert_allclose(np.stack([x, y], -1), want, rtol=0, atol=1e-14)
 
 
 def test_linear_kernel_matches_numpy_twin():
@@ -111,6 +112,99 @@ def test_linear_kernel_matches_numpy_twin():
     px, w = px.reshape(5, -1, 2), w.reshape(5, -1)
     mats, lin = _matrices(cams), _linearise_numpy(cams, px, w)
     np.testing.assert_allclose(tri.xyz.reshape(-1, 3), _dlt_numpy(mats, lin, w), atol=1e-9)
+
+
+def test_linear_result_does_not_depend_on_the_block():
+    """A point's solve runs in one SIMD lane of a block of points: its bits must not depend
+    on the block, the lane or the other points (nor, then, on how points are split up)."""
+    frames = (2 * _k.BLOCK + 100) // 5  # two blocks of points and a rest
+    cams, truth = ring_cameras(), chain_motion(frames)
+    rng = np.random.default_rng(7)
+    xy = project(cams, truth) + rng.normal(0, 3.0, (4, frames, 5, 2))
+    xy[rng.random(xy.shape[:3]) < 0.3] = np.nan
+    flat = xy.reshape(4, -1, 1, 2)
+    whole = triangulate_linear(cams, flat)
+    shifted = triangulate_linear(cams, flat[:, 37:])
+    np.testing.assert_array_equal(shifted.xyz, whole.xyz[37:])
+    np.testing.assert_array_equal(shifted.error, whole.error[37:])
+    for n in (0, _k.BLOCK + 3, 5 * frames - 1):
+        np.testing.assert_array_equal(triangulate_linear(cams, flat[:, n:n + 1]).xyz,
+                                      whole.xyz[n:n + 1])
+
+
+def solver_lanes(mats):
+    """Run the kernels' QR and smallest right singular vector on matrices (lanes, rows, 4);
+    returns R (lanes, 4, 4), the vectors (lanes, 4) and the states after 12 plain steps."""
+    a = np.ascontiguousarray(np.transpose(mats, (1, 2, 0)))
+    lanes = a.shape[2]
+    lane, state = np.zeros((13, lanes)), np.zeros(lanes, np.int64)
+    _k.qr_lanes(a, a.shape[0], lane, lanes)
+    r = np.transpose(a[:4], (2, 0, 1)).copy()
+    probe, probe_state = a.copy(), state.copy()
+    _k._start(probe, lane, probe_state, lanes)
+    for _ in range(12):
+        _k._inverse_step(probe, lane, probe_state, lanes)
+    _k.smallest_right_singular(a, lane, state, lanes)
+    assert np.all(state == _k.DONE)
+    return r, lane[:4].T, probe_state
+
+
+def test_qr_lanes_matches_numpy_with_rows_of_zeros():
+    rng = np.random.default_rng(8)
+    mats = rng.normal(size=(16, 8, 4)) * [1.0, 1.0, 1.0, 300.0]
+    want = np.linalg.qr(mats)[1]
+    padded = np.zeros((16, 12, 4))
+    padded[:, [0, 1, 4, 5, 6, 7, 10, 11]] = mats  # cameras left out: rows of zeros
+    for got in (solver_lanes(mats)[0], solver_lanes(padded)[0]):
+        # R is unique up to the signs of its rows
+        signs = np.sign(np.diagonal(got, axis1=1, axis2=2) * np.diagonal(want, axis1=1, axis2=2))
+        np.testing.assert_allclose(got, want * signs[..., None], rtol=1e-12, atol=1e-9)
+
+
+def test_smallest_right_singular_matches_lapack_on_every_path():
+    rng = np.random.default_rng(9)
+
+    def with_singular_values(s):
+        u = np.linalg.qr(rng.normal(size=(8, 4)))[0]
+        v = np.linalg.qr(rng.normal(size=(4, 4)))[0]
+        return u @ np.diag(s) @ v.T
+
+    # DLT-like: the translation column dominates, a noisy point leaves a small singular value
+    mats = [with_singular_values([400.0, 3.0, 1.0, s4])
+            for s4 in (1e-4, 1e-3, 0.01, 0.03, 0.05, 0.1)]
+    mats.append(with_singular_values([3.0, 2.0, 1.0, 0.999]))  # no gap: Jacobi
+    mats.append(with_singular_values([3.0, 2.0, 1.0, 1e-9]))  # a big gap: a step or two
+    exact = rng.normal(size=(8, 4))
+    exact[:, 2] = 0.0  # an exact null direction (0, 0, 1, 0)
+    mats.append(exact)
+    mats = np.array(mats)
+    _, h, plain = solver_lanes(mats)
+    assert plain[6] == _k.ITERATE and plain[8] == _k.NULL  # each path was taken
+    assert np.all(plain[:6] == _k.DONE) and plain[7] == _k.DONE
+    want = np.linalg.svd(mats)[2][:, -1]
+    sign = np.sign(np.sum(h * want, axis=1))[:, None]
+    np.testing.assert_allclose(h * sign, want, atol=1e-12)
+
+
+def test_mean_errors_kernel_matches_numpy_twin():
+    cams = [*ring_cameras(3), OrthographicCamera.from_axes("o", 2.0, ("x", "z"), (300, 200))]
+    rng = np.random.default_rng(10)
+    pts = chain_motion(4).reshape(-1, 3)
+    pts[5] = np.nan
+    px = project(cams, pts + rng.normal(0, 0.5, pts.shape))
+    w = (rng.random((4, len(pts))) < 0.7).astype(float)
+    w[:, 7] = 0.0  # seen by none: NaN
+    px[w == 0] = np.nan
+    pts[3] = -cams[0].R.T @ cams[0].t - 50.0 * cams[0].R[2]  # behind camera 0: NaN
+    px[:, 3], w[:, 3] = [600.0, 500.0], 1.0
+    err, ncams = np.empty(len(pts)), np.empty(len(pts), np.int64)
+    _k.mean_errors(*pack_cameras(cams), np.ascontiguousarray(pts.T), px[..., 0].copy(),
+                   px[..., 1].copy(), w, err, ncams)
+    want, want_n = _mean_errors_numpy(cams, pts, px, w)
+    np.testing.assert_array_equal(ncams, want_n)
+    np.testing.assert_array_equal(np.isnan(err), np.isnan(want))
+    assert np.isnan(err[[3, 5, 7]]).all() and np.isfinite(err).sum() > len(pts) // 2
+    np.testing.assert_allclose(err, want, rtol=1e-12, atol=1e-9)
 
 
 @pytest.mark.parametrize("inlier_px", [0.0, 6.0])
@@ -205,7 +299,7 @@ def test_optimisation_improves_on_linear_with_outliers():
     assert np.abs(seg - 20.0).max() < np.abs(np.linalg.norm(np.diff(lin.xyz, axis=1),
                                                             axis=-1) - 20.0).max()
     assert np.all(opt.ncams == (np.isfinite(xy[..., 0])).sum(axis=0))
-    # the errors kernel against NumPy: mean pixel distance over the cameras that see a point
+    # mean_errors against NumPy: mean pixel distance over the cameras that see a point
     dist = np.linalg.norm(project(cams, opt.xyz) - xy, axis=-1)
     np.testing.assert_allclose(opt.error, np.nanmean(dist, axis=0), rtol=1e-9)
 
