@@ -82,15 +82,6 @@ def _sincos(x):
     return s1, c1
 
 
-@njit(inline="always", **_OPTS)
-def _draw(state, x, scale):
-    """The stream's next draw as a step of Eq. 6: ``(state, x + scale · (2u - 1))``, as the
-    scalar kernel computes it."""
-    st = state + _GOLDEN
-    u = np.float64(mix64(st) >> _S11) * _TWO_M53
-    return st, x + scale * (2.0 * u - 1.0)
-
-
 @njit(**_OPTS)
 def sincos_lanes(x, s, c):
     """Fill ``s``, ``c`` with :func:`_sincos` of ``x`` (for tests)."""
@@ -196,30 +187,13 @@ def project_lanes(vals, cs, sn, parent, chain, pre_rot, pre_trans, post_trans, e
                 pos[j, 1, ln] = py
                 pos[j, 2, ln] = pz
     nv = kind.shape[0]
-    all_ortho = True
-    for v in range(nv):
-        all_ortho = all_ortho and kind[v] == ORTHOGRAPHIC
     for m in range(marker_joint.shape[0]):
         j = marker_joint[m]
         a0, a1, a2 = marker_local[m, 0], marker_local[m, 1], marker_local[m, 2]
-        if all_ortho:
-            # orthographic views two at a time, each loop computing the marker itself: a
-            # third of the loops of storing the 3D markers first
-            for v in range(0, nv, 2):
-                w = min(v + 1, nv - 1)  # an odd last view is projected twice
-                p00, p01, p02, p03 = P[v, 0, 0], P[v, 0, 1], P[v, 0, 2], P[v, 0, 3]
-                p10, p11, p12, p13 = P[v, 1, 0], P[v, 1, 1], P[v, 1, 2], P[v, 1, 3]
-                q00, q01, q02, q03 = P[w, 0, 0], P[w, 0, 1], P[w, 0, 2], P[w, 0, 3]
-                q10, q11, q12, q13 = P[w, 1, 0], P[w, 1, 1], P[w, 1, 2], P[w, 1, 3]
-                for ln in range(nl):
-                    x, y, z = _marker(rot, pos, j, ln, a0, a1, a2)
-                    proj[v, m, 0, ln] = p00 * x + p01 * y + p02 * z + p03
-                    proj[v, m, 1, ln] = p10 * x + p11 * y + p12 * z + p13
-                    proj[w, m, 0, ln] = q00 * x + q01 * y + q02 * z + q03
-                    proj[w, m, 1, ln] = q10 * x + q11 * y + q12 * z + q13
-            continue
         for ln in range(nl):
-            x, y, z = _marker(rot, pos, j, ln, a0, a1, a2)
+            x = pos[j, 0, ln] + rot[j, 0, ln] * a0 + rot[j, 1, ln] * a1 + rot[j, 2, ln] * a2
+            y = pos[j, 1, ln] + rot[j, 3, ln] * a0 + rot[j, 4, ln] * a1 + rot[j, 5, ln] * a2
+            z = pos[j, 2, ln] + rot[j, 6, ln] * a0 + rot[j, 7, ln] * a1 + rot[j, 8, ln] * a2
             mk[m, 0, ln] = x
             mk[m, 1, ln] = y
             mk[m, 2, ln] = z
@@ -233,15 +207,6 @@ def project_lanes(vals, cs, sn, parent, chain, pre_rot, pre_trans, post_trans, e
                     proj[v, m, 1, ln] = p10 * x + p11 * y + p12 * z + p13
             else:
                 _pinhole_lanes(K, dist, R, t, v, mk, m, proj)
-
-
-@njit(inline="always", **_OPTS)
-def _marker(rot, pos, j, ln, a0, a1, a2):
-    """Lane ``ln``'s marker at ``(a0, a1, a2)`` in joint j's frame, in the world."""
-    x = pos[j, 0, ln] + rot[j, 0, ln] * a0 + rot[j, 1, ln] * a1 + rot[j, 2, ln] * a2
-    y = pos[j, 1, ln] + rot[j, 3, ln] * a0 + rot[j, 4, ln] * a1 + rot[j, 5, ln] * a2
-    z = pos[j, 2, ln] + rot[j, 6, ln] * a0 + rot[j, 7, ln] * a1 + rot[j, 8, ln] * a2
-    return x, y, z
 
 
 @njit(inline="always", **_OPTS)
@@ -375,6 +340,8 @@ def iterate_lanes(n_iter, free_idx, n_hist, step, hist, nbins, th, dof_kind, lo,
     arg = np.empty(nl, np.int64)
     matched = np.empty((4, nl), np.bool_)
     near = np.empty((4, nl))
+    xs = np.empty(nl)
+    ok = np.empty(nl, np.bool_)
     pending = np.empty(nl, np.bool_)
     accept = np.empty(nl, np.bool_)
     better = np.empty(nl, np.bool_)
@@ -394,43 +361,47 @@ def iterate_lanes(n_iter, free_idx, n_hist, step, hist, nbins, th, dof_kind, lo,
             s_i = step[i]
             lo_i = lo[i]
             hi_i = hi[i]
-            # One loop per try, the first included (most draws are plausible at once): a
-            # lane that takes this try draws, keeps a plausible value, else its axis stays
-            # where it is (cur) until a later try succeeds.
+            for ln in range(nl):
+                xs[ln] = cur[i, ln]
+                ok[ln] = False
+                pending[ln] = True
             tries = 0
             any_pending = True
             while any_pending and tries <= max_redraws:
-                first = tries == 0
                 any_pending = False
                 if use_hist:
                     for ln in range(nl):
-                        take = first | pending[ln]
-                        st, x = _draw(rs[ln], cur[i, ln], length[ln] * s_i)
+                        st = rs[ln] + _GOLDEN
+                        u = np.float64(mix64(st) >> _S11) * _TWO_M53
+                        x = cur[i, ln] + (length[ln] * s_i) * (2.0 * u - 1.0)
                         # hist_at without a branch: the bin index wrapped by a float modulo
                         kf = np.floor(x * (nf * (0.5 / np.pi)) + 0.5 * nf)
                         inside = (kf >= 0.0) & (kf < nf)
                         kf = kf if inside else kf - nf * np.floor(kf / nf)
                         good = hist[i, int(kf)] >= th
-                        kept = cur[i, ln] if first else cand[i, ln]
-                        x = (x if good else kept) if take else cand[i, ln]
+                        take = pending[ln]
                         rs[ln] = st if take else rs[ln]
-                        cand[i, ln] = x
-                        sn[i, ln], cs[i, ln] = _sincos(x)
+                        xs[ln] = x if take else xs[ln]
+                        ok[ln] = good if take else ok[ln]
                         pending[ln] = take & (not good)
-                        any_pending = any_pending | (take & (not good))
+                        any_pending = any_pending | pending[ln]
                 else:
                     for ln in range(nl):
-                        take = first | pending[ln]
-                        st, x = _draw(rs[ln], cur[i, ln], length[ln] * s_i)
+                        st = rs[ln] + _GOLDEN
+                        u = np.float64(mix64(st) >> _S11) * _TWO_M53
+                        x = cur[i, ln] + (length[ln] * s_i) * (2.0 * u - 1.0)
                         good = (lo_i <= x) & (x <= hi_i)
-                        kept = cur[i, ln] if first else cand[i, ln]
-                        x = (x if good else kept) if take else cand[i, ln]
+                        take = pending[ln]
                         rs[ln] = st if take else rs[ln]
-                        cand[i, ln] = x
-                        sn[i, ln], cs[i, ln] = _sincos(x)
+                        xs[ln] = x if take else xs[ln]
+                        ok[ln] = good if take else ok[ln]
                         pending[ln] = take & (not good)
-                        any_pending = any_pending | (take & (not good))
+                        any_pending = any_pending | pending[ln]
                 tries += 1
+            for ln in range(nl):
+                x = xs[ln] if ok[ln] else cur[i, ln]
+                cand[i, ln] = x
+                sn[i, ln], cs[i, ln] = _sincos(x)
         project_lanes(cand, cs, sn, parent, chain, pre_rot, pre_trans, post_trans,
                       elem_axis, elem_index, joint_flags, marker_joint, marker_local,
                       slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj)
