@@ -110,20 +110,19 @@ _C4, _C5, _C6 = -2.75573143513906633035e-07, 2.08757232129817482790e-09, -1.1359
 
 @njit(cache=True, nogil=True, inline="always")
 def sincos(x):
-    """``(sin x, cos x)`` for radians x."""
+    """``(sin x, cos x)`` for radians x. The quadrant is picked by selects, not branches, so
+    a loop over SIMD lanes vectorises (:mod:`kinematics._lane_kernels` uses it too)."""
     k = np.rint(x * _TWO_OVER_PI)
     r = (x - k * _PIO2_HI) - k * _PIO2_LO
     z = r * r
     s = r + r * z * (_S1 + z * (_S2 + z * (_S3 + z * (_S4 + z * (_S5 + z * _S6)))))
     c = 1.0 - 0.5 * z + z * z * (_C1 + z * (_C2 + z * (_C3 + z * (_C4 + z * (_C5 + z * _C6)))))
-    q = int(k) & 3
-    if q == 0:
-        return s, c
-    if q == 1:
-        return c, -s
-    if q == 2:
-        return -s, -c
-    return -c, s
+    q = int(k) & 3  # quadrants 0..3: (s, c), (c, -s), (-s, -c), (-c, s)
+    s1 = c if q & 1 else s
+    c1 = s if q & 1 else c
+    s1 = -s1 if q >= 2 else s1
+    c1 = -c1 if q == 1 or q == 2 else c1
+    return s1, c1
 
 
 # -- histogram lookup ---------------------------------------------------------------------

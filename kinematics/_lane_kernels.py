@@ -18,9 +18,10 @@ last bit — whatever the number of lanes or threads. What a lane cannot do chea
 run, its starting E, refinement, deciding on re-runs) calls the scalar kernels.
 
 Layout (``L = LANES``): state ``cur``, ``cand``, ``best``, ``cs``, ``sn`` (n_state, L);
-``rot`` (nj, 9, L) row-major A'_j; ``pos`` (nj, 3, L); ``mk`` (nm, 3, L); ``proj``
+``rot`` (nj + n_chains, 9, L) row-major A'_j and the roots' seed rotations; ``pos``
+(nj + n_chains, 3, L); ``mk`` (nm, 3, L); ``proj``
 (nv, nm, 2, L); detections ``dx``, ``dy`` (nv, c_max, L), padded with :data:`PAD` beyond the
-lane's own ``ndet`` (nv, L). The supported problems are those :func:`lanes_valid` accepts
+lane's own ``ndet`` (nv, L). The supported problems are those ``Fitter._use_lanes`` accepts
 (unlabelled points, one partition, independent frames); the scalar kernel does the rest.
 """
 
@@ -35,8 +36,9 @@ from kinematics._anneal_kernels import (
     ROOT_POSE,
     count_unexplained,
     evaluate,
-    mix64,
+    next_uniform,
     project_posture,
+    sincos,
     stream_state,
 )
 from kinematics._camera_kernels import ORTHOGRAPHIC
@@ -49,44 +51,15 @@ LANES = 64
 #: Coordinate of a padding detection: farther than any real one, finite when squared.
 PAD = 1.0e30
 
-_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
-_S11 = np.uint64(11)
-_TWO_M53 = 1.0 / 9007199254740992.0  # 2**-53
-
-# The scalar kernel's sine/cosine constants (kinematics._anneal_kernels.sincos).
-_TWO_OVER_PI = 6.36619772367581382433e-01
-_PIO2_HI = 1.57079632673412561417e00
-_PIO2_LO = 6.07710050650619224932e-11
-_S1, _S2, _S3 = -1.66666666666666324348e-01, 8.33333333332248946124e-03, -1.98412698298579493134e-04
-_S4, _S5, _S6 = 2.75573137070700676789e-06, -2.50507602534068634195e-08, 1.58969099521155010221e-10
-_C1, _C2, _C3 = 4.16666666666666019037e-02, -1.38888888888741095749e-03, 2.48015872894767294178e-05
-_C4, _C5, _C6 = -2.75573143513906633035e-07, 2.08757232129817482790e-09, -1.13596475577881948265e-11
-
 _OPTS = {"cache": True, "nogil": True, "error_model": "numpy"}
-
-
-@njit(inline="always", **_OPTS)
-def _sincos(x):
-    """``(sin x, cos x)`` bit-identical to the scalar kernel's ``sincos``, without branches
-    (the quadrant picks by selects, so a loop over lanes vectorises)."""
-    k = np.rint(x * _TWO_OVER_PI)
-    r = (x - k * _PIO2_HI) - k * _PIO2_LO
-    z = r * r
-    s = r + r * z * (_S1 + z * (_S2 + z * (_S3 + z * (_S4 + z * (_S5 + z * _S6)))))
-    c = 1.0 - 0.5 * z + z * z * (_C1 + z * (_C2 + z * (_C3 + z * (_C4 + z * (_C5 + z * _C6)))))
-    q = int(k) & 3
-    s1 = c if q & 1 else s
-    c1 = s if q & 1 else c
-    s1 = -s1 if q >= 2 else s1
-    c1 = -c1 if q == 1 or q == 2 else c1
-    return s1, c1
 
 
 @njit(**_OPTS)
 def sincos_lanes(x, s, c):
-    """Fill ``s``, ``c`` with :func:`_sincos` of ``x`` (for tests)."""
+    """Fill ``s``, ``c`` with the kernels' ``sincos`` of ``x`` in a loop as the lanes run it
+    (for tests)."""
     for k in range(x.shape[0]):
-        s[k], c[k] = _sincos(x[k])
+        s[k], c[k] = sincos(x[k])
 
 
 # -- forward kinematics and projection of all lanes ----------------------------------------
@@ -349,9 +322,7 @@ def iterate_lanes(n_iter, free_idx, n_hist, step, hist, nbins, th, dof_kind, lo,
     n = 0
     while n < n_iter and not done:
         for ln in range(nl):
-            st = rs[ln] + _GOLDEN
-            rs[ln] = st
-            u = np.float64(mix64(st) >> _S11) * _TWO_M53
+            rs[ln], u = next_uniform(rs[ln])
             e_acc[ln] = e_cur[ln] + tau[ln] * -np.log(u)
         for q in range(n_free):
             i = free_idx[q]
@@ -371,8 +342,7 @@ def iterate_lanes(n_iter, free_idx, n_hist, step, hist, nbins, th, dof_kind, lo,
                 any_pending = False
                 if use_hist:
                     for ln in range(nl):
-                        st = rs[ln] + _GOLDEN
-                        u = np.float64(mix64(st) >> _S11) * _TWO_M53
+                        st, u = next_uniform(rs[ln])
                         x = cur[i, ln] + (length[ln] * s_i) * (2.0 * u - 1.0)
                         # hist_at without a branch: the bin index wrapped by a float modulo
                         kf = np.floor(x * (nf * (0.5 / np.pi)) + 0.5 * nf)
@@ -387,8 +357,7 @@ def iterate_lanes(n_iter, free_idx, n_hist, step, hist, nbins, th, dof_kind, lo,
                         any_pending = any_pending | pending[ln]
                 else:
                     for ln in range(nl):
-                        st = rs[ln] + _GOLDEN
-                        u = np.float64(mix64(st) >> _S11) * _TWO_M53
+                        st, u = next_uniform(rs[ln])
                         x = cur[i, ln] + (length[ln] * s_i) * (2.0 * u - 1.0)
                         good = (lo_i <= x) & (x <= hi_i)
                         take = pending[ln]
@@ -401,7 +370,7 @@ def iterate_lanes(n_iter, free_idx, n_hist, step, hist, nbins, th, dof_kind, lo,
             for ln in range(nl):
                 x = xs[ln] if ok[ln] else cur[i, ln]
                 cand[i, ln] = x
-                sn[i, ln], cs[i, ln] = _sincos(x)
+                sn[i, ln], cs[i, ln] = sincos(x)
         project_lanes(cand, cs, sn, parent, chain, pre_rot, pre_trans, post_trans,
                       elem_axis, elem_index, joint_flags, marker_joint, marker_local,
                       slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj)
@@ -575,7 +544,7 @@ def _fit_group(f0, f1, frame_ids, root_pos, root_rot, start, body, cams, dofs, s
                     cur[k, ln] = start[k]
                     cand[k, ln] = start[k]
                     best[k, ln] = start[k]
-                    sn[k, ln], cs[k, ln] = _sincos(start[k])
+                    sn[k, ln], cs[k, ln] = sincos(start[k])
                 project_posture(start, root_pos[f], root_rot[f], parent, chain, pre_rot,
                                 pre_trans, post_trans, elem_axis, elem_index, joint_flags,
                                 marker_joint, marker_local, slide_index, kind, P, K, dist, R,
