@@ -798,6 +798,103 @@ def anneal_partitions(origin, state, rp, rr, body, cams, dofs, schedule, error, 
                     cap, penalty_cap, per_view, nearest), its
 
 
+# -- the per-frame procedure, shared by fit_frames and the lane kernel ---------------------
+@njit(cache=True, nogil=True)
+def clear_frame(out, f):
+    """Frame ``f``'s outputs before it is fitted: NaN, no runs (a frame without observations
+    keeps them)."""
+    out.runs[f] = 0
+    out.iterations[f] = 0
+    out.pairs[f] = 0
+    out.error[f] = np.nan
+    out.angles[f, :] = np.nan
+    out.view_error[f, :] = np.nan
+    out.run_angles[f, :, :] = np.nan
+    out.run_error[f, :] = np.nan
+
+
+@njit(cache=True, nogil=True, inline="always")
+def wants_run(run, min_runs, max_runs, e_keep, u_keep, threshold, max_unexplained):
+    """Whether a frame gets run ``run``: the first ``min_runs`` always (candidates), then
+    while the kept run is above the re-analysis threshold or leaves too many detections
+    unexplained, ``max_runs`` at most."""
+    u_limit = max_unexplained if max_unexplained >= 0 else 1 << 30
+    return run < max_runs and (run < min_runs or not (e_keep <= threshold
+                                                      and u_keep <= u_limit))
+
+
+@njit(cache=True, nogil=True, inline="always")
+def keeps(e, u, e_keep, u_keep, max_unexplained):
+    """Whether a run (E ``e``, ``u`` unexplained detections) replaces the kept one: lower E,
+    or with ``max_unexplained`` in use fewer unexplained detections first; ties keep the
+    earlier run."""
+    if max_unexplained < 0:
+        return e < e_keep
+    return u < u_keep or (u == u_keep and e < e_keep)
+
+
+@njit(cache=True, nogil=True)
+def finish_run(best, e, rp, rr, body, cams, dofs, schedule, error, objective, points, conf,
+               view_off, obs3, claim_gate, annealed, cs, sn, rot, pos, mk, proj, per_view,
+               nearest):
+    """After a run's annealing (best posture ``best``, its E ``e``): refinement, kept only if
+    E did not grow, and the count of unexplained detections. Updates ``best`` in place;
+    returns (E, refinement pairs, unexplained)."""
+    (parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index, joint_flags,
+     marker_joint, marker_local, slide_index) = body
+    kind, P, K, dist, R, t = cams
+    free_idx, _, _, _, dof_kind, lo, hi = dofs
+    refine_steps, refine_gate, max_unexplained = schedule[13], schedule[14], schedule[16]
+    bidirectional, weight, cap, penalty_cap = error
+    pairs = 0
+    if refine_steps > 0:
+        # Refinement minimises squared pair residuals, not E: keep its result only if E
+        # did not grow (it never makes a fit worse).
+        annealed[:] = best
+        _, pairs = _rk.refine_posture(
+            best, free_idx, lo, hi, dof_kind, refine_steps, refine_gate, rp, rr, parent, chain,
+            pre_rot, pre_trans, post_trans, elem_axis, elem_index, joint_flags, marker_joint,
+            marker_local, slide_index, kind, P, K, dist, R, t, objective, points, conf,
+            view_off, obs3)
+        project_posture(best, rp, rr, parent, chain, pre_rot, pre_trans, post_trans,
+                        elem_axis, elem_index, joint_flags, marker_joint, marker_local,
+                        slide_index, kind, P, K, dist, R, t, cs, sn, rot, pos, mk, proj)
+        e_refined = evaluate(objective, proj, mk, points, conf, view_off, obs3, bidirectional,
+                             weight, cap, penalty_cap, per_view, nearest)
+        if e_refined <= e:
+            e = e_refined
+        else:
+            best[:] = annealed
+            pairs = 0
+    u = 0
+    if max_unexplained >= 0 and objective == OBJ_NEAREST:
+        # Detections far from every model marker: a limb on another's blobs leaves its own
+        # unexplained, a fused blob does not.
+        project_posture(best, rp, rr, parent, chain, pre_rot, pre_trans, post_trans,
+                        elem_axis, elem_index, joint_flags, marker_joint, marker_local,
+                        slide_index, kind, P, K, dist, R, t, cs, sn, rot, pos, mk, proj)
+        u = count_unexplained(proj, points, view_off, claim_gate)
+    return e, pairs, u
+
+
+@njit(cache=True, nogil=True)
+def write_frame(out, f, keep, runs, rp, rr, body, cams, error, objective, points, conf,
+                view_off, obs3, cs, sn, rot, pos, mk, proj, per_view, nearest):
+    """Frame ``f``'s outputs from its kept posture ``keep`` after ``runs`` runs."""
+    (parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index, joint_flags,
+     marker_joint, marker_local, slide_index) = body
+    kind, P, K, dist, R, t = cams
+    bidirectional, weight, cap, penalty_cap = error
+    project_posture(keep, rp, rr, parent, chain, pre_rot, pre_trans, post_trans, elem_axis,
+                    elem_index, joint_flags, marker_joint, marker_local, slide_index, kind, P,
+                    K, dist, R, t, cs, sn, rot, pos, mk, proj)
+    out.error[f] = evaluate(objective, proj, mk, points, conf, view_off, obs3, bidirectional,
+                            weight, cap, penalty_cap, per_view, nearest)
+    out.view_error[f, :] = per_view
+    out.angles[f, :] = keep
+    out.runs[f] = runs
+
+
 @njit(cache=True, nogil=True, parallel=True)
 def fit_frames(seg_off, frame_ids, root_pos, root_rot, start, body, cams, dofs, schedule,
                error, obs, parts, out):
@@ -844,13 +941,11 @@ def fit_frames(seg_off, frame_ids, root_pos, root_rot, start, body, cams, dofs, 
     kind, P, K, dist, R, t = cams
     free_idx, step, hist, nbins, dof_kind, lo, hi = dofs
     (th, max_redraws, n_end, n_l, n_tau, tau0, l0, c_l, c_tau, eps, seed,
-     reanalysis_threshold, max_runs, refine_steps, refine_gate, start_previous,
-     max_unexplained, min_runs) = schedule
+     reanalysis_threshold, max_runs, _, _, start_previous, max_unexplained, min_runs) = schedule
     claim_gate = parts[4]
     bidirectional, weight, cap, penalty_cap = error
     objective, det_points, det_conf, det_off, obs3 = obs
-    (out_angles, out_error, out_view_error, out_runs, out_iterations, out_pairs,
-     out_run_angles, out_run_error) = out
+    out_iterations, out_pairs, out_run_angles, out_run_error = out[4:]
     n_parts = parts[0].shape[0]
     nv = kind.shape[0]
     nj = parent.shape[0]
@@ -877,14 +972,7 @@ def fit_frames(seg_off, frame_ids, root_pos, root_rot, start, body, cams, dofs, 
             vo = det_off[f * nv: f * nv + nv + 1]
             rp = root_pos[f]
             rr = root_rot[f]
-            out_runs[f] = 0
-            out_iterations[f] = 0
-            out_pairs[f] = 0
-            out_error[f] = np.nan
-            out_angles[f, :] = np.nan
-            out_view_error[f, :] = np.nan
-            out_run_angles[f, :, :] = np.nan
-            out_run_error[f, :] = np.nan
+            clear_frame(out, f)
             has = vo[nv] > vo[0]
             if objective == OBJ_POINTS3D:
                 has = False
@@ -894,9 +982,8 @@ def fit_frames(seg_off, frame_ids, root_pos, root_rot, start, body, cams, dofs, 
                 e_keep = np.inf
                 run = 0
                 u_keep = 1 << 30  # with max_unexplained < 0 only E decides (u stays 0)
-                u_limit = max_unexplained if max_unexplained >= 0 else 1 << 30
-                while run < max_runs and (run < min_runs or not (
-                        e_keep <= reanalysis_threshold and u_keep <= u_limit)):
+                while wants_run(run, min_runs, max_runs, e_keep, u_keep, reanalysis_threshold,
+                                max_unexplained):
                     state = stream_state(seed, frame_ids[f], run)
                     origin = first if run == 0 else start
                     if n_parts > 1:
@@ -918,57 +1005,21 @@ def fit_frames(seg_off, frame_ids, root_pos, root_rot, start, body, cams, dofs, 
                                               cand, best, cs, sn, rot, pos, mk, proj,
                                               per_view, nearest)
                     out_iterations[f] += its
-                    pairs = 0
-                    if refine_steps > 0:
-                        # Refinement minimises squared pair residuals, not E: keep its
-                        # result only if E did not grow (it never makes a fit worse).
-                        annealed[:] = best
-                        _, pairs = _rk.refine_posture(
-                            best, free_idx, lo, hi, dof_kind, refine_steps, refine_gate, rp,
-                            rr, parent, chain, pre_rot, pre_trans, post_trans, elem_axis,
-                            elem_index, joint_flags, marker_joint, marker_local, slide_index,
-                            kind, P, K, dist, R, t, objective, det_points, det_conf, vo,
-                            obs3[f])
-                        project_posture(best, rp, rr, parent, chain, pre_rot, pre_trans,
-                                        post_trans, elem_axis, elem_index, joint_flags,
-                                        marker_joint, marker_local, slide_index, kind, P, K,
-                                        dist, R, t, cs, sn, rot, pos, mk, proj)
-                        e_refined = evaluate(objective, proj, mk, det_points, det_conf, vo,
-                                             obs3[f], bidirectional, weight, cap,
-                                             penalty_cap, per_view, nearest)
-                        if e_refined <= e:
-                            e = e_refined
-                        else:
-                            best[:] = annealed
-                            pairs = 0
-                    u = 0
-                    if max_unexplained >= 0 and objective == OBJ_NEAREST:
-                        # Detections far from every model marker: a limb on another's blobs
-                        # leaves its own unexplained, a fused blob does not.
-                        project_posture(best, rp, rr, parent, chain, pre_rot, pre_trans,
-                                        post_trans, elem_axis, elem_index, joint_flags,
-                                        marker_joint, marker_local, slide_index, kind, P, K,
-                                        dist, R, t, cs, sn, rot, pos, mk, proj)
-                        u = count_unexplained(proj, det_points, vo, claim_gate)
+                    e, pairs, u = finish_run(best, e, rp, rr, body, cams, dofs, schedule,
+                                             error, objective, det_points, det_conf, vo,
+                                             obs3[f], claim_gate, annealed, cs, sn, rot, pos,
+                                             mk, proj, per_view, nearest)
                     out_run_angles[f, run, :] = best
                     out_run_error[f, run] = e
-                    better = u < u_keep or (u == u_keep and e < e_keep)
-                    if (max_unexplained < 0 and e < e_keep) or (max_unexplained >= 0 and better):
+                    if keeps(e, u, e_keep, u_keep, max_unexplained):
                         e_keep = e
                         u_keep = u
                         keep[:] = best
                         out_pairs[f] = pairs
                     run += 1
-                project_posture(keep, rp, rr, parent, chain, pre_rot, pre_trans, post_trans,
-                                elem_axis, elem_index, joint_flags, marker_joint,
-                                marker_local, slide_index, kind, P, K, dist, R, t, cs, sn,
-                                rot, pos, mk, proj)
-                out_error[f] = evaluate(objective, proj, mk, det_points, det_conf, vo, obs3[f],
-                                        bidirectional, weight, cap, penalty_cap, per_view,
-                                        nearest)
-                out_view_error[f, :] = per_view
-                out_angles[f, :] = keep
-                out_runs[f] = run
+                write_frame(out, f, keep, run, rp, rr, body, cams, error, objective,
+                            det_points, det_conf, vo, obs3[f], cs, sn, rot, pos, mk, proj,
+                            per_view, nearest)
                 if start_previous:
                     first[:] = keep
 

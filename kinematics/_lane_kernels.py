@@ -30,16 +30,19 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from kinematics import _refine_kernels as _rk
 from kinematics._anneal_kernels import (
     NAN_MARKER_COST,
     ROOT_POSE,
-    count_unexplained,
+    clear_frame,
     evaluate,
+    finish_run,
+    keeps,
     next_uniform,
     project_posture,
     sincos,
     stream_state,
+    wants_run,
+    write_frame,
 )
 from kinematics._camera_kernels import ORTHOGRAPHIC
 
@@ -425,12 +428,9 @@ def _fit_group(f0, f1, frame_ids, root_pos, root_rot, start, body, cams, dofs, s
     kind, P, K, dist, R, t = cams
     free_idx, step, hist, nbins, dof_kind, lo, hi = dofs
     (th, max_redraws, n_end, n_l, n_tau, tau0, l0, c_l, c_tau, eps, seed,
-     reanalysis_threshold, max_runs, refine_steps, refine_gate, _, max_unexplained,
-     min_runs) = schedule
+     reanalysis_threshold, max_runs, _, _, _, max_unexplained, min_runs) = schedule
     bidirectional, weight, cap, penalty_cap = error
     objective, det_points, det_conf, det_off, obs3 = obs
-    (out_angles, out_error, out_view_error, out_runs, out_iterations, out_pairs,
-     out_run_angles, out_run_error) = out
     nv = kind.shape[0]
     nj = parent.shape[0]
     nm = marker_joint.shape[0]
@@ -495,20 +495,12 @@ def _fit_group(f0, f1, frame_ids, root_pos, root_rot, start, body, cams, dofs, s
     keep_run = np.zeros(n, np.int64)
     run_u = np.zeros((n, max_runs), np.int64)
     run_pairs = np.zeros((n, max_runs), np.int64)
-    u_limit = max_unexplained if max_unexplained >= 0 else 1 << 30
     queue = np.empty(n * max_runs, np.int64)  # tasks: local frame * max_runs + run
     head = 0
     tail = 0
     first_runs = min(max(min_runs, 1), max_runs)
     for f in range(f0, f1):
-        out_runs[f] = 0
-        out_iterations[f] = 0
-        out_pairs[f] = 0
-        out_error[f] = np.nan
-        out_angles[f, :] = np.nan
-        out_view_error[f, :] = np.nan
-        out_run_angles[f, :, :] = np.nan
-        out_run_error[f, :] = np.nan
+        clear_frame(out, f)
         if det_off[f * nv + nv] > det_off[f * nv]:
             for r in range(first_runs):
                 queue[tail] = (f - f0) * max_runs + r
@@ -584,63 +576,39 @@ def _fit_group(f0, f1, frame_ids, root_pos, root_rot, start, body, cams, dofs, s
                 vo = det_off[f * nv: f * nv + nv + 1]
                 for k in range(na):
                     s_state[k] = best[k, ln]
-                e_run = e_best[ln]
-                out_iterations[f] += it[ln]
-                pairs = 0
-                if refine_steps > 0:
-                    s_annealed[:] = s_state
-                    _, pairs = _rk.refine_posture(
-                        s_state, free_idx, lo, hi, dof_kind, refine_steps, refine_gate,
-                        root_pos[f], root_rot[f], parent, chain, pre_rot, pre_trans,
-                        post_trans, elem_axis, elem_index, joint_flags, marker_joint,
-                        marker_local, slide_index, kind, P, K, dist, R, t, objective,
-                        det_points, det_conf, vo, obs3[f])
-                    project_posture(s_state, root_pos[f], root_rot[f], parent, chain, pre_rot,
-                                    pre_trans, post_trans, elem_axis, elem_index, joint_flags,
-                                    marker_joint, marker_local, slide_index, kind, P, K, dist,
-                                    R, t, s_cs, s_sn, s_rot, s_pos, s_mk, s_proj)
-                    e_ref = evaluate(objective, s_proj, s_mk, det_points, det_conf, vo,
-                                     obs3[f], bidirectional, weight, cap, penalty_cap, s_view,
-                                     s_near)
-                    if e_ref <= e_run:
-                        e_run = e_ref
-                    else:
-                        s_state[:] = s_annealed
-                        pairs = 0
-                u = 0
-                if max_unexplained >= 0:
-                    project_posture(s_state, root_pos[f], root_rot[f], parent, chain, pre_rot,
-                                    pre_trans, post_trans, elem_axis, elem_index, joint_flags,
-                                    marker_joint, marker_local, slide_index, kind, P, K, dist,
-                                    R, t, s_cs, s_sn, s_rot, s_pos, s_mk, s_proj)
-                    u = count_unexplained(s_proj, det_points, vo, claim_gate)
-                out_run_angles[f, run, :] = s_state
-                out_run_error[f, run] = e_run
+                out.iterations[f] += it[ln]
+                e_run, pairs, u = finish_run(s_state, e_best[ln], root_pos[f], root_rot[f],
+                                             body, cams, dofs, schedule, error, objective,
+                                             det_points, det_conf, vo, obs3[f], claim_gate,
+                                             s_annealed, s_cs, s_sn, s_rot, s_pos, s_mk,
+                                             s_proj, s_view, s_near)
+                out.run_angles[f, run, :] = s_state
+                out.run_error[f, run] = e_run
                 run_u[fl, run] = u
                 run_pairs[fl, run] = pairs
                 finished[fl] += 1
                 if finished[fl] == issued[fl]:
-                    _settle(fl, f, issued, e_keep, u_keep, keep_run, run_u, run_pairs,
-                            out_run_error, out_pairs, max_unexplained)
+                    # the frame's runs so far are all done: take them in run order, as the
+                    # scalar kernel does after each (runs taken before change nothing)
+                    for r in range(issued[fl]):
+                        if keeps(out.run_error[f, r], run_u[fl, r], e_keep[fl], u_keep[fl],
+                                 max_unexplained):
+                            e_keep[fl] = out.run_error[f, r]
+                            u_keep[fl] = run_u[fl, r]
+                            keep_run[fl] = r
+                            out.pairs[f] = run_pairs[fl, r]
                     nxt = issued[fl]
-                    if nxt < max_runs and (nxt < min_runs or not (
-                            e_keep[fl] <= reanalysis_threshold and u_keep[fl] <= u_limit)):
+                    if wants_run(nxt, min_runs, max_runs, e_keep[fl], u_keep[fl],
+                                 reanalysis_threshold, max_unexplained):
                         queue[tail] = fl * max_runs + nxt
                         tail += 1
                         issued[fl] = nxt + 1
                     else:
-                        s_state[:] = out_run_angles[f, keep_run[fl], :]
-                        project_posture(s_state, root_pos[f], root_rot[f], parent, chain,
-                                        pre_rot, pre_trans, post_trans, elem_axis, elem_index,
-                                        joint_flags, marker_joint, marker_local, slide_index,
-                                        kind, P, K, dist, R, t, s_cs, s_sn, s_rot, s_pos, s_mk,
-                                        s_proj)
-                        out_error[f] = evaluate(objective, s_proj, s_mk, det_points, det_conf,
-                                                vo, obs3[f], bidirectional, weight, cap,
-                                                penalty_cap, s_view, s_near)
-                        out_view_error[f, :] = s_view
-                        out_angles[f, :] = s_state
-                        out_runs[f] = issued[fl]
+                        s_state[:] = out.run_angles[f, keep_run[fl], :]
+                        write_frame(out, f, s_state, issued[fl], root_pos[f], root_rot[f],
+                                    body, cams, error, objective, det_points, det_conf, vo,
+                                    obs3[f], s_cs, s_sn, s_rot, s_pos, s_mk, s_proj, s_view,
+                                    s_near)
         if any_done:
             continue  # refill the freed lanes first
         iterate_lanes(1 << 30, free_idx, n_hist, step, hist, nbins, th, dof_kind, lo, hi,
@@ -648,19 +616,3 @@ def _fit_group(f0, f1, frame_ids, root_pos, root_rot, start, body, cams, dofs, s
                       length, to_tau, to_l, e_cur, e_best, cur, cand, best, cs, sn, body,
                       cams, dx, dy, ndet, cmax, bidirectional, weight, cap,
                       penalty_cap, rot, pos, mk, proj, nearest, e)
-
-
-@njit(**_OPTS)
-def _settle(fl, f, issued, e_keep, u_keep, keep_run, run_u, run_pairs, run_error, out_pairs,
-            max_unexplained):
-    """Take the frame's finished runs in run order, as the scalar kernel does after each
-    (runs taken before change nothing: ties keep the earlier run)."""
-    for run in range(issued[fl]):
-        e = run_error[f, run]
-        u = run_u[fl, run]
-        better = u < u_keep[fl] or (u == u_keep[fl] and e < e_keep[fl])
-        if (max_unexplained < 0 and e < e_keep[fl]) or (max_unexplained >= 0 and better):
-            e_keep[fl] = e
-            u_keep[fl] = u
-            keep_run[fl] = run
-            out_pairs[f] = run_pairs[fl, run]
