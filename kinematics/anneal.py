@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import copy
 import math
-from collections.abc import Iterable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import NamedTuple
 
@@ -552,8 +552,8 @@ class Fitter:
                                roots, rots, start, np.array([0, 1], np.int64))[0]
 
     def iter_fit(self, detections, frames=None, *, chunk_size: int | None = None,
-                 sequence_starts: Iterable[int] = (), previous: FrameResult | None = None
-                 ) -> Iterator[FrameResult]:
+                 sequence_starts: Iterable[int] = (), previous: FrameResult | None = None,
+                 cancel: Callable[[], bool] | None = None) -> Iterator[FrameResult]:
         """Fit frames of a video; yields one :class:`FrameResult` per frame, in order.
 
         Parameters
@@ -567,8 +567,9 @@ class Fitter:
             ``start="previous"`` follow this order); default all.
         chunk_size : int, optional
             Frames computed per parallel batch (default 8 per thread, or 2 segments per
-            thread with ``start="previous"``; rounded up to whole segments); closing the
-            generator takes effect between batches.
+            thread with ``start="previous"``, or with the lane backend enough runs to fill
+            its lanes twice; rounded up to whole segments); closing the generator takes
+            effect between batches.
         sequence_starts : iterable of int
             Frames where a new, independent sequence starts (concatenated recordings): the
             path through time (``candidates`` > 1) never links across them. Gaps in
@@ -576,6 +577,10 @@ class Fitter:
         previous : FrameResult, optional
             The result chosen just before the first of ``frames`` (a resumed fit): the path
             continues from it, so a fit resumed where it stopped chooses as the whole would.
+        cancel : callable, optional
+            Asked before each batch; once it returns True no further batch is fitted and
+            the frames fitted so far are yielded (the path through time holds back up to 64
+            of them, so closing the generator alone can wait that long).
 
         Raises
         ------
@@ -585,11 +590,11 @@ class Fitter:
         obs = self.observations(detections)
         idx = self._frame_indices(frames, obs.n_frames)
         starts = np.asarray(list(sequence_starts), np.int64)
-        return self._iter(obs, idx, chunk_size, starts, previous)
+        return self._iter(obs, idx, chunk_size, starts, previous, cancel)
 
     def _iter(self, obs: Observations, idx: np.ndarray, chunk_size: int | None,
-              starts: np.ndarray | None = None, previous: FrameResult | None = None
-              ) -> Iterator[FrameResult]:
+              starts: np.ndarray | None = None, previous: FrameResult | None = None,
+              cancel: Callable[[], bool] | None = None) -> Iterator[FrameResult]:
         starts = np.zeros(0, np.int64) if starts is None else starts
         roots, rots = self._place(obs, idx)
         params = self.params
@@ -611,6 +616,8 @@ class Fitter:
 
         def chunks():
             for a in range(0, len(idx), chunk):
+                if cancel is not None and cancel():
+                    return
                 sel = idx[a: a + chunk]
                 n = len(sel)
                 seg_off = np.unique(np.r_[np.arange(0, n, seg), n]).astype(np.int64)

@@ -479,3 +479,19 @@ def test_pins_hold_axes_while_the_rest_is_fitted(locust):
     every = {label: 0.0 for label in locust.axis_labels}
     with pytest.raises(KinematicsError, match="nothing to fit"):
         fitter.with_pins(every)
+
+
+def test_cancel_stops_before_the_next_batch_and_keeps_what_was_fitted(locust):
+    truth = smooth_random_motion(locust, 40, 1, seed=3)
+    dets = planted(locust, locust_cameras(), truth)
+    fitter = Fitter(locust, locust_cameras(), AnnealParams().with_schedule(300))
+    asked = []
+
+    def cancel():  # stop after two batches of 4 frames
+        asked.append(1)
+        return len(asked) > 2
+
+    got = list(fitter.iter_fit(dets, chunk_size=4, cancel=cancel))
+    assert [r.frame for r in got] == list(range(8))  # the path still decides what it holds
+    assert all(r.runs for r in got)
+    assert len(asked) == 3
