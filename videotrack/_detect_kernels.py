@@ -7,7 +7,8 @@ with statistics costs about 1 ms per half PAL frame, while marker masks are near
 for runs of foreground pixels and labelling the runs costs a few microseconds.
 
 Pixel (row i, column j) has centre (x, y) = (j, i). Regions are numbered in raster order of their
-first pixel, as OpenCV numbers its labels.
+first pixel, as OpenCV numbers its labels. The kernels release the GIL (``nogil``): a run fits
+earlier records in another thread while it detects (``videotrack.pipeline.FitAlongside``).
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ AREA, X0, Y0, X1, Y1, SX, SY, SXX, SYY, SXY = range(10)
 N_STATS = 10
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def find_runs(mask):
     """Horizontal runs of non-zero pixels in raster order.
 
@@ -40,7 +41,7 @@ def find_runs(mask):
         cap = n
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _row_max(row):
     m = np.uint8(0)
     for x in range(row.size):
@@ -48,7 +49,7 @@ def _row_max(row):
     return m
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _scan_runs(mask, rows, starts, ends):
     """Store runs while the arrays have room; return how many runs there are."""
     h, w = mask.shape
@@ -74,7 +75,7 @@ def _scan_runs(mask, rows, starts, ends):
     return n
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _root(parent, i):
     while parent[i] != i:
         parent[i] = parent[parent[i]]  # path halving
@@ -82,7 +83,7 @@ def _root(parent, i):
     return i
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def label_runs(n, rows, starts, ends, diagonal):
     """Connected components of the first ``n`` runs (union-find over adjacent rows).
 
@@ -130,7 +131,7 @@ def label_runs(n, rows, starts, ends, diagonal):
     return labels, n_regions
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def region_moments(n, rows, starts, ends, labels, n_regions):
     """Area, inclusive bounding box and binary moment sums of each region.
 
@@ -165,7 +166,7 @@ def region_moments(n, rows, starts, ends, labels, n_regions):
     return st
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def weighted_centroids(weights, label_img, n, rows, starts, ends, labels, stats, keep, pad):
     """Intensity-weighted centroids of the kept regions.
 

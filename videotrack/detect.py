@@ -103,6 +103,7 @@ def detect_project(
     output: str | os.PathLike | None = None,
     log: Callable[[str], object] | None = None,
     frames_field: str = "frames",
+    each: Callable[[FrameDetections], object] | None = None,
 ) -> tuple[Detections, Path, bool]:
     """Detect the markers of a project's video(s) and save them, unless already up to date.
 
@@ -122,6 +123,9 @@ def detect_project(
         Receives a one-line note when an existing file is out of date.
     frames_field : str
         Name given to ``frames`` in errors (the CLI passes ``--frames``).
+    each : callable, optional
+        Called with every record's :class:`FrameDetections` as it is detected (before the
+        file is written; never when the file is up to date).
 
     Returns
     -------
@@ -164,7 +168,8 @@ def detect_project(
 
         try:
             detections = detect_video(videos, settings, frame_range,
-                                      progress=step if progress is not None else None)
+                                      progress=step if progress is not None else None,
+                                      each=each)
         except VideoTrackError as err:
             raise err.located(file=config.path) from None
     # what went wrong travels with the detections: later runs report it too; paths are
@@ -358,7 +363,8 @@ class _Sampler:
 
 
 def detect_video(source, settings: DetectSettings, frames=None,
-                 progress: Callable[[int], object] | None = None) -> Detections:
+                 progress: Callable[[int], object] | None = None,
+                 each: Callable[[FrameDetections], object] | None = None) -> Detections:
     """Detect markers in every record of a frame range and collect them.
 
     Parameters
@@ -368,6 +374,9 @@ def detect_video(source, settings: DetectSettings, frames=None,
     frames : range, (start, stop), "A:B" or None
     progress : callable, optional
         Called with 1 after each video frame (e.g. ``tqdm.update``).
+    each : callable, optional
+        Called with each record's :class:`FrameDetections` as it is detected (e.g. to fit
+        records while later ones are still being detected).
 
     Returns
     -------
@@ -387,6 +396,8 @@ def detect_video(source, settings: DetectSettings, frames=None,
             per_record.append(list(zip(det.points, det.areas, strict=True)))
             video_frames.append(det.video_frame)
             parities.append(-1 if det.parity is None else det.parity)
+            if each is not None:
+                each(det)
             if progress is not None and det.video_frame != last:
                 progress(1)
             last = det.video_frame

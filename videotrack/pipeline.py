@@ -15,6 +15,14 @@ same inputs and parameters keeps those frames and fits only the rest; the final 
 same as an uninterrupted run's because frames are fitted independently from their own random
 streams (with ``start = "previous"`` the checkpoint is not used).
 
+Fitting while detecting: when every record is fitted on its own (:func:`not_streamable`: one
+candidate per frame, an absolute re-analysis threshold, start from the means, fixed roots),
+:func:`run_project` hands the records to a fitting thread as they are detected
+(:class:`FitAlongside`), so decoding, detection and fitting overlap; the results are those of
+detecting first and fitting afterwards. Checkpoints start once the detections file is written
+(their sidecar names it by content hash); a run that finds a checkpoint detects first and
+resumes from it.
+
 Identity: the results sidecar names its inputs by paths relative to the results file's
 folder and identifies them by content hash (:mod:`videotrack.identity`); only the hashes and
 the parameters decide whether results are up to date (:data:`IDENTITY_KEYS`), so a project
@@ -39,11 +47,14 @@ from __future__ import annotations
 
 import contextlib
 import os
+import queue
+import threading
 import time
 import warnings
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -303,6 +314,7 @@ def fit_project(
     *,
     notes: Sequence[str] = (),
     resumed: Callable[[int, int], object] | None = None,
+    stream: FitAlongside | None = None,
 ) -> Results:
     """Fit ``frames`` (default all records) and write the results file and its sidecar.
 
@@ -310,7 +322,9 @@ def fit_project(
     checkpointed so an interrupted run resumes (see the module docstring); ``resumed`` is
     called with (frames kept from a checkpoint, frames in all) when it does. The sidecar's
     ``warnings`` are ``notes`` (e.g. the detections' warnings) followed by
-    :func:`fit_warnings` of the results.
+    :func:`fit_warnings` of the results. ``stream``: a :class:`FitAlongside` that has been
+    fitting every record while they were detected; its results are taken (when there is no
+    checkpoint to resume from) instead of fitting them again.
     """
     fitter = model.fitter()
     results_path = Path(results_path)
@@ -333,7 +347,10 @@ def fit_project(
     previous = results.get(before[-1]) if before and len(todo) and all(
         int(f) in done for f in before) else None
     observed = detections.observations if isinstance(detections, KeypointInput) else detections
-    gen = fitter.iter_fit(observed, todo, previous=previous) if todo.size else iter(())
+    if stream is not None and not done and frames is None:
+        gen = stream.results(len(todo))
+    else:
+        gen = fitter.iter_fit(observed, todo, previous=previous) if todo.size else iter(())
     with contextlib.closing(gen):
         for r in gen:
             results[r.frame] = r
@@ -350,6 +367,129 @@ def fit_project(
     write_candidates(results_path, model.body, ordered)
     discard_checkpoint(results_path)
     return table
+
+
+#: Records handed to the fitting thread at a time while detecting: enough to fill the lanes of
+#: every thread, few enough that the fit starts soon after the detection.
+STREAM_CHUNK = 64
+
+
+def not_streamable(model: ProjectModel) -> str | None:
+    """Why a project's records cannot be fitted while later ones are still being detected
+    (the fit of a record would then differ from fitting all records at once), or None when
+    they can: each record is fitted on its own, from its own random streams."""
+    p = model.params
+    if p.candidates > 1:
+        return "candidates > 1: the path through time looks 32 frames ahead"
+    if p.threshold_mode != "absolute":
+        return f"threshold_mode {p.threshold_mode!r}: measured on frames of the whole video"
+    if p.start != "mean":
+        return f"start {p.start!r}: a frame starts from the one before"
+    if any(c.root.mode != "fixed" for c in model.body.chains):
+        return "a root that is tracked or placed from the detections"
+    return None
+
+
+class FitAlongside:
+    """Fits records in a thread of its own while the caller detects the next ones.
+
+    Decoding (FFmpeg, in its own threads) and detection run in the caller's thread, annealing
+    (numba kernels that release the GIL) in this one, so the two overlap and the slower sets
+    the pace. Detection stays in the caller's thread because the warnings it records into the
+    detections file are caught with :func:`warnings.catch_warnings`, which is process-wide,
+    and because progress and cancel belong to the caller.
+
+    Give it every record with :meth:`add` as it is detected, then take the results in record
+    order with :meth:`results`; :meth:`close` (or leaving the ``with`` block) stops the thread
+    and drops what it fitted. Only for models where :func:`not_streamable` is None: the
+    results are then those of one :meth:`Fitter.iter_fit` over all records.
+    """
+
+    def __init__(self, model: ProjectModel, chunk: int | None = None) -> None:
+        import numba
+
+        self.fitter = model.fitter()
+        self.n_views = len(model.view_names)
+        self.chunk = chunk or STREAM_CHUNK
+        self.started = time.perf_counter()
+        self._threads = numba.get_num_threads()  # numba's setting is per thread
+        self._gathered: list[tuple[np.ndarray, ...]] = []
+        self._added = 0  # records handed to the thread
+        # unbounded: records are small, and the detection should never wait for the fit
+        self._todo: queue.SimpleQueue = queue.SimpleQueue()
+        self._done: queue.SimpleQueue = queue.SimpleQueue()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._work, name="videotrack-fit", daemon=True)
+        self._thread.start()
+
+    def add(self, record) -> None:
+        """A detected record (:class:`videotrack.detect.FrameDetections`), the next in order."""
+        self._gathered.append(record.points)
+        if len(self._gathered) >= self.chunk:
+            self._hand_on()
+
+    def results(self, n: int) -> Iterator[FrameResult]:
+        """The results of the ``n`` records added (all of them), in order, as they come."""
+        self._hand_on()
+        self._todo.put(None)
+        if n != self._added:
+            raise RuntimeError(f"{n} records to fit, {self._added} were detected")
+        for _ in range(n):
+            item = self._done.get()
+            if isinstance(item, BaseException):
+                raise item
+            yield item
+
+    def close(self) -> None:
+        self._stop.set()
+        self._todo.put(None)
+        self._thread.join()
+
+    def __enter__(self) -> FitAlongside:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def _hand_on(self) -> None:
+        if self._gathered:
+            self._todo.put((self._added, self._gathered))
+            self._added += len(self._gathered)
+            self._gathered = []
+
+    def _work(self) -> None:
+        import numba
+
+        numba.set_num_threads(self._threads)
+        try:
+            while (item := self._todo.get()) is not None and not self._stop.is_set():
+                first, records = item
+                gen = self.fitter.iter_fit(_records(first, records, self.n_views),
+                                           range(first, first + len(records)))
+                with contextlib.closing(gen):
+                    for r in gen:
+                        if self._stop.is_set():
+                            return
+                        self._done.put(r)
+        except BaseException as err:  # raised again in the caller's thread by results()
+            self._done.put(err)
+
+
+class _Records(NamedTuple):
+    points: np.ndarray
+    offsets: np.ndarray
+
+
+def _records(first: int, records: list[tuple[np.ndarray, ...]], n_views: int) -> _Records:
+    """Records ``first, first + 1, ...`` (per-view points each) as detections the fitter
+    takes, preceded by ``first`` empty records: a record's random streams are keyed by its
+    index, so it must keep it, and the empty ones are not fitted."""
+    views = [v for rec in records for v in rec]
+    offsets = np.zeros((first + len(records)) * n_views + 1, np.int64)
+    np.cumsum([len(v) for v in views], out=offsets[first * n_views + 1:])
+    points = np.concatenate(views).astype(np.float64).reshape(-1, 2) if views else \
+        np.empty((0, 2))
+    return _Records(points, offsets)
 
 
 def _source(detections, detections_path: Path | None) -> Path | KeypointInput:
@@ -468,6 +608,9 @@ class ProjectRun:
         end (truncated, an unreadable image), or not one frame was fitted.
     resumed : int
         Frames kept from the checkpoint of an interrupted fit (0: none).
+    overlapped : bool
+        The records were fitted while the next ones were being detected
+        (:class:`FitAlongside`); ``fit_seconds`` then counts from the detection's start.
     model, detections, results
         The model, the detections and the results table (model and results are None with
         ``fit=False``).
@@ -486,6 +629,7 @@ class ProjectRun:
     warnings: tuple[str, ...] = ()
     incomplete: str = ""
     resumed: int = 0
+    overlapped: bool = False
     model: ProjectModel | None = field(default=None, repr=False, compare=False)
     detections: object = field(default=None, repr=False, compare=False)
     results: Results | None = field(default=None, repr=False, compare=False)
@@ -595,17 +739,25 @@ def run_project(
         _guard(config, model, det_out, results_path, detect=detect, fit=fit, plot=plot,
                force=force, results_given=results is not None,
                inputs=detection_inputs(config))
-        t0 = time.perf_counter()
-        detections, det_path, detected = _detections(config, detect, force, report, log)
-        run = ProjectRun(det_path, results_path, steps=(DETECT,) if detected else (),
-                         detect_seconds=time.perf_counter() - t0 if detected else 0.0,
-                         detections=detections)
-        if fit:
-            notes = [*loading, *detections.metadata.get("warnings", [])]
-            run = _fit(run, model, frames, force,
-                       config["fit"]["jobs"] if threads is None else threads, report, log,
-                       notes)
-            run = _plot(run, plot)
+        threads = config["fit"]["jobs"] if threads is None else threads
+        # records fitted while the next are detected, when that gives the same results and
+        # there is no checkpoint to resume from (else the detection finishes first)
+        alongside = (fit and detect and frames is None and not_streamable(model) is None
+                     and not checkpoint_paths(results_path)[0].exists())
+        if alongside:
+            _set_threads(threads)
+        with FitAlongside(model) if alongside else contextlib.nullcontext() as stream:
+            t0 = time.perf_counter()
+            detections, det_path, detected = _detections(
+                config, detect, force, report, log, each=stream.add if stream else None)
+            run = ProjectRun(det_path, results_path, steps=(DETECT,) if detected else (),
+                             detect_seconds=time.perf_counter() - t0 if detected else 0.0,
+                             detections=detections)
+            if fit:
+                notes = [*loading, *detections.metadata.get("warnings", [])]
+                run = _fit(run, model, frames, force, threads, report, log, notes,
+                           stream=stream if detected else None)
+                run = _plot(run, plot)
     return _reported(run, caught)
 
 
@@ -775,8 +927,9 @@ def _recorded_warnings(pass_on: bool = False):
                 warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
 
 
-def _detections(config, detect: bool, force: bool, report, log):
-    """``(detections, path, made now)``: detected when stale (or forced), else as on disk."""
+def _detections(config, detect: bool, force: bool, report, log, each=None):
+    """``(detections, path, made now)``: detected when stale (or forced), else as on disk;
+    ``each`` gets every record detected (:func:`~videotrack.detect.detect_project`)."""
     from videotrack.detect import default_output, detect_project
 
     if not detect:
@@ -784,15 +937,25 @@ def _detections(config, detect: bool, force: bool, report, log):
         return load_fresh_detections(config, path), path, False
     detections, path, up_to_date = detect_project(
         config, force=force, progress=lambda done, total: report(DETECT, done, total),
-        log=log)
+        log=log, each=each)
     if not up_to_date and log is not None:
         log(f"detected {detections.n_records} records into {path.name}")
     return detections, path, not up_to_date
 
 
+def _set_threads(threads: int) -> None:
+    """numba threads for fitting (0: keep numba's setting)."""
+    import numba
+
+    if threads:
+        numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
+
+
 def _fit(run: ProjectRun, model: ProjectModel, frames: slice | None, force: bool,
-         threads: int, report, log, notes: Sequence[str] = ()) -> ProjectRun:
-    """The fit step: results read when up to date, else fitted and written."""
+         threads: int, report, log, notes: Sequence[str] = (),
+         stream: FitAlongside | None = None) -> ProjectRun:
+    """The fit step: results read when up to date, else fitted and written (taking the
+    results of ``stream``, which fitted the records while they were detected)."""
     import numba
 
     detections, out = run.detections, run.results_path
@@ -805,11 +968,11 @@ def _fit(run: ProjectRun, model: ProjectModel, frames: slice | None, force: bool
     if why is None:
         discard_checkpoint(out)  # left if a run was killed right after its last write
         return _with_results(replace(run, model=model), read_results(out))
-    if threads:
-        numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
+    _set_threads(threads)
     total = n if idx is None else len(idx)
     if log is not None:
-        log(f"fitting {total} records ({why}), {numba.get_num_threads()} thread(s)")
+        log(f"fitting {total} records ({why}), {numba.get_num_threads()} thread(s)"
+            + (", begun while detecting" if stream is not None else ""))
     out.parent.mkdir(parents=True, exist_ok=True)
     counts = {"done": 0, "bad": 0}
 
@@ -826,13 +989,13 @@ def _fit(run: ProjectRun, model: ProjectModel, frames: slice | None, force: bool
             log(f"resumed an interrupted fit: {n} of {of} records kept from "
                 f"{checkpoint_paths(out)[0].name}")
 
-    t0 = time.perf_counter()
+    t0 = time.perf_counter() if stream is None else stream.started
     report(FIT, 0, total)
     table = fit_project(model, detections, run.detections_path, out, idx, fitted,
-                        notes=notes, resumed=resumed)
+                        notes=notes, resumed=resumed, stream=stream)
     return _with_results(replace(run, model=model, steps=(*run.steps, FIT), fit_reason=why,
                                  fit_seconds=time.perf_counter() - t0,
-                                 resumed=sum(kept)), table)
+                                 resumed=sum(kept), overlapped=stream is not None), table)
 
 
 def _with_results(run: ProjectRun, table: Results) -> ProjectRun:
