@@ -134,11 +134,12 @@ def manual_result(frame: int, angles_deg, roots, error: float, error_per_view, s
                        root_positions=np.asarray(roots, float))
 
 
-def iter_fit(fitter: Fitter, detections, frames: Sequence[int],
-             chunk_size: int) -> Iterator[FrameResult]:
-    """The fitter's generator over ``frames``; closing it cancels between chunks."""
+def iter_fit(fitter: Fitter, detections, frames: Sequence[int], chunk_size: int,
+             cancel=None) -> Iterator[FrameResult]:
+    """The fitter's generator over ``frames``; ``cancel`` (asked before each chunk) or
+    closing it stops it between chunks."""
     return fitter.iter_fit(detections, np.asarray(frames, dtype=np.int64),
-                           chunk_size=chunk_size)
+                           chunk_size=chunk_size, cancel=cancel)
 
 
 def with_status(result: FrameResult, status: str) -> FrameResult:

@@ -89,9 +89,10 @@ class TaskWorker(QThread):
 class FitWorker(QThread):
     """Drives the fitter's generator over frames, handing results on in small batches.
 
-    Cancelling closes the generator (the fitter stops between chunks); the results that
-    arrived before are kept. ``chunk_size`` frames are computed per parallel batch, so a
-    cancel takes effect within one batch.
+    Cancelling stops the fitter before its next chunk (``iter_fit``'s ``cancel``: the path
+    through time would otherwise hold up to 64 frames back) and closes the generator; the
+    results that arrived before are kept. ``chunk_size`` frames are computed per parallel
+    batch, so a cancel takes effect within one batch.
     """
 
     resultsReady = Signal(object)  # list[FrameResult]
@@ -122,7 +123,8 @@ class FitWorker(QThread):
         batch = []
         gen = None
         try:
-            gen = backend.iter_fit(self._fitter, self._detections, self._frames, self._chunk)
+            gen = backend.iter_fit(self._fitter, self._detections, self._frames, self._chunk,
+                                   cancel=lambda: self._cancel)
             for result in gen:
                 batch.append(result)
                 self.count += 1
