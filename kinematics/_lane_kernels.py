@@ -268,26 +268,35 @@ def error_lanes(proj, dx, dy, ndet, cmax, bidirectional, weight, cap, penalty_ca
             if bidirectional:
                 c = 0
                 while c < cm:
-                    nb = min(4, cm - c)  # detections c .. c + nb together
+                    # four detections per loop where four are left (a constant count, so the
+                    # loop over them unrolls and the loop over lanes vectorises), else one
+                    nb = 4 if c + 4 <= cm else 1
                     for ln in range(nl):
                         for q in range(4):
                             matched[q, ln] = False
                             near[q, ln] = np.inf
                     for i in range(nm):
-                        for ln in range(nl):
-                            px = proj[v, i, 0, ln]
-                            py = proj[v, i, 1, ln]
-                            k = nearest[i, ln]
-                            for q in range(nb):
-                                matched[q, ln] = matched[q, ln] | (k == c + q)
-                                ex = px - dx[v, c + q, ln]
-                                ey = py - dy[v, c + q, ln]
-                                near[q, ln] = min(near[q, ln], ex * ex + ey * ey)
+                        if nb == 4:
+                            for ln in range(nl):
+                                px = proj[v, i, 0, ln]
+                                py = proj[v, i, 1, ln]
+                                k = nearest[i, ln]
+                                for q in range(4):
+                                    matched[q, ln] = matched[q, ln] | (k == c + q)
+                                    ex = px - dx[v, c + q, ln]
+                                    ey = py - dy[v, c + q, ln]
+                                    near[q, ln] = min(near[q, ln], ex * ex + ey * ey)
+                        else:
+                            for ln in range(nl):
+                                matched[0, ln] = matched[0, ln] | (nearest[i, ln] == c)
+                                ex = proj[v, i, 0, ln] - dx[v, c, ln]
+                                ey = proj[v, i, 1, ln] - dy[v, c, ln]
+                                near[0, ln] = min(near[0, ln], ex * ex + ey * ey)
                     for ln in range(nl):
                         acc = ev[ln]
-                        for q in range(nb):
+                        for q in range(4):
                             d = np.sqrt(near[q, ln]) if near[q, ln] < np.inf else missing
-                            add = (not matched[q, ln]) & (c + q < ndet[v, ln])
+                            add = (q < nb) & (not matched[q, ln]) & (c + q < ndet[v, ln])
                             acc = acc + weight * min(d, penalty_cap) if add else acc
                         ev[ln] = acc
                     c += nb
