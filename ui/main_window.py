@@ -37,7 +37,7 @@ from PySide6.QtWidgets import (
 from kinematics.errors import LocatedError
 from ui import adapters, shortcuts, style
 from ui.axis_sliders import FocusSpinBox, FrameSpinBox
-from ui.correction_panel import CorrectionPanel
+from ui.correction_panel import SETTLE_MS, CorrectionPanel
 from ui.frame_table import FrameTable
 from ui.marker_table import MarkerTable
 from ui.posture_view import PostureView
@@ -47,6 +47,8 @@ from ui.video_view import VideoView
 
 #: Playback never asks for more frames per second than this.
 MAX_PLAY_FPS = 50.0
+#: One marker nudge key moves the selected model marker this far (view pixels).
+MARKER_NUDGE_PX = 0.5
 
 #: The menus: action names of :data:`ui.shortcuts.COMMANDS` (None: a separator).
 MENUS = {
@@ -58,6 +60,7 @@ MENUS = {
               "next_bad"),
     "&Correct": ("accept_next", "accept_selected", "swap", None, "prev_axis", "next_axis",
                  "nudge_down", "nudge_up", "nudge_down_big", "nudge_up_big", None,
+                 "marker_left", "marker_right", "marker_up", "marker_down", None,
                  "refit_forward", "refit_backward", "interpolate"),
     "&Help": ("help",),
 }
@@ -84,6 +87,12 @@ class MainWindow(QMainWindow):
         self._timeline_timer.timeout.connect(self.refresh_timeline)
         self._play_timer = QTimer(self)
         self._play_timer.timeout.connect(self._next_play_frame)
+        #: (view, marker) the marker nudge keys move, or None
+        self.selected_marker: tuple[int, int] | None = None
+        #: marker nudges not yet re-fitted: (frame, view, marker, x, y)
+        self._marker_nudge: tuple[int, int, int, float, float] | None = None
+        self._marker_settle = QTimer(self, singleShot=True, interval=SETTLE_MS)
+        self._marker_settle.timeout.connect(self.flush_marker_nudge)
         self._connect()
         self._update_actions()
 
@@ -222,6 +231,7 @@ class MainWindow(QMainWindow):
     def _connect(self) -> None:
         s = self.session
         s.projectChanged.connect(self._project_changed)
+        s.frameChanged.connect(lambda *_: self.flush_marker_nudge())
         s.frameChanged.connect(self.refresh_frame)
         s.bodyChanged.connect(self.refresh_overlays)
         s.bodyChanged.connect(self._schedule_timeline)
@@ -279,9 +289,11 @@ class MainWindow(QMainWindow):
                 v.setParent(None)
                 v.deleteLater()
             self.video_views = []
+            self.selected_marker = self._marker_nudge = None
             for k, name in enumerate(s.view_names):
                 view = VideoView(k, name)
                 view.markerDragged.connect(self._marker_dragged)
+                view.markerSelected.connect(self.select_marker)
                 view.detectionRemoved.connect(self._detection_removed)
                 view.detectionAdded.connect(self._detection_added)
                 view.detectionMoved.connect(self._detection_moved)
@@ -421,8 +433,53 @@ class MainWindow(QMainWindow):
                              f"threshold · {n_corr} corrected")
 
     # -- interaction --------------------------------------------------------------------
-    def _marker_dragged(self, view: int, marker: int, x: float, y: float) -> None:
-        self.session.drag_marker(view, marker, (x, y), refit=self.correction.refit.isChecked())
+    def _marker_dragged(self, view: int, marker: int, x: float, y: float,
+                        frame: int | None = None) -> None:
+        self.session.drag_marker(view, marker, (x, y), refit=self.correction.refit.isChecked(),
+                                 frame=frame)
+
+    def select_marker(self, view: int, marker: int) -> None:
+        """The model marker the marker nudge keys move (ringed in its view)."""
+        self.flush_marker_nudge()
+        self.selected_marker = (view, marker)
+        for k, v in enumerate(self.video_views):
+            v.select_marker(marker if k == view else None)
+        s = self.session
+        if s.display_body is not None and marker < len(s.display_body.marker_names):
+            s.status.emit(f"Alt+arrows move {s.display_body.marker_names[marker]} in "
+                          f"{s.view_names[view]} by {MARKER_NUDGE_PX:g} px")
+
+    def nudge_marker(self, dx: int, dy: int) -> None:
+        """Move the selected model marker by (dx, dy) nudges: drawn at once, then, once the
+        keys rest for the panel's settle time, corrected as a drag to that point."""
+        s = self.session
+        if self.selected_marker is None or self.selected_marker[0] >= len(self.video_views):
+            s.status.emit("click a model marker in a video view first (Alt+arrows move it)")
+            return
+        view, marker = self.selected_marker
+        pending = self._marker_nudge
+        if pending is not None and pending[:3] != (s.frame, view, marker):
+            self.flush_marker_nudge()
+            pending = None
+        x, y = pending[3:] if pending is not None else self.video_views[view].marker_xy(marker)
+        if not np.isfinite(x + y):
+            return
+        x, y = x + dx * MARKER_NUDGE_PX, y + dy * MARKER_NUDGE_PX
+        self._marker_nudge = (s.frame, view, marker, x, y)
+        self.video_views[view].show_marker_at(marker, x, y)
+        self._marker_settle.start()  # restarted by every key
+
+    def flush_marker_nudge(self) -> None:
+        """Correct the frame for the pending marker nudges now (after a running task)."""
+        if self._marker_nudge is None or self.session.closed:
+            self._marker_nudge = None
+            return
+        if self.session.busy:
+            self._marker_settle.start()
+            return
+        self._marker_settle.stop()
+        (frame, view, marker, x, y), self._marker_nudge = self._marker_nudge, None
+        self._marker_dragged(view, marker, x, y, frame=frame)
 
     def _snapped(self, view: int, x: float, y: float) -> tuple[float, float]:
         """A click moved to the intensity centroid of the marker under it."""
@@ -482,9 +539,10 @@ class MainWindow(QMainWindow):
         """Accept the frame shown (status corrected) and go to the next needing attention."""
         s = self.session
         result = s.results.get(s.frame)
-        set_by_hand = self.correction.pending is not None or (
-            result is not None and result.status == "corrected")
+        set_by_hand = (self.correction.pending is not None or self._marker_nudge is not None
+                       or (result is not None and result.status == "corrected"))
         self.correction.flush()  # pending steps are re-fitted as a correction: set by hand
+        self.flush_marker_nudge()
         if not set_by_hand:
             s.accept()
         self.next_attention(1)
@@ -494,6 +552,7 @@ class MainWindow(QMainWindow):
 
     def refit_from(self, direction: int) -> None:
         self.correction.flush()
+        self.flush_marker_nudge()
         self.session.refit_from(direction)
 
     def interpolate(self) -> None:

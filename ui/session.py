@@ -1132,8 +1132,10 @@ class Session(QObject):
                          f"of {len(current.candidates)}, error {error:.2f} px")
         return True
 
-    def drag_marker(self, view: int, marker: int, target_xy, refit: bool = True) -> bool:
-        """Correct the current frame so that ``marker`` appears at ``target_xy`` in ``view``.
+    def drag_marker(self, view: int, marker: int, target_xy, refit: bool = True,
+                    frame: int | None = None) -> bool:
+        """Correct a frame (the current one by default) so that ``marker`` appears at
+        ``target_xy`` in ``view``.
 
         The one axis that brings the marker nearest the target is found by
         :func:`ui.adapters.solve_marker_drag` and set; then every axis the marker depends on
@@ -1142,9 +1144,12 @@ class Session(QObject):
         """
         if self.body is None or not self.cameras:
             return False
-        angles, roots, _ = self.posture()
+        frame = self.frame if frame is None else int(frame)
+        angles, roots, _ = self.posture(frame)
         upstream = adapters.marker_axes(self.body, marker)
-        free = [k for k in upstream if k not in self.pins.get(self.frame, {})]
+        # once a drag (or a nudge) pinned every axis above the marker, moving it again
+        # may turn any of them: the user is placing this marker
+        free = [k for k in upstream if k not in self.pins.get(frame, {})] or upstream
         solution = adapters.solve_marker_drag(self.body, self.cameras[view], angles, roots,
                                               marker, target_xy, axes=free)
         if solution is None:
@@ -1152,7 +1157,7 @@ class Session(QObject):
             return False
         values = {k: float(angles[k]) for k in upstream}
         values[solution.axis] = solution.value_deg
-        return self.correct(values, refit=refit,
+        return self.correct(values, refit=refit, frame=frame,
                             label=f"drag {self.body.marker_names[marker]} in "
                                   f"{self.view_names[view]}")
 

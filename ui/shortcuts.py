@@ -123,6 +123,16 @@ COMMANDS: tuple[Command, ...] = (
             lambda w: w.correction.nudge(-1.0)),
     Command("nudge_up_big", "Nudge axis +1°", ("Ctrl+.",), "Correct", "",
             lambda w: w.correction.nudge(1.0)),
+    Command("marker_left", "Nudge marker left 0.5 px", ("Alt+Left",), "Correct",
+            "Move the selected model marker (click it in a video view); the frame is "
+            "re-fitted around it once the keys rest, as after a drag",
+            lambda w: w.nudge_marker(-1, 0)),
+    Command("marker_right", "Nudge marker right 0.5 px", ("Alt+Right",), "Correct", "",
+            lambda w: w.nudge_marker(1, 0)),
+    Command("marker_up", "Nudge marker up 0.5 px", ("Alt+Up",), "Correct", "",
+            lambda w: w.nudge_marker(0, -1)),  # image rows grow downwards
+    Command("marker_down", "Nudge marker down 0.5 px", ("Alt+Down",), "Correct", "",
+            lambda w: w.nudge_marker(0, 1)),
     Command("refit_forward", "Re-fit &forward from here", ("F9",), "Correct",
             "Seed the following frames with this posture, one after the other, until the "
             "error exceeds the threshold or a corrected frame", lambda w: w.refit_from(1)),

@@ -53,6 +53,12 @@ def marker_style() -> dict:
             "brush": pg.mkBrush(MARKER), "pxMode": True}
 
 
+def selected_marker_style() -> dict:
+    """A ring around the model marker the marker nudge keys move."""
+    return {"symbol": "o", "size": MARKER_SIZE + 10, "pen": pg.mkPen("#ffffff", width=1.5),
+            "brush": None, "pxMode": True}
+
+
 def keypoint_style() -> dict:
     return {"symbol": "o", "size": DETECTION_SIZE, "brush": None, "pxMode": True}
 

@@ -66,6 +66,8 @@ class VideoView(pg.GraphicsLayoutWidget):
     -------
     markerDragged(view, marker, x, y)
         A model marker was dropped at (x, y) in view pixels.
+    markerSelected(view, marker)
+        A model marker was clicked (or dragged): the one the marker nudge keys move.
     detectionRemoved(view, x, y)
         Shift+click on the detection at (x, y): remove it (a ghost).
     detectionAdded(view, x, y)
@@ -75,6 +77,7 @@ class VideoView(pg.GraphicsLayoutWidget):
     """
 
     markerDragged = Signal(int, int, float, float)
+    markerSelected = Signal(int, int)
     detectionRemoved = Signal(int, float, float)
     detectionAdded = Signal(int, float, float)
     detectionMoved = Signal(int, float, float, float, float)
@@ -103,10 +106,16 @@ class VideoView(pg.GraphicsLayoutWidget):
         self.markers.setZValue(10)
         self.markers.dragged.connect(self._dropped)
         self.markers.moving.connect(self._moving)
+        self.markers.sigClicked.connect(
+            lambda _item, points, _ev: self.markerSelected.emit(self.index,
+                                                                int(points[0].index())))
+        self.selection = pg.ScatterPlotItem(**style.selected_marker_style())
+        self.selection.setZValue(11)
+        self.selected: int | None = None  # model marker ringed (nudge keys), or None
         # labelled keypoints: one colour per marker (the model marker's), faded by score
         self.keypoints = pg.ScatterPlotItem(**style.keypoint_style())
         self._keypoints = np.empty((0, 3))
-        for item in (self.detected, self.keypoints, self.lines, self.markers):
+        for item in (self.detected, self.keypoints, self.lines, self.markers, self.selection):
             self.plot.addItem(item)
         self.labels: list[pg.TextItem] = []
         self.info = pg.TextItem(anchor=(0, 0), color="#ffffff", fill=pg.mkBrush(0, 0, 0, 140))
@@ -170,7 +179,7 @@ class VideoView(pg.GraphicsLayoutWidget):
         """Draw a :class:`ui.adapters.ViewOverlay` (None clears), with marker names."""
         if overlay is None:
             self._marker_xy = np.empty((0, 2))
-            self.markers.setData(pos=self._marker_xy)
+            self._set_markers(self._marker_xy)
             self.lines.setData([], [])
             self._set_labels([], [])
             return
@@ -202,8 +211,26 @@ class VideoView(pg.GraphicsLayoutWidget):
                  else None)
         self.markers.setData(pos=xy, data=np.arange(len(xy)),
                              **({"brush": brush} if brush is not None else {}))
+        k = self.selected
+        shown = k is not None and k < len(xy) and bool(np.all(np.isfinite(xy[k])))
+        self.selection.setData(pos=xy[k:k + 1] if shown else np.empty((0, 2)))
+
+    def select_marker(self, index: int | None) -> None:
+        """Ring model marker ``index`` (None: none)."""
+        self.selected = index
+        self._set_markers(self._marker_xy)
+
+    def marker_xy(self, index: int) -> tuple[float, float]:
+        """Where model marker ``index`` is drawn (view pixels)."""
+        return float(self._marker_xy[index, 0]), float(self._marker_xy[index, 1])
+
+    def show_marker_at(self, index: int, x: float, y: float) -> None:
+        """Draw one model marker moved to (x, y) until the overlay is drawn again."""
+        self._moving(index, x, y)
 
     def _moving(self, index: int, x: float, y: float) -> None:
+        if self.selected != index:
+            self.markerSelected.emit(self.index, index)
         xy = self._marker_xy.copy()
         xy[index] = (x, y)
         self._set_markers(xy)

@@ -180,3 +180,43 @@ def test_accept_and_go_to_the_next_frame_needing_attention(window, qtbot):
         (0, 2, 4, 5, 7, 9), "corrected")
     s.undo()
     assert s.results[7].status == "ambiguous" and s.results[2].status == "corrected"
+
+
+def test_alt_arrows_nudge_the_clicked_marker_and_refit_once_after_a_pause(window, qtbot,
+                                                                          wait_idle):
+    from kinematics.fk import forward_kinematics
+
+    s = window.session
+    _activate(window, qtbot)
+    notes = []
+    s.status.connect(notes.append)
+    qtbot.keyClick(window.table, K.Key_Right, M.AltModifier)
+    assert notes[-1].startswith("click a model marker") and not s.can_undo
+    s.set_frame(2)
+    view = window.video_views[1]
+    x0, y0 = view.marker_xy(3)
+    # a real click on the marker selects it (pyqtgraph picks the point under the mouse)
+    at = view.mapFromScene(view.scene_pos(x0, y0))
+    qtbot.mouseClick(view.viewport(), Qt.MouseButton.LeftButton, pos=at)
+    assert window.selected_marker == (1, 3)
+    assert np.allclose(view.selection.getData()[0], x0)
+    for _ in range(4):
+        qtbot.keyClick(window.table, K.Key_Right, M.AltModifier)
+    qtbot.keyClick(window.table, K.Key_Up, M.AltModifier)
+    target = np.array([x0 + 2.0, y0 - 0.5])  # 0.5 px a key; image rows grow downwards
+    assert np.allclose(view.drawn()["markers"][3], target)  # shown at once ...
+    assert not s.busy and not s.can_undo  # ... and nothing fitted per key
+    qtbot.waitUntil(lambda: s.busy or 2 in s.results, timeout=SETTLE_MS * 10)
+    wait_idle(s)
+    assert len(s._undo) == 1 and s.undo_label == "drag M3 in top"  # the drag's correction
+    r = s.results[2]
+    assert r.status == "corrected" and s.frame == 2
+    marker = forward_kinematics(s.body, r.angles_deg, r.root_positions).markers[3]
+    drawn = s.cameras[1].project(marker)
+    # one axis turned moves the marker along a curve: as near as a drag gets (2.06 px before)
+    assert np.linalg.norm(drawn - target) < 1.0 and np.linalg.norm(drawn - (x0, y0)) > 1.0
+    # nudges pending when the frame changes are committed to their own frame
+    qtbot.keyClick(window.table, K.Key_Down, M.AltModifier)
+    window.act_next.trigger()
+    wait_idle(s)
+    assert len(s._undo) == 2 and 3 not in s.results

@@ -1,0 +1,145 @@
+"""Screenshots of the correcting workflow for docs/gui.md, rendered offscreen (no display).
+
+The real MainWindow drawn by Qt's offscreen platform (``QWidget.grab()``; the 3D view is its
+2D fallback, as without OpenGL). Saves into ``docs/img/``:
+
+* ``gui_correcting.png`` — the main window on a cluttered 200-frame project (ghosts,
+  flickering ghosts, occlusions) after *Fit all* and setting the bar, a wrong frame selected
+  (wrong against the synthetic truth);
+* ``gui_shortcuts.png`` — the shortcut sheet (``?``);
+* ``gui_keypoints.png`` — a keypoint project (DeepLabCut files of three cameras, no video);
+* ``gui_correction_panel.png`` — the posture, the correction panel with an axis typed in
+  (pinned: bold) and the rest re-fitted, and the marker residual table.
+
+Usage::
+
+    python tools/make_gui_screenshots.py [--out docs/img] [--keep FOLDER]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "bench"))
+
+import ui  # noqa: F401,E402  (guards PySide6's reference counts before any Qt call)
+
+#: The cluttered project: the correction bench's harder set-up.
+CLUTTER = ["--ghosts", "2", "--flicker-ghosts", "2", "--occlusions", "0.05",
+           "--sequences", "5"]
+#: Largest file written; bigger grabs are scaled down.
+MAX_BYTES = 300_000
+
+
+def settle(app, session=None, seconds: float = 0.3) -> None:
+    """Process events until the session is idle and the widgets have painted."""
+    end = time.monotonic() + seconds
+    while time.monotonic() < end or (session is not None and session.busy):
+        app.processEvents()
+        time.sleep(0.01)
+
+
+def save(widget, path: Path) -> None:
+    """``widget.grab()`` as PNG, scaled down until it is under :data:`MAX_BYTES`."""
+    from PySide6.QtCore import Qt
+
+    image = widget.grab().toImage()
+    scale = 1.0
+    while True:
+        shown = image if scale == 1.0 else image.scaledToWidth(
+            int(image.width() * scale), Qt.TransformationMode.SmoothTransformation)
+        shown.save(str(path))
+        if path.stat().st_size < MAX_BYTES or scale < 0.4:
+            break
+        scale *= 0.85
+    print(f"{path} ({shown.width()}x{shown.height()}, {path.stat().st_size // 1000} KB)")
+
+
+def window_on(project: Path):
+    from PySide6.QtWidgets import QMessageBox
+
+    from ui.main_window import MainWindow
+
+    window = MainWindow(use_opengl=False)
+    window.ask_unsaved = lambda: QMessageBox.StandardButton.Discard  # a demo: no saving
+    window.resize(1400, 880)
+    window.show()
+    assert window.open_project(project)
+    return window
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", type=Path, default=REPO / "docs" / "img")
+    parser.add_argument("--keep", type=Path, help="make the projects here and keep them")
+    args = parser.parse_args()
+
+    from bench_correction import User, make_project
+    from PySide6.QtWidgets import QApplication
+
+    from videotrack.synth_keypoints import write_session
+
+    app = QApplication.instance() or QApplication([])
+    app.setApplicationName("VideoTrack")
+    args.out.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        root = args.keep or Path(tmp)
+        project = make_project(root / "cluttered", 200, CLUTTER)
+        window = window_on(project)
+        s = window.session
+        window.act_fit_all.trigger()
+        settle(app, s)
+        user = User(app, window, project.parent / "truth.csv", log=False)
+        user.set_bar()  # walkthrough step 2, as the correction bench's user sets it
+        wrong = user.wrong_frames()
+        # the wrong frame the user is sent to first (flagged), else the first wrong one
+        flagged = [f for f in wrong if f in set(user.flagged())]
+        frame = (flagged or wrong or [0])[0]
+        s.set_frame(frame)
+        window.table.follow(frame)
+        settle(app, s, 0.5)
+        print(f"frame {frame}: {s.results[frame].status}, error {s.results[frame].error:.1f}"
+              f" px, off by up to {user.off_deg(frame).max():.0f}°")
+        save(window, args.out / "gui_correcting.png")
+
+        sheet = window.show_shortcuts()  # what the ? key runs
+        sheet.resize(600, 1180)  # every row
+        settle(app, seconds=0.3)
+        save(sheet, args.out / "gui_shortcuts.png")
+        sheet.close()
+
+        # the user's correction: the axis farthest off typed in (pinned, the rest re-fitted)
+        user.type_axis(frame)
+        right = window.correction.parentWidget()  # posture | correction | residuals
+        right.setSizes([230, 330, 190])
+        settle(app, s, 0.5)
+        save(right, args.out / "gui_correction_panel.png")
+        window.close()
+        s.close()
+
+        write_session(root / "keypoints", 40, n_cameras=3, noise_px=1.0, bad_share=0.1,
+                      project_text="[anneal]\nseed = 1\n")
+        window = window_on(root / "keypoints" / "project.toml")
+        s = window.session
+        window.act_fit_all.trigger()
+        settle(app, s)
+        s.set_frame(12)
+        window.table.follow(12)
+        settle(app, s, 0.5)
+        save(window, args.out / "gui_keypoints.png")
+        window.close()
+        s.close()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
