@@ -130,6 +130,10 @@ class FrameResult:
     candidates : tuple of Candidate
         With ``candidates`` > 1: the frame's distinct postures, lowest E first (this
         result's posture among them); empty otherwise.
+    threshold : float
+        The re-analysis threshold on E that decided the status: with ``threshold_mode``
+        'auto' the one measured on the video, which a front end should show as its bar
+        (NaN for results not made by a fit).
     """
 
     frame: int
@@ -149,6 +153,7 @@ class FrameResult:
     unexplained: int = 0
     worst_px: float = float("nan")
     candidates: tuple = ()
+    threshold: float = float("nan")
 
     @property
     def spread_deg(self) -> np.ndarray:
@@ -751,6 +756,7 @@ class Fitter:
             worst_px=float(np.nanmax(residuals)) if np.isfinite(residuals).any()
             else float("nan"),
             candidates=candidates,
+            threshold=float(p.reanalysis_threshold),
         )
 
     def _state_error(self, arrays, state, root_pos, root_rot, p: AnnealParams):

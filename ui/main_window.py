@@ -8,7 +8,6 @@ timeline of angles and error. The status bar says what the program is doing.
 
 from __future__ import annotations
 
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -307,13 +306,11 @@ class MainWindow(QMainWindow):
             w.blockSignals(True)
             w.setRange(0, max(n - 1, 0))
             w.blockSignals(False)
-        self.threshold.blockSignals(True)
         # the 3D route's error is a distance in the chain's length units
         units = s.body.units if (s.body is not None and s.keypoints is not None
                                  and not s.error_views) else "px"
         self.threshold.setSuffix(f" {units}")
-        self.threshold.setValue(s.threshold if np.isfinite(s.threshold) else 0.0)
-        self.threshold.blockSignals(False)
+        self._show_threshold()
         if s.body is not None:
             self.posture_view.set_extent(s.body.root_positions().mean(axis=0),
                                          adapters.body_reach(s.body))
@@ -412,6 +409,7 @@ class MainWindow(QMainWindow):
     def _results_changed(self, frames) -> None:
         if self.session.frame in frames:
             self.refresh_overlays()
+        self._show_threshold()
         self._schedule_timeline()
 
     def _schedule_timeline(self) -> None:
@@ -500,9 +498,20 @@ class MainWindow(QMainWindow):
     def _threshold_changed(self, value: float) -> None:
         s = self.session
         if s.params is not None and value > 0:
-            s.set_params(replace(s.params, reanalysis_threshold=float(value)))
+            s.set_bar(value)
             self.table.source.reset()
             self.refresh_timeline()
+
+    def _show_threshold(self) -> None:
+        """The bar box shows the session's bar (e.g. the threshold a fit just measured)."""
+        s = self.session
+        value = round(s.threshold if np.isfinite(s.threshold) else 0.0,
+                      self.threshold.decimals())
+        if self.threshold.value() != value:
+            self.threshold.blockSignals(True)
+            self.threshold.setValue(value)
+            self.threshold.blockSignals(False)
+            self.table.source.reset()
 
     def fit_range(self) -> None:
         from videotrack.video import parse_frame_range, resolve_frames

@@ -155,6 +155,10 @@ class Session(QObject):
         self.detections_path: Path | None = None
         self.results_path: Path | None = None
         self.results: dict[int, backend.FrameResult] = {}
+        #: The re-analysis threshold the last fit measured on the video (threshold_mode
+        #: 'auto'), shown as the bar until the user types one (:meth:`set_bar`).
+        self.measured_threshold: float | None = None
+        self.bar_typed = False
         self.pins: dict[int, dict[int, float]] = {}
         #: The user's edits of the detections, ``{(record, view): ViewEdit}``.
         self.detection_edits: dict = {}
@@ -416,7 +420,11 @@ class Session(QObject):
             self.status.emit(f"{err.message} (Detect markers runs them again)")
 
     def set_params(self, params: backend.AnnealParams) -> None:
-        """Annealing parameters of the next fits (the project's ``[anneal]`` by default)."""
+        """Annealing parameters of the next fits (the project's ``[anneal]`` by default); a
+        changed ``reanalysis_threshold`` is a bar the user set (:attr:`threshold`)."""
+        if self.params is not None and (params.reanalysis_threshold
+                                        != self.params.reanalysis_threshold):
+            self.bar_typed = True
         self.params = params
 
     def _close_videos(self) -> None:
@@ -461,8 +469,20 @@ class Session(QObject):
 
     @property
     def threshold(self) -> float:
-        """The re-analysis threshold (pixels): frames above it are highlighted."""
-        return float("inf") if self.params is None else self.params.reanalysis_threshold
+        """The bar (pixels): frames above it are highlighted and need attention. It is the
+        threshold the last fit used — with ``threshold_mode = "auto"`` the one it measured on
+        the video — until the user sets one (:meth:`set_bar`)."""
+        if self.params is None:
+            return float("inf")
+        if (self.params.threshold_mode == "auto" and not self.bar_typed
+                and self.measured_threshold is not None):
+            return self.measured_threshold
+        return self.params.reanalysis_threshold
+
+    def set_bar(self, value: float) -> None:
+        """The user's bar: it replaces the fit's threshold in the window from now on."""
+        self.set_params(replace(self.params, reanalysis_threshold=float(value)))
+        self.bar_typed = True
 
     @property
     def display_body(self) -> Body | None:
@@ -892,6 +912,8 @@ class Session(QObject):
             r, pins = item if isinstance(item, tuple) else (item, None)
             edit.record_result(r.frame, self.results.get(r.frame), r)
             self.results[r.frame] = r
+            if np.isfinite(r.threshold):
+                self.measured_threshold = float(r.threshold)
             if pins or r.frame in self.pins:
                 edit.record_pins(r.frame, self.pins.pop(r.frame, None), pins)
                 if pins:

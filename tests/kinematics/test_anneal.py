@@ -495,3 +495,17 @@ def test_cancel_stops_before_the_next_batch_and_keeps_what_was_fitted(locust):
     assert [r.frame for r in got] == list(range(8))  # the path still decides what it holds
     assert all(r.runs for r in got)
     assert len(asked) == 3
+
+
+def test_results_carry_the_threshold_that_decided_their_status(locust):
+    truth = smooth_random_motion(locust, 12, 1, seed=4)
+    dets = planted(locust, locust_cameras(), truth, ghosts=2)
+    fixed = Fitter(locust, locust_cameras(), AnnealParams(threshold_mode="absolute",
+                                                          reanalysis_threshold=7.0
+                                                          ).with_schedule(300)).fit(dets)
+    assert {r.threshold for r in fixed} == {7.0}
+    measured = Fitter(locust, locust_cameras(), AnnealParams().with_schedule(300)).fit(dets)
+    t = {r.threshold for r in measured}
+    assert len(t) == 1 and np.isfinite(next(iter(t))) and t != {10.0}
+    for r in measured:
+        assert (r.status == "failed") == (r.error > r.threshold)

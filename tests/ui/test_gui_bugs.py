@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 from PySide6.QtCore import QEvent, Qt
 from PySide6.QtWidgets import QApplication, QPushButton
@@ -137,7 +135,7 @@ def test_learning_within_the_threshold_uses_the_current_threshold(window, wait_i
     errors = np.array([s.results[f].error for f in range(12)])
     stored_good = sum(r.status in adapters.GOOD_STATUSES for r in s.results.values())
     # stricter than the fit's (as the window's threshold box does, finer than its 0.1 px)
-    s.set_params(replace(s.params, reanalysis_threshold=float(np.median(errors))))
+    s.set_bar(float(np.median(errors)))
     within = int(np.sum(errors <= s.threshold))
     assert 0 < within != stored_good
     dialog = window.open_histograms()

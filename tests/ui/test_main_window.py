@@ -396,3 +396,21 @@ def test_project_dialog_writes_only_changed_annealing_keys(window):
     assert dialog.edited_raw()["anneal"]["seed"] == 7
     dialog.accept()
     assert window.session.params.seed == 7
+
+
+def test_bar_is_the_threshold_the_fit_measured_until_the_user_sets_one(window, qtbot,
+                                                                       wait_idle):
+    s = window.session
+    assert s.params.threshold_mode == "auto"
+    s.fit()
+    wait_idle(s)
+    measured = s.results[0].threshold
+    assert np.isfinite(measured) and measured != s.params.reanalysis_threshold
+    assert s.threshold == measured  # the bar the fit's statuses were decided by
+    assert window.threshold.value() == pytest.approx(measured, abs=0.06)
+    failed = {f for f, r in s.results.items() if r.status == "failed"}
+    assert failed <= {f for f, r in s.results.items() if r.error > s.threshold}
+    window.threshold.setValue(measured + 5.0)  # the user's bar stays after another fit
+    s.fit()
+    wait_idle(s)
+    assert s.threshold == pytest.approx(round(measured + 5.0, 1))
