@@ -5,11 +5,19 @@ One annealing run is latency-bound: each iteration waits for the previous accept
 of different frames (and the candidate runs of one frame) are independent, so this module
 anneals ``LANES`` of them together: every per-run quantity has a last axis of ``LANES``
 entries, and every loop over that axis is straight-line code that LLVM turns into packed
-vector instructions (``for ln in range(nl)``: the lane count is read from an array's shape,
-because LLVM fully unrolls a loop with a compile-time trip count of 8 and numba leaves SLP
-vectorisation off, so the unrolled code would stay scalar). Decisions
-that differ between runs (acceptance, redraws, the nearest detection) are selects, not
-branches.
+vector instructions. Decisions that differ between runs (acceptance, redraws, the nearest
+detection) are selects, not branches. What LLVM vectorises under numba, found by measuring
+(bench/bench_lanes.py, docs/benchmarks.md "Lanes"):
+
+* the lane count must be a run-time value (``for ln in range(nl)``, ``nl`` from an array's
+  shape): a compile-time 8 is fully unrolled, and numba leaves SLP vectorisation off;
+* a loop over lanes must be the innermost loop: an inner loop with a run-time count (even of
+  1 to 4) keeps it scalar, a constant one is unrolled and fine;
+* no branch around a load (invariant choices go outside the loop, as separate loops), at
+  most about nine stores, and loads before stores;
+* no array views (``rot[j]``) in the iteration: each costs atomic reference counts;
+* several small loops beat one fused loop that does more per lane (the redraw loops fused
+  into one were 1.5x slower).
 
 The readable twin and test oracle is the scalar kernel :func:`kinematics._anneal_kernels.
 fit_frames`: each run here performs exactly the scalar kernel's arithmetic in the same order
