@@ -30,6 +30,12 @@ from videotrack.markerless import DEFAULT_FPS
 #: Video frames kept decoded for scrubbing back and forth.
 FRAME_CACHE = 48
 
+#: Re-fitting forward/backward stops where a frame's error exceeds JUMP_FACTOR times the
+#: median error of the frames carried so far plus JUMP_PX: the carried posture no longer
+#: fits there (a loose bar alone let it overwrite right frames with wrong ones).
+JUMP_FACTOR = 3.0
+JUMP_PX = 2.0
+
 
 @dataclass
 class Edit:
@@ -1032,9 +1038,11 @@ class Session(QObject):
     def refit_from(self, direction: int, frame: int | None = None) -> bool:
         """Carry the frame's posture to its neighbours (``direction`` +1 forward, -1
         backward): each next frame is fitted starting from the previous frame's result, in
-        the background, until a frame's error exceeds the threshold (that frame is left as
-        it was), a frame corrected, accepted or pinned by hand, or the end of the video.
-        One undo step; a cancel keeps the frames done."""
+        the background, until a frame's error exceeds the threshold or jumps (above
+        :data:`JUMP_FACTOR` times the carried frames' median plus :data:`JUMP_PX`: the
+        posture no longer carries, even under a loose bar; that frame is left as it was), a
+        frame corrected, accepted or pinned by hand, or the end of the video. One undo step;
+        a cancel keeps the frames done."""
         frame = self.frame if frame is None else int(frame)
         step = 1 if direction > 0 else -1
         angles, _, source = self.posture(frame)
@@ -1058,6 +1066,9 @@ class Session(QObject):
         detections = self.fit_detections
         known = {f: np.asarray(r.root_positions) for f, r in self.results.items()}
 
+        start = self.results.get(frame)
+        carried = [start.error] if start is not None and np.isfinite(start.error) else []
+
         def work(worker: TaskWorker):
             prev_angles = angles
             tracked = None
@@ -1075,6 +1086,12 @@ class Session(QObject):
                     worker.summary = (f"stopped at frame {f}: error {r.error:.2f} px above the "
                                       f"threshold, left as it was")
                     return
+                if carried and r.error > JUMP_FACTOR * float(np.median(carried)) + JUMP_PX:
+                    worker.summary = (f"stopped at frame {f}: error jumps to {r.error:.2f} px "
+                                      f"(carried frames {np.median(carried):.2f}), left as it "
+                                      "was")
+                    return
+                carried.append(r.error)
                 worker.publish([r])
                 worker.report(k + 1, len(frames))
                 prev_angles = r.angles_deg

@@ -94,3 +94,21 @@ def test_interpolate_pinned_axes_between_two_corrected_frames(session, wait_idle
     assert s.undo_label == "interpolate frames 2–6"
     s.undo()
     assert all(s.results[f].status != "corrected" and f not in s.pins for f in (3, 4, 5))
+
+
+def test_refit_forward_stops_where_the_error_jumps_even_under_a_loose_bar(session,
+                                                                          wait_idle):
+    s = session
+    _fit_all(s, wait_idle)
+    s.set_bar(1e9)  # the bar alone would carry on to the end
+    for point in s.frame_detections(6)[0]:  # frame 6's first view: every blob 40 px off
+        assert s.edit_detection(0, remove=tuple(point), add=(point[0] + 40.0, point[1]),
+                                frame=6)
+    before = dict(s.results)
+    messages = []
+    s.status.connect(messages.append)
+    assert s.refit_from(1, frame=3)
+    wait_idle(s)
+    assert s.results[6] is before[6] and s.results[7] is before[7]
+    assert all(s.results[f] is not before[f] for f in (4, 5))
+    assert any("stopped at frame 6" in m and "jumps" in m for m in messages)
