@@ -38,6 +38,7 @@ from videotrack.pipeline import (
     load_model,
     results_sidecar,
     run_project,
+    threshold_entry,
 )
 from videotrack.project import command_config, trial_outputs
 from videotrack.results import (
@@ -230,8 +231,12 @@ def read_project_results(path: str | os.PathLike, body: Body,
     if list(table.view_names) != list(view_names):
         raise VideoTrackError(f"results are for the views {list(table.view_names)}, the "
                               f"project has {list(view_names)}", file=path)
-    seed = int(read_sidecar(path).get("seed", 0))
-    return frame_results(table, seed)
+    sidecar = read_sidecar(path)
+    results = frame_results(table, int(sidecar.get("seed", 0)))
+    threshold = sidecar.get("threshold")  # the one that decided the statuses
+    if isinstance(threshold, int | float) and np.isfinite(threshold):
+        results = {k: replace(r, threshold=float(threshold)) for k, r in results.items()}
+    return results
 
 
 def save_project_results(path: str | os.PathLike, model: ProjectModel, body: Body,
@@ -247,7 +252,8 @@ def save_project_results(path: str | os.PathLike, model: ProjectModel, body: Bod
     ordered = [results[k] for k in sorted(results)]
     table = results_from_fit(body, ordered, model.view_names, detections)
     source = detections if isinstance(detections, KeypointInput) else Path(detections_path)
-    sidecar = {**results_sidecar(model, source), "source": "videotrack gui"}
+    sidecar = {**results_sidecar(model, source), **threshold_entry(ordered),
+               "source": "videotrack gui"}
     written = _write_results(path, table, sidecar)
     write_candidates(path, body, ordered)
     return written

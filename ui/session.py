@@ -350,6 +350,8 @@ class Session(QObject):
                 self.results = backend.read_project_results(self.results_path, self.body,
                                                             self.error_views)
                 self.results = backend.attach_candidates(self.results, self.results_path)
+                used = [r.threshold for r in self.results.values() if np.isfinite(r.threshold)]
+                self.measured_threshold = used[0] if used else None
             except LocatedError as err:
                 self.error.emit(str(err))
 

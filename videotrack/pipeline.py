@@ -269,6 +269,14 @@ def results_sidecar(model: ProjectModel, detections_path: Path | KeypointInput,
             "detections_sha256": file_sha256(detections_path)}
 
 
+def threshold_entry(results) -> dict:
+    """The sidecar's ``threshold``: the re-analysis threshold that decided the statuses of
+    these results (measured on the video with the defaults), so a front end that opens them
+    shows the same bar; empty when no result came from a fit."""
+    used = [r.threshold for r in results if np.isfinite(r.threshold)]
+    return {"threshold": float(used[-1])} if used else {}
+
+
 def changed_inputs(meta: Mapping, expected: Mapping) -> list[str]:
     """The inputs and parameters (:data:`IDENTITY_KEYS`) in which a sidecar ``meta``
     differs from ``expected``, named as ``changed: ...`` lists them."""
@@ -363,7 +371,8 @@ def fit_project(
     table = results_from_fit(model.body, ordered, model.view_names, detections)
     base = results_path.absolute().parent
     found = [relative_message(w, base) for w in (*notes, *fit_warnings(table, detections))]
-    write_results(results_path, table, {**sidecar, "warnings": list(dict.fromkeys(found))})
+    write_results(results_path, table, {**sidecar, **threshold_entry(ordered),
+                                        "warnings": list(dict.fromkeys(found))})
     write_candidates(results_path, model.body, ordered)
     discard_checkpoint(results_path)
     return table

@@ -330,3 +330,20 @@ def test_an_alternative_posture_is_one_key_away(session, wait_idle, tmp_path):
     assert s.results[3] is before
     assert not s.swap_candidate(4)  # no alternatives there
 
+
+
+def test_reopened_results_keep_the_bar_their_fit_used(session, project, wait_idle):
+    from ui.session import Session
+
+    s = session
+    assert s.fit()
+    wait_idle(s)
+    measured = s.threshold
+    assert np.isfinite(measured) and measured != s.params.reanalysis_threshold
+    assert s.save()
+    again = Session()
+    try:
+        assert again.open_project(project)
+        assert again.threshold == measured
+    finally:
+        again.close()

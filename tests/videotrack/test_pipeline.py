@@ -211,3 +211,19 @@ def test_fit_says_when_it_resumed(project, capsys, monkeypatch):
     assert kept and int(kept[1]) >= 5, out
     assert (f"resumed an interrupted fit: {kept[1]} of {N_FRAMES} records kept from "
             "detections.results.csv.partial") in err
+
+
+def test_sidecar_records_the_threshold_that_decided_the_statuses(tmp_path):
+    from videotrack.cli import main
+    from videotrack.results import read_results, read_sidecar
+
+    assert main(["synth", str(tmp_path), "--frames", "10", "--sequences", "1", "--ghosts",
+                 "1"]) == 0
+    project = tmp_path / "project.toml"
+    assert main(["run", str(project)]) == 0
+    results = next(tmp_path.glob("*.results.csv"))
+    threshold = read_sidecar(results)["threshold"]
+    assert threshold > 0 and threshold != 10.0  # measured on the video (the defaults)
+    table = read_results(results)
+    failed = table.status == "failed"
+    assert (table.error[failed] > threshold).all() and (table.error[~failed] <= threshold).all()
