@@ -57,25 +57,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import numpy as np
 from _report import in_out_folder, machine, print_table
-from bench_gui import run_loop_until
+from bench_gui import make_project, run_loop_until
 
 import ui  # noqa: F401  (guards PySide6's reference counts before any Qt call)
-from videotrack.cli import main as cli
 
 #: A posture is right when every free axis is within this many degrees of the truth.
 RIGHT_DEG = 10.0
 #: Drags tried on one frame before typing axis values.
 MAX_DRAGS = 2
-
-
-def make_project(folder: Path, frames: int, synth_args: list[str]) -> Path:
-    """``videotrack synth`` (one motion sequence unless ``synth_args`` say otherwise), then
-    ``videotrack detect``."""
-    args = ["synth", str(folder), "--frames", str(frames), "--sequences", "1", *synth_args,
-            "--force"]
-    assert cli(args) == 0
-    assert cli(["detect", str(folder / "project.toml")]) == 0
-    return folder / "project.toml"
 
 
 class User:

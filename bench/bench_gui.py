@@ -42,12 +42,11 @@ import ui  # noqa: F401  (guards PySide6's reference counts before any Qt call)
 from videotrack.cli import main as cli
 
 
-def make_project(folder: Path, frames: int, ghosts: int, occlusions: float) -> Path:
-    args = ["synth", str(folder), "--frames", str(frames), "--sequences", "1", "--force"]
-    if ghosts:
-        args += ["--ghosts", str(ghosts)]
-    if occlusions:
-        args += ["--occlusions", str(occlusions)]
+def make_project(folder: Path, frames: int, synth_args: list[str]) -> Path:
+    """``videotrack synth`` (one motion sequence unless ``synth_args`` say otherwise), then
+    ``videotrack detect``; returns the project file."""
+    args = ["synth", str(folder), "--frames", str(frames), "--sequences", "1", *synth_args,
+            "--force"]
     assert cli(args) == 0
     assert cli(["detect", str(folder / "project.toml")]) == 0
     return folder / "project.toml"
@@ -153,7 +152,8 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
 
     def run(folder: Path, _keep: bool) -> int:
-        project = make_project(folder, args.frames, args.ghosts, args.occlusions)
+        project = make_project(folder, args.frames, ["--ghosts", str(args.ghosts),
+                                                     "--occlusions", str(args.occlusions)])
         rows = measure(project)
         print(f"\nmachine: {machine()}; QT_QPA_PLATFORM={os.environ['QT_QPA_PLATFORM']}")
         print_table(rows)
