@@ -867,6 +867,15 @@ class Session(QObject):
                                   file=self.config_path)
         return backend.make_fitter(body or self.body, self._fit_model().cameras, self.params)
 
+    def _fitter_or_report(self):
+        """The fitter for the next task, or None after reporting on :attr:`error` why there
+        is none (one line)."""
+        try:
+            return self._fitter()
+        except LocatedError as err:
+            self.error.emit(str(err))
+            return None
+
     def _missing_input(self) -> str | None:
         """Why there is nothing to fit, or None."""
         if self.fit_detections is not None:
@@ -896,10 +905,8 @@ class Session(QObject):
         if not frames:
             self.status.emit("nothing to fit")
             return False
-        try:
-            fitter = self._fitter()
-        except LocatedError as err:
-            self.error.emit(str(err))
+        fitter = self._fitter_or_report()
+        if fitter is None:
             return False
         self._edit = Edit(f"{label} ({len(frames)} frames)")
         worker = FitWorker(fitter, self.fit_detections, frames, backend.fit_chunk_size())
@@ -980,10 +987,8 @@ class Session(QObject):
         angles, roots, _ = self.posture(frame)
         pins = {**self.pins.get(frame, {}), **{int(k): float(v) for k, v in values_deg.items()}}
         label = label or "set " + ", ".join(self.body.axis_labels[k] for k in values_deg)
-        try:
-            fitter = self._fitter()
-        except LocatedError as err:
-            self.error.emit(str(err))
+        fitter = self._fitter_or_report()
+        if fitter is None:
             return False
         dets = self.frame_input(frame)
 
@@ -1055,10 +1060,8 @@ class Session(QObject):
         if missing:
             self.error.emit(missing)
             return False
-        try:
-            fitter = self._fitter()
-        except LocatedError as err:
-            self.error.emit(str(err))
+        fitter = self._fitter_or_report()
+        if fitter is None:
             return False
         frames = list(range(frame + step, self.n_frames if step > 0 else -1, step))
         if not frames:
@@ -1119,10 +1122,8 @@ class Session(QObject):
             return False
         axes = sorted(set(self.pins.get(first, {})) | set(self.pins.get(last, {}))
                       ) or adapters.free_axes(self.body)
-        try:
-            fitter = self._fitter()
-        except LocatedError as err:
-            self.error.emit(str(err))
+        fitter = self._fitter_or_report()
+        if fitter is None:
             return False
         (a0, r0, _), (a1, r1, _) = self.posture(first), self.posture(last)
         plan = []
