@@ -22,7 +22,6 @@ import argparse
 import os
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
@@ -30,6 +29,9 @@ os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "bench"))
+sys.path.insert(0, str(REPO / "tools"))
+
+from gui_screenshots import settle  # noqa: E402
 
 import ui  # noqa: F401,E402  (guards PySide6's reference counts before any Qt call)
 
@@ -38,14 +40,6 @@ CLUTTER = ["--ghosts", "2", "--flicker-ghosts", "2", "--occlusions", "0.05",
            "--sequences", "5"]
 #: Largest file written; bigger grabs are scaled down.
 MAX_BYTES = 300_000
-
-
-def settle(app, session=None, seconds: float = 0.3) -> None:
-    """Process events until the session is idle and the widgets have painted."""
-    end = time.monotonic() + seconds
-    while time.monotonic() < end or (session is not None and session.busy):
-        app.processEvents()
-        time.sleep(0.01)
 
 
 def save(widget, path: Path) -> None:
@@ -83,7 +77,8 @@ def main() -> int:
     parser.add_argument("--keep", type=Path, help="make the projects here and keep them")
     args = parser.parse_args()
 
-    from bench_correction import User, make_project
+    from bench_correction import User
+    from bench_gui import make_project
     from PySide6.QtWidgets import QApplication
 
     from videotrack.synth_keypoints import write_session
