@@ -474,7 +474,8 @@ class FitAlongside:
             while (item := self._todo.get()) is not None and not self._stop.is_set():
                 first, records = item
                 gen = self.fitter.iter_fit(_records(first, records, self.n_views),
-                                           range(first, first + len(records)))
+                                           range(first, first + len(records)),
+                                           cancel=self._stop.is_set)
                 with contextlib.closing(gen):
                     for r in gen:
                         if self._stop.is_set():
