@@ -383,19 +383,26 @@ class Fitter:
 
     def error(self, angles_deg, detections_frame, root_positions=None) -> tuple[float,
                                                                                 np.ndarray]:
-        """E of a posture for one frame's detections (kernel; e.g. for a manual correction).
+        """E of a posture for one frame (kernel; e.g. for a manual correction).
 
         Parameters
         ----------
         angles_deg : array_like, shape (n_axes,)
-        detections_frame : sequence of array_like (n_c, 2), one per view
+        detections_frame : sequence of array_like (n_c, 2), one per view, or one record's
+            :class:`~kinematics.observations.Observations` (labelled keypoints or 3D points:
+            E is then the objective they are fitted by)
         root_positions : array_like, shape (n_chains, 3), optional
 
         Returns
         -------
         error : float
-        error_per_view : ndarray, shape (n_views,)
+        error_per_view : ndarray, shape (n_views,) (zeros for 3D points)
         """
+        if isinstance(detections_frame, Observations):
+            obs = self.observations(detections_frame)
+            state, pos, rot = self.state(angles_deg, root_positions)
+            return self._state_error(obs.arrays(np.array([0], np.int64)), state, pos, rot,
+                                     self.params)
         rag = self._frame_ragged(detections_frame)
         per_view = np.empty(self.n_views)
         opts = self.params.error

@@ -187,30 +187,12 @@ def has_observations(frame) -> bool:
 
 def posture_error(fitter: Fitter, angles_deg, frame, root_positions=None
                   ) -> tuple[float, np.ndarray]:
-    """E of a posture for one record's fitting input (:func:`frame_input`) and E per view:
-    the fitter's Eq. 5 for detections; for labelled keypoints or 3D points the objective the
-    fit used, from its NumPy specification (:mod:`kinematics.error_function`), which the
-    fitter's kernels are tested against."""
-    if not isinstance(frame, Observations):
-        return fitter.error(angles_deg, frame, root_positions)
-    from kinematics import error_function
-
-    options = fitter.params.error
-    if frame.kind == "points3d":
-        from kinematics.fk import forward_kinematics
-
-        markers = forward_kinematics(fitter.body, np.asarray(angles_deg, float),
-                                     root_positions).markers
-        return error_function.points3d_error(markers, frame.points3d[0], options), np.empty(0)
-    proj = fitter.project(angles_deg, root_positions)
-    nm = proj.shape[1]
-    keypoints = np.full((frame.n_views, nm, 3), np.nan)
-    keypoints[..., 2] = 0.0
-    for v, rows in enumerate(np.split(np.column_stack([frame.points, frame.conf]),
-                                      frame.offsets[1:-1])):
-        if len(rows):  # a view without keypoints holds no rows
-            keypoints[v] = rows
-    return error_function.labelled_error(proj, keypoints, options)
+    """E of a posture for one record's fitting input (:func:`frame_input`) and E per view
+    (none for 3D points): the objective the fit uses (Eq. 5 for detections)."""
+    error, per_view = fitter.error(angles_deg, frame, root_positions)
+    if isinstance(frame, Observations) and frame.kind == "points3d":
+        return error, np.empty(0)
+    return error, per_view
 
 
 def read_project_results(path: str | os.PathLike, body: Body,

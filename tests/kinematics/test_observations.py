@@ -110,3 +110,22 @@ def test_free_body_from_3d_points_without_cameras():
     err = joint_errors(body, res, angles, roots, "joints")
     assert np.median(err) < 0.3, err
     assert all(r.status in ("ok", "reanalysed") for r in res)
+
+
+def test_fitter_error_of_one_record_is_its_objective():
+    body = mouse_like()
+    cams = three_pinholes()
+    names = body.marker_names
+    angles, roots, _ = planted_frames(body, cams, n=1, seed=2)
+    fitter = Fitter(body, cams, AnnealParams(error=ErrorOptions(cap_px=30.0)))
+    markers = forward_kinematics_reference(body, angles[0], roots[0]).markers
+    proj = np.stack([c.project(markers) for c in cams])
+    kp = np.concatenate([proj + 1.5, np.full((*proj.shape[:2], 1), 0.8)], axis=2)
+    obs = Observations.keypoints(kp[None], [c.name for c in cams], names, names)
+    error, per_view = fitter.error(angles[0], obs, roots[0])
+    want, want_view = labelled_error(proj, kp, fitter.params.error)
+    assert error == pytest.approx(want, rel=1e-9) and error > 0
+    np.testing.assert_allclose(per_view, want_view, rtol=1e-9)
+    pts = np.concatenate([markers + 0.5, np.ones((len(names), 1))], axis=1)
+    e3, _ = fitter.error(angles[0], Observations.points_3d(pts[None], names, names), roots[0])
+    assert e3 == pytest.approx(points3d_error(markers, pts, fitter.params.error), rel=1e-9)
