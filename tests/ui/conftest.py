@@ -58,9 +58,9 @@ def session(qtbot, project):
     s.close()
 
 
-@pytest.fixture
-def window(qtbot, project):
-    """The main window on the project; closing it never asks (unsaved changes discarded)."""
+def open_window(qtbot, project):
+    """A shown main window on ``project``; closing it never asks (unsaved changes
+    discarded)."""
     from PySide6.QtWidgets import QMessageBox
 
     from ui.main_window import MainWindow
@@ -71,6 +71,19 @@ def window(qtbot, project):
     w.resize(1400, 900)
     w.show()
     assert w.open_project(project)
+    return w
+
+
+@pytest.fixture
+def window_on(qtbot):
+    """``window_on(project)``: :func:`open_window` for tests with projects of their own."""
+    return lambda project: open_window(qtbot, project)
+
+
+@pytest.fixture
+def window(qtbot, project):
+    """The main window on the project (:func:`open_window`)."""
+    w = open_window(qtbot, project)
     yield w
     w.session.close()
 

@@ -61,18 +61,9 @@ def open_session(project) -> Session:
 
 
 @pytest.fixture
-def kp_window(qtbot, made, tmp_path):
-    from PySide6.QtWidgets import QMessageBox
-
-    from ui.main_window import MainWindow
-
+def kp_window(window_on, made, tmp_path):
     project, truth = copy_of(made, tmp_path)
-    w = MainWindow(use_opengl=False)
-    w.ask_unsaved = lambda: QMessageBox.StandardButton.Discard
-    qtbot.addWidget(w)
-    w.resize(1400, 900)
-    w.show()
-    assert w.open_project(project)
+    w = window_on(project)
     w.truth = truth
     yield w
     w.session.close()
