@@ -383,6 +383,8 @@ def build_params(args, threshold_px: float):
     try:
         params = AnnealParams.paper(error=ErrorOptions(**error), **kw)
         params = params.with_schedule(kw.get("n_end", args.n_end))
+        if params.match == "3d":  # E sums one distance per marker, not per marker image
+            scheduled["reanalysis_threshold"] = threshold_px / args.cameras
         return dataclasses.replace(params, **scheduled)
     except (KinematicsError, TypeError) as err:
         raise SystemExit(f"--param: {err}") from None

@@ -401,6 +401,8 @@ def _paper_error(proj, points, view_off, cap):
 OBJ_NEAREST = 0  # unlabelled points per view: Eq. 5 and its variants
 OBJ_LABELLED = 1  # labelled 2D keypoints: marker i of view v against its own keypoint
 OBJ_POINTS3D = 2  # labelled 3D points: marker i against its own 3D point
+OBJ_CLOUD = 3  # unlabelled 3D points (detections triangulated across views): nearest point
+NO_CLAIMS = np.zeros(0, np.bool_)  # the whole body: no partition claims a cloud point
 
 
 @njit(cache=True, nogil=True)
@@ -449,6 +451,84 @@ def points3d_error(mk, obs, cap):
 
 
 @njit(cache=True, nogil=True, inline="always")
+def cloud_nearest(mk, i, cloud, claimed):
+    """Marker ``i``'s nearest cloud point not ``claimed`` (in px-equivalents: the 3D
+    distance times the point's px per length unit, ``cloud[c, 3]``; 0 marks padding);
+    returns (distance, row), row -1 when there is none."""
+    best = np.inf
+    arg = -1
+    for c in range(cloud.shape[0]):
+        s = cloud[c, 3]
+        dx = mk[i, 0] - cloud[c, 0]
+        dy = mk[i, 1] - cloud[c, 1]
+        dz = mk[i, 2] - cloud[c, 2]
+        d2 = s * s * (dx * dx + dy * dy + dz * dz)
+        if s > 0.0 and d2 < best and not (c < claimed.shape[0] and claimed[c]):
+            best = d2
+            arg = c
+    return np.sqrt(best), arg
+
+
+@njit(cache=True, nogil=True)
+def cloud_error(mk, cloud, m0, m1, claimed, penalty, cap, penalty_cap, nearest):
+    """Unlabelled 3D points (:data:`OBJ_CLOUD`), the 3D twin of Eq. 5: ``E = sum_i
+    min(s_c |X_i - Y_c|, cap)`` over the markers ``m0:m1``, ``Y_c`` marker i's nearest cloud
+    point among those not ``claimed`` (by other partitions; an empty ``claimed`` claims
+    nothing) and ``s_c`` its px per length unit (``cloud`` (k, 4): x, y, z, s; s = 0 marks
+    padding), so E reads in pixels like Eq. 5's. With ``penalty > 0`` (the bidirectional
+    modes) each unclaimed point that none of these markers takes adds ``penalty · min(s_c ·
+    distance to the nearest of them, penalty_cap)``. ``nearest`` (n_markers,) is scratch."""
+    missing = cap if cap < np.inf else NAN_MARKER_COST
+    total = 0.0
+    for i in range(m0, m1):
+        d, nearest[i] = cloud_nearest(mk, i, cloud, claimed)
+        total += min(d if nearest[i] >= 0 else missing, cap)
+    if penalty > 0.0:
+        for c in range(cloud.shape[0]):
+            s = cloud[c, 3]
+            taken = s <= 0.0 or (c < claimed.shape[0] and claimed[c])
+            best = np.inf
+            for i in range(m0, m1):
+                taken = taken or nearest[i] == c
+                dx = mk[i, 0] - cloud[c, 0]
+                dy = mk[i, 1] - cloud[c, 1]
+                dz = mk[i, 2] - cloud[c, 2]
+                best = min(best, dx * dx + dy * dy + dz * dz)
+            if not taken:
+                total += penalty * min(s * np.sqrt(best), penalty_cap)
+    return total
+
+
+@njit(cache=True, nogil=True)
+def claim_cloud(mk, cloud, m0, m1, gate, claimed):
+    """:func:`claim_detections` for a 3D cloud: each marker outside ``m0:m1`` claims its
+    nearest point within ``gate`` px-equivalents."""
+    claimed[:] = False
+    for i in range(mk.shape[0]):
+        if m0 <= i < m1:
+            continue
+        d, arg = cloud_nearest(mk, i, cloud, claimed[:0])
+        if arg >= 0 and d <= gate:
+            claimed[arg] = True
+
+
+@njit(cache=True, nogil=True)
+def count_unexplained_cloud(mk, cloud, gate):
+    """Cloud points farther than ``gate`` px-equivalents from every model marker."""
+    n = 0
+    for c in range(cloud.shape[0]):
+        s = cloud[c, 3]
+        near = s <= 0.0
+        for i in range(mk.shape[0]):
+            dx = mk[i, 0] - cloud[c, 0]
+            dy = mk[i, 1] - cloud[c, 1]
+            dz = mk[i, 2] - cloud[c, 2]
+            near = near or s * np.sqrt(dx * dx + dy * dy + dz * dz) <= gate
+        n += 0 if near else 1
+    return n
+
+
+@njit(cache=True, nogil=True, inline="always")
 def evaluate(objective, proj, mk, points, conf, view_off, obs3, bidirectional, weight, cap,
              penalty_cap, per_view, nearest):
     """E of projected (``proj``) and 3D (``mk``) markers under ``objective``; fills
@@ -459,6 +539,9 @@ def evaluate(objective, proj, mk, points, conf, view_off, obs3, bidirectional, w
     if objective == OBJ_LABELLED:
         return labelled_error(proj, points, conf, view_off, cap, per_view)
     per_view[:] = 0.0
+    if objective == OBJ_CLOUD:
+        return cloud_error(mk, obs3, 0, mk.shape[0], NO_CLAIMS, weight if bidirectional
+                           else 0.0, cap, penalty_cap, nearest)
     return points3d_error(mk, obs3, cap)
 
 
@@ -478,6 +561,8 @@ def partition_error(objective, proj, mk, points, conf, view_off, obs3, cap, m0, 
     """
     missing = cap if cap < np.inf else NAN_MARKER_COST
     total = 0.0
+    if objective == OBJ_CLOUD:
+        return cloud_error(mk, obs3, m0, m1, claimed, penalty, cap, penalty_cap, nearest)
     if objective == OBJ_POINTS3D:
         for i in range(m0, m1):
             w = obs3[i, 3]
@@ -776,6 +861,8 @@ def anneal_partitions(origin, state, rp, rr, body, cams, dofs, schedule, error, 
                 m1 = bounds[p, 4]  # a trunk before its limbs are fitted: its own markers
             if r > 0 and objective == OBJ_NEAREST:
                 claim_detections(proj, points, view_off, m0, m1, claim_gate, claimed)
+            elif r > 0 and objective == OBJ_CLOUD:
+                claim_cloud(mk, obs3, m0, m1, claim_gate, claimed)
             else:
                 claimed[:] = False
             rs, _ = next_uniform(rs)  # a stream of its own for each partition and round
@@ -874,6 +961,11 @@ def finish_run(best, e, rp, rr, body, cams, dofs, schedule, error, objective, po
                         elem_axis, elem_index, joint_flags, marker_joint, marker_local,
                         slide_index, kind, P, K, dist, R, t, cs, sn, rot, pos, mk, proj)
         u = count_unexplained(proj, points, view_off, claim_gate)
+    elif max_unexplained >= 0 and objective == OBJ_CLOUD:
+        project_posture(best, rp, rr, parent, chain, pre_rot, pre_trans, post_trans,
+                        elem_axis, elem_index, joint_flags, marker_joint, marker_local,
+                        slide_index, kind, P, K, dist, R, t, cs, sn, rot, pos, mk, proj)
+        u = count_unexplained_cloud(mk, obs3, claim_gate)
     return e, pairs, u
 
 
@@ -960,7 +1052,7 @@ def fit_frames(seg_off, frame_ids, root_pos, root_rot, start, body, cams, dofs, 
         sn = np.empty(na)
         per_view = np.empty(nv)
         nearest = np.empty(nm, np.int64)
-        claimed = np.zeros(det_points.shape[0], np.bool_)
+        claimed = np.zeros(max(det_points.shape[0], obs3.shape[1]), np.bool_)
         work = np.empty(na)
         cur = np.empty(na)
         cand = np.empty(na)
@@ -974,7 +1066,7 @@ def fit_frames(seg_off, frame_ids, root_pos, root_rot, start, body, cams, dofs, 
             rr = root_rot[f]
             clear_frame(out, f)
             has = vo[nv] > vo[0]
-            if objective == OBJ_POINTS3D:
+            if objective in (OBJ_POINTS3D, OBJ_CLOUD):
                 has = False
                 for i in range(obs3.shape[1]):
                     has = has or obs3[f, i, 3] > 0.0

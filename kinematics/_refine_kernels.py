@@ -19,8 +19,11 @@ from numba import njit, prange
 
 from kinematics._anneal_kernels import (
     DOF_HISTOGRAM,
+    NO_CLAIMS,
+    OBJ_CLOUD,
     OBJ_LABELLED,
     OBJ_POINTS3D,
+    cloud_nearest,
     project_posture,
     solve_spd,
 )
@@ -51,13 +54,22 @@ def assign_pairs(objective, proj, mk, points, conf, view_off, obs3, gate, pair):
     Unlabelled points (``OBJ_NEAREST``): ``pair[v * nm + i]`` = index of marker i's nearest
     detection in view v. Labelled keypoints: the row of marker i's own keypoint in view v (if
     present, with confidence > 0). 3D points: ``pair[i] = i`` where marker i's point is
-    present. -1 marks no pair (farther than ``gate``: pixels, or length units for 3D).
+    present. Unlabelled 3D points (``OBJ_CLOUD``): ``pair[i]`` = the row of marker i's
+    nearest cloud point (px-equivalents, as :func:`kinematics._anneal_kernels.cloud_error`).
+    -1 marks no pair (farther than ``gate``: pixels, or length units for labelled 3D).
     """
     nv = proj.shape[0]
     nm = mk.shape[0]
     n = 0
     g2 = gate * gate
     pair[:] = -1
+    if objective == OBJ_CLOUD:
+        for i in range(nm):
+            d, arg = cloud_nearest(mk, i, obs3, NO_CLAIMS)
+            if arg >= 0 and d <= gate:
+                pair[i] = arg
+                n += 1
+        return n
     if objective == OBJ_POINTS3D:
         for i in range(nm):
             d2 = 0.0
@@ -98,12 +110,13 @@ def fill_residuals(objective, proj, mk, points, conf, obs3, pair, res):
     weighted by the square root of the confidence); returns their sum of squares."""
     res[:] = 0.0
     s = 0.0
-    if objective == OBJ_POINTS3D:
+    if objective in (OBJ_POINTS3D, OBJ_CLOUD):
         for i in range(mk.shape[0]):
-            if pair[i] >= 0:
-                w = np.sqrt(obs3[i, 3])
+            c = pair[i]
+            if c >= 0:  # a cloud point's weight is its px per unit, labelled ones' a variance
+                w = obs3[c, 3] if objective == OBJ_CLOUD else np.sqrt(obs3[c, 3])
                 for k in range(3):
-                    r = w * (mk[i, k] - obs3[i, k])
+                    r = w * (mk[i, k] - obs3[c, k])
                     res[3 * i + k] = r
                     s += r * r
         return s

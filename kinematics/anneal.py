@@ -48,6 +48,7 @@ import numpy as np
 from kinematics import _anneal_kernels as _ak
 from kinematics import _lane_kernels as _lk
 from kinematics import placement, temporal
+from kinematics.cloud import cloud_observations
 from kinematics.error_function import projection_error
 from kinematics.errors import KinematicsError
 from kinematics.fk import forward_kinematics_reference
@@ -351,14 +352,16 @@ class Fitter:
         if not self.cameras:
             raise KinematicsError("no cameras: 2D observations need one camera per view",
                                   field="cameras")
-        if obs is not None:
-            if list(obs.view_names) != self.view_names:
-                raise KinematicsError(f"observations are for views {list(obs.view_names)} but "
-                                      f"the cameras are {self.view_names}",
-                                      field="observations")
-            return obs
-        rag = _as_ragged(data, self.view_names)
-        return Observations.unlabelled(rag.points, rag.offsets, self.view_names, rag.dropped)
+        if obs is None:
+            rag = _as_ragged(data, self.view_names)
+            obs = Observations.unlabelled(rag.points, rag.offsets, self.view_names,
+                                          rag.dropped)
+        elif list(obs.view_names) != self.view_names:
+            raise KinematicsError(f"observations are for views {list(obs.view_names)} but "
+                                  f"the cameras are {self.view_names}", field="observations")
+        if obs.kind == "points" and self.params.match == "3d":
+            obs = cloud_observations(self.cameras, obs)
+        return obs
 
     def _to_range_deg(self, angles_rad: np.ndarray) -> np.ndarray:
         """Degrees, each angle moved by whole turns to lie nearest its range centre."""
@@ -372,14 +375,16 @@ class Fitter:
         forward kinematics), shape (n_views, n_markers, 2) pixels."""
         return self._project_state(*self.state(angles_deg, root_positions))
 
-    def _project_state(self, state, root_pos, root_rot) -> np.ndarray:
+    def _project_state(self, state, root_pos, root_rot, *, markers: bool = False):
+        """Projections (n_views, n_markers, 2) of a kernel state; with ``markers`` also the
+        3D markers (n_markers, 3)."""
         f = self.problem.folded
         nj, nm, ns = f.parent.size, f.marker_joint.size, state.size
         proj = np.empty((self.n_views, nm, 2))
+        mk = np.empty((nm, 3))
         _ak.project_posture(state, root_pos, root_rot, *f, *self.problem.cams, np.empty(ns),
-                            np.empty(ns), np.empty((nj, 3, 3)), np.empty((nj, 3)),
-                            np.empty((nm, 3)), proj)
-        return proj
+                            np.empty(ns), np.empty((nj, 3, 3)), np.empty((nj, 3)), mk, proj)
+        return (proj, mk) if markers else proj
 
     def error(self, angles_deg, detections_frame, root_positions=None) -> tuple[float,
                                                                                 np.ndarray]:
@@ -398,8 +403,9 @@ class Fitter:
         error : float
         error_per_view : ndarray, shape (n_views,) (zeros for 3D points)
         """
-        if isinstance(detections_frame, Observations):
-            obs = self.observations(detections_frame)
+        if isinstance(detections_frame, Observations) or self.params.match == "3d":
+            obs = self.observations(detections_frame if isinstance(
+                detections_frame, Observations) else [detections_frame])
             state, pos, rot = self.state(angles_deg, root_positions)
             return self._state_error(obs.arrays(np.array([0], np.int64)), state, pos, rot,
                                      self.params)
@@ -729,12 +735,11 @@ class Fitter:
         unexplained = 0
         if runs:
             residuals, unexplained = self._residuals(obs, state, root_pos, root_rot,
-                                                     arrays.points, arrays.offsets,
-                                                     p.claim_gate_px)
+                                                     arrays, p.claim_gate_px)
             if error is None:
                 error = self._state_error(arrays, state, root_pos, root_rot, p)
         err, view_err = error if error is not None else (np.nan, np.full(nv, np.nan))
-        too_many = (p.max_unexplained is not None and obs.kind == "points"
+        too_many = (p.max_unexplained is not None and obs.kind in ("points", "cloud")
                     and unexplained > p.max_unexplained)
         if runs == 0:
             status = "no-detections"
@@ -997,12 +1002,14 @@ class Fitter:
             return None
         return self._candidates(out.run_angles[0], out.run_error[0], pos, rot, local)[0]
 
-    def _residuals(self, obs: Observations, state, root_pos, root_rot, pts, view_off,
+    def _residuals(self, obs: Observations, state, root_pos, root_rot, arrays,
                    gate: float) -> tuple[np.ndarray, int]:
         """(n_views, n_markers) distance of each model marker to its nearest detection (to
         its own keypoint for labelled keypoints; NaN where there is none), and the number of
-        detections farther than ``gate`` from every marker."""
-        proj = self._project_state(state, root_pos, root_rot)
+        detections farther than ``gate`` from every marker (for a cloud: of its 3D points,
+        as the kernel counts them)."""
+        proj, mk = self._project_state(state, root_pos, root_rot, markers=True)
+        pts, view_off = arrays.points, arrays.offsets
         out = np.full(proj.shape[:2], np.nan)
         unexplained = 0
         for v in range(self.n_views):
@@ -1013,6 +1020,8 @@ class Fitter:
                 dist = np.linalg.norm(proj[v][:, None] - d[None], axis=2)
                 out[v] = dist.min(axis=1)
                 unexplained += int((dist.min(axis=0) > gate).sum())
+        if obs.kind == "cloud":
+            unexplained = int(_ak.count_unexplained_cloud(mk, arrays.points3d[0], gate))
         return out, unexplained
 
 
@@ -1033,6 +1042,8 @@ def marker_images(obs: Observations, frames, n_markers: int) -> np.ndarray:
     the markers with a point)."""
     if obs.kind == "points3d":
         return (obs.points3d[frames, :, 3] > 0).sum(axis=1)
+    if obs.kind == "cloud":  # E sums one distance per marker
+        return n_markers * (obs.points3d[frames, :, 3] > 0).any(axis=1)
     return n_markers * (obs.view_counts(frames) > 0).sum(axis=1)
 
 

@@ -171,3 +171,40 @@ def points3d_error(markers, points, options: ErrorOptions | None = None) -> floa
     present = np.isfinite(y[:, :3]).all(axis=1) & (w > 0)
     d = np.linalg.norm(np.asarray(markers, float) - y[:, :3], axis=1)
     return float(np.where(present, w * np.minimum(d, opts.cap), 0.0).sum())
+
+
+def cloud_error(markers, cloud, options: ErrorOptions | None = None, claimed=None) -> float:
+    """Unlabelled 3D points (the objective of ``match = "3d"``), Eq. 5 in 3D::
+
+        E = sum_i min(s_c · |X_i - Y_c|, cap)
+
+    ``Y_c`` is model marker i's nearest cloud point by ``s_c · distance`` (ties: the lower
+    row), ``s_c`` the pixels per length unit at that point, so E reads in pixels. With the
+    bidirectional modes every point that is no marker's nearest adds ``penalty_weight ·
+    min(s_c · its distance to the nearest marker, penalty_cap)``.
+
+    Parameters
+    ----------
+    markers : (n_markers, 3) model markers
+    cloud : (k, 4) x, y, z, s of each point; s <= 0 marks padding
+    options : ErrorOptions, optional (default: the paper's Eq. 5)
+    claimed : (k,) bool, optional: points another partition took, left out entirely
+    """
+    opts = options or ErrorOptions()
+    mk = np.asarray(markers, dtype=float)
+    c = np.asarray(cloud, dtype=float).reshape(-1, 4)
+    use = c[:, 3] > 0
+    if claimed is not None:
+        use &= ~np.asarray(claimed, bool)
+    if not use.any():
+        missing = opts.cap if np.isfinite(opts.cap) else NAN_MARKER_COST
+        return float(len(mk) * min(missing, opts.cap))
+    diff = mk[:, None, :] - c[None, use, :3]
+    dist = c[use, 3] * np.sqrt((diff * diff).sum(axis=2))  # (markers, used points)
+    e = float(np.minimum(dist.min(axis=1), opts.cap).sum())
+    if opts.bidirectional:
+        taken = np.zeros(dist.shape[1], bool)
+        taken[np.argmin(dist, axis=1)] = True
+        e += opts.penalty_weight * float(np.minimum(dist.min(axis=0)[~taken],
+                                                    opts.penalty_cap).sum())
+    return e

@@ -12,12 +12,18 @@
     Labelled 3D points (Anipose, motion capture): for every model marker an (x, y, z, weight)
     row in the body's length units, NaN when missing. Objective: the 3D distance of each
     marker to its point, weighted and capped. No cameras are needed.
+``cloud``
+    Unlabelled points per view together with their triangulation across the views
+    (:func:`kinematics.cloud.triangulate_unlabelled`): per frame any number of 3D points
+    ``(x, y, z, s)`` with ``s`` the pixels per length unit at the point (0 marks padding).
+    Objective: each model marker's distance to its nearest 3D point times ``s`` (Eq. 5 in
+    3D, in pixels), capped. The 2D points stay for residuals per view and for drawing.
 
 Layout (the kernels'): 2D observations are ragged, frame-major: ``points`` (n, 2) pixels
 with ``conf`` (n,) weights, view ``v`` of frame ``f`` owning rows
 ``offsets[f * n_views + v]:offsets[f * n_views + v + 1]``; for keypoints a view's rows are
 the body's markers in order (``n_markers`` rows) or none. 3D points are ``points3d``
-(n_frames, n_markers, 4).
+(n_frames, n_markers, 4), a cloud's (n_frames, most points in a frame, 4).
 """
 
 from __future__ import annotations
@@ -31,7 +37,7 @@ import numpy as np
 from kinematics import _anneal_kernels as _ak
 from kinematics.errors import KinematicsError
 
-KINDS = ("points", "keypoints", "points3d")
+KINDS = ("points", "keypoints", "points3d", "cloud")
 
 
 class ObservationArrays(NamedTuple):
@@ -41,9 +47,11 @@ class ObservationArrays(NamedTuple):
     points: np.ndarray  # (n_points, 2)
     conf: np.ndarray  # (n_points,)
     offsets: np.ndarray  # (n_frames * n_views + 1,) int64
-    points3d: np.ndarray  # (n_frames, n_markers or 0, 4)
+    points3d: np.ndarray  # (n_frames, n_markers or 0, 4); a cloud's (n_frames, k, 4)
+
+
 _OBJECTIVE = {"points": _ak.OBJ_NEAREST, "keypoints": _ak.OBJ_LABELLED,
-              "points3d": _ak.OBJ_POINTS3D}
+              "points3d": _ak.OBJ_POINTS3D, "cloud": _ak.OBJ_CLOUD}
 
 
 @dataclass(frozen=True, eq=False)
@@ -52,11 +60,12 @@ class Observations:
 
     Attributes
     ----------
-    kind : {"points", "keypoints", "points3d"}
+    kind : {"points", "keypoints", "points3d", "cloud"}
     view_names : tuple of str (empty for 3D points)
     n_frames : int
     points : ndarray (n, 2); conf : ndarray (n,); offsets : ndarray (n_frames * n_views + 1,)
-    points3d : ndarray (n_frames, n_markers, 4) (n_markers 0 for 2D kinds)
+    points3d : ndarray (n_frames, n_markers, 4) (n_markers 0 for 2D kinds; for a cloud
+        (n_frames, k, 4) x, y, z, pixels per length unit, 0 in padding rows)
     dropped : ndarray (n_frames,) unlabelled points dropped for a NaN coordinate
     """
 
@@ -80,7 +89,7 @@ class Observations:
 
     @property
     def labelled(self) -> bool:
-        return self.kind != "points"
+        return self.kind in ("keypoints", "points3d")
 
     # -- construction ------------------------------------------------------------------
     @classmethod
@@ -94,6 +103,21 @@ class Observations:
         drop = np.zeros(n, np.int64) if dropped is None else np.asarray(dropped, np.int64)
         return cls("points", tuple(view_names), n, pts, np.ones(len(pts)), off,
                    np.zeros((n, 0, 4)), drop)
+
+    def with_cloud(self, cloud) -> Observations:
+        """These unlabelled points with their 3D cloud ``cloud`` (n_frames, k, 4): x, y, z
+        and the pixels per length unit at each point (0 or NaN rows: padding)."""
+        if self.kind != "points":
+            raise KinematicsError(f"a cloud is made of unlabelled points, not {self.kind}",
+                                  field="observations")
+        c = np.array(cloud, dtype=float, copy=True)
+        if c.ndim != 3 or c.shape[0] != self.n_frames or c.shape[2] != 4:
+            raise KinematicsError(f"a cloud needs shape ({self.n_frames} frames, points, 4), "
+                                  f"got {c.shape}", field="cloud")
+        bad = ~np.isfinite(c).all(axis=2) | ~(c[..., 3] > 0)
+        c[bad] = 0.0
+        return Observations("cloud", self.view_names, self.n_frames, self.points, self.conf,
+                            self.offsets, np.ascontiguousarray(c), self.dropped)
 
     @classmethod
     def keypoints(cls, keypoints, view_names: Sequence[str], marker_names: Sequence[str],

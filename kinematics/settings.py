@@ -45,6 +45,7 @@ def setting(default, doc: str, *, min=None, max=None, choices=None, none=None):
 START_MODES = ("mean", "previous")
 PARTITION_MODES = ("auto", "none")
 BACKENDS = ("auto", "scalar", "lanes")
+MATCH_MODES = ("views", "3d")
 THRESHOLD_MODES = ("absolute", "auto")
 
 #: Cost of a marker with no finite projection when no cap is set (same as the kernels).
@@ -220,6 +221,15 @@ class AnnealParams:
         "flatten": {"mode": "error"}})
     seed: int = setting(0, "Seed of the random streams; written into every result.",
                         min=0, max=2**62)
+    match: str = setting(
+        "views", "Where unlabelled markers are matched to the model: 'views' — each "
+        "projected model marker to its nearest detection in every view (Eq. 5, the paper); "
+        "'3d' — the detections are first triangulated across the calibrated views into 3D "
+        "points (a marker seen in at least 3 views; kinematics.cloud), and each model marker "
+        "is matched to its nearest 3D point, its distance read in pixels at that point, so "
+        "every pixel setting keeps its meaning. '3d' needs 3 or more views; it keeps the "
+        "limbs of a many-limbed body on their own markers where blobs fuse in the images "
+        "(docs/fitting.md, 'Matching in 3D').", choices=MATCH_MODES)
     backend: str = setting(
         "auto", "Which kernel anneals: 'scalar' one run at a time, 'lanes' many runs at once "
         "in SIMD lanes (the same results to the last bit; faster on many frames), 'auto' "
@@ -284,6 +294,9 @@ class AnnealParams:
         if self.partitions not in PARTITION_MODES:
             raise KinematicsError(f"must be one of {', '.join(PARTITION_MODES)}, got "
                                   f"{self.partitions!r}", field="partitions")
+        if self.match not in MATCH_MODES:
+            raise KinematicsError(f"must be one of {', '.join(MATCH_MODES)}, got "
+                                  f"{self.match!r}", field="match")
         if self.backend not in BACKENDS:
             raise KinematicsError(f"must be one of {', '.join(BACKENDS)}, got "
                                   f"{self.backend!r}", field="backend")

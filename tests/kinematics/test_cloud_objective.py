@@ -1,0 +1,135 @@
+"""Matching in 3D (``match = "3d"``): the cloud objective's kernel against its NumPy twin,
+partition claims on a cloud, the refinement pairs, and bodies fitted to triangulated markers
+where matching per view lets limbs share blobs."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from kinematics import _anneal_kernels as ak
+from kinematics import _refine_kernels as rk
+from kinematics.anneal import AnnealParams, Fitter
+from kinematics.cameras import PinholeCamera
+from kinematics.error_function import cloud_error
+from kinematics.errors import KinematicsError
+from kinematics.fk import forward_kinematics_reference
+from kinematics.observations import Observations
+from kinematics.rotations import euler_yxz
+from kinematics.settings import ErrorOptions
+from tests.kinematics.test_partitions import marker_errors, three_legs
+
+OPTIONS = [ErrorOptions(), ErrorOptions(cap_px=4.0), ErrorOptions(mode="bidirectional"),
+           ErrorOptions(mode="bounded", cap_px=6.0), ErrorOptions(mode="bidirectional",
+                                                                  penalty_weight=0.5)]
+
+
+def random_cloud(rng, n_markers=7, n_points=9, pad=3):
+    mk = rng.uniform(-5, 5, (n_markers, 3))
+    cloud = np.zeros((n_points + pad, 4))
+    cloud[:n_points, :3] = rng.uniform(-5, 5, (n_points, 3))
+    cloud[:n_points, 3] = rng.uniform(5, 20, n_points)  # px per unit
+    cloud[n_points:, :3] = rng.uniform(-5, 5, (pad, 3))  # padding: s = 0, never used
+    return mk, cloud
+
+
+@pytest.mark.parametrize("opts", OPTIONS, ids=lambda o: f"{o.mode}-{o.cap_px}")
+def test_cloud_error_kernel_equals_twin(opts):
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        mk, cloud = random_cloud(rng)
+        nearest = np.empty(len(mk), np.int64)
+        got = ak.cloud_error(mk, cloud, 0, len(mk), ak.NO_CLAIMS,
+                             opts.penalty_weight if opts.bidirectional else 0.0, opts.cap,
+                             opts.penalty_cap, nearest)
+        assert got == pytest.approx(cloud_error(mk, cloud, opts), rel=1e-12)
+
+
+def test_partition_cloud_error_leaves_claimed_points_out():
+    rng = np.random.default_rng(5)
+    opts = ErrorOptions(mode="bounded", cap_px=30.0)
+    for _ in range(20):
+        mk, cloud = random_cloud(rng)
+        claimed = np.zeros(len(cloud), np.bool_)
+        ak.claim_cloud(mk, cloud, 2, 5, 40.0, claimed)  # markers outside 2:5 claim
+        want = set()
+        for i in [0, 1, 5, 6]:
+            d = cloud[:, 3] * np.linalg.norm(mk[i] - cloud[:, :3], axis=1)
+            d[cloud[:, 3] <= 0] = np.inf
+            if d.min() <= 40.0:
+                want.add(int(np.argmin(d)))
+        assert set(np.flatnonzero(claimed)) == want
+        got = ak.partition_error(ak.OBJ_CLOUD, np.zeros((0, len(mk), 2)), mk, np.empty((0, 2)),
+                                 np.empty(0), np.zeros(1, np.int64), cloud, opts.cap, 2, 5,
+                                 claimed, opts.penalty_weight, opts.penalty_cap,
+                                 np.empty(len(mk), np.int64))
+        assert got == pytest.approx(cloud_error(mk[2:5], cloud, opts, claimed), rel=1e-12)
+
+
+def test_refinement_pairs_markers_with_their_nearest_point_in_pixels():
+    mk = np.array([[0.0, 0.0, 0.0], [3.0, 0.0, 0.0]])
+    cloud = np.array([[0.1, 0.0, 0.0, 10.0], [3.0, 0.5, 0.0, 10.0], [0.0, 0.0, 0.05, 0.0]])
+    pair = np.empty(2, np.int64)
+    proj = np.zeros((0, 2, 2))
+    n = rk.assign_pairs(ak.OBJ_CLOUD, proj, mk, np.empty((0, 2)), np.empty(0),
+                        np.zeros(1, np.int64), cloud, 2.0, pair)  # gate 2 px = 0.2 units
+    assert n == 1 and pair.tolist() == [0, -1]  # padding row 2 is never a pair
+    res = np.empty(6)
+    sse = rk.fill_residuals(ak.OBJ_CLOUD, proj, mk, np.empty((0, 2)), np.empty(0), cloud,
+                            pair, res)
+    assert sse == pytest.approx(1.0)  # 0.1 units at 10 px per unit
+
+
+def ring(n=5, distance=80.0, focal=800.0):
+    """Pinhole cameras on a ring around the origin at alternating elevations."""
+    cams = {}
+    for i in range(n):
+        r = euler_yxz(2 * np.pi * i / n, 0.3 + 0.3 * (i % 2), 0.0).T
+        centre = r.T @ np.array([0.0, 0.0, -distance])
+        cams[f"c{i}"] = PinholeCamera(f"c{i}", [[focal, 0, 320], [0, focal, 240], [0, 0, 1]],
+                                      R=r, t=-r @ centre, size=(640, 480))
+    return cams
+
+
+def planted_frames(body, cams, n, seed, noise=0.05):
+    rng = np.random.default_rng(seed)
+    lo, hi = body.ranges_deg().T
+    margin = np.minimum(5.0, (hi - lo) / 4)
+    angles = np.where(body.locked_mask(), 0.0, rng.uniform(lo + margin, hi - margin,
+                                                           (n, len(lo))))
+    frames = []
+    for a in angles:
+        m = forward_kinematics_reference(body, a).markers
+        views = []
+        for c in cams.values():
+            p = c.project(m) + rng.normal(0, noise, (len(m), 2))
+            views.append(p[rng.permutation(len(p))])  # unlabelled: any order
+        frames.append(views)
+    return angles, frames
+
+
+def test_three_legs_fitted_to_their_triangulated_markers():
+    body = three_legs()
+    cams = ring()
+    angles, frames = planted_frames(body, cams, 8, seed=11)
+    params = AnnealParams(match="3d", candidates=1, threshold_mode="absolute",
+                          reanalysis_threshold=8.0, error=ErrorOptions()).with_schedule(3000)
+    fitter = Fitter(body, cams, params)
+    obs = fitter.observations(frames)
+    assert obs.kind == "cloud" and (obs.points3d[..., 3] > 0).sum(axis=1).tolist() == [8] * 8
+    res = fitter.fit(frames)
+    err = marker_errors(body, res, angles)
+    assert np.median(err) < 0.05 and err.max() < 0.2, err
+    assert all(r.status == "ok" and r.unexplained == 0 for r in res)
+    # E is the sum over markers in pixels at the markers: about the 2D noise per marker
+    assert np.median([r.error for r in res]) < 0.5 * 8
+    e, per_view = fitter.error(res[0].angles_deg, frames[0])
+    assert e == pytest.approx(res[0].error, rel=1e-9) and not per_view.any()
+
+
+def test_match_3d_needs_unlabelled_points_and_valid_settings():
+    with pytest.raises(KinematicsError, match="match"):
+        AnnealParams(match="2d")
+    obs = Observations.points_3d(np.zeros((2, 1, 3)), ["m"], ["m"])
+    with pytest.raises(KinematicsError, match="unlabelled"):
+        obs.with_cloud(np.zeros((2, 1, 4)))
