@@ -500,12 +500,12 @@ def cloud_error(mk, cloud, m0, m1, claimed, penalty, cap, penalty_cap, nearest):
 
 
 @njit(cache=True, nogil=True)
-def claim_cloud(mk, cloud, m0, m1, gate, claimed):
-    """:func:`claim_detections` for a 3D cloud: each marker outside ``m0:m1`` claims its
-    nearest point within ``gate`` px-equivalents."""
+def claim_cloud(mk, cloud, claimers, gate, claimed):
+    """:func:`claim_detections` for a 3D cloud: each marker flagged in ``claimers`` claims
+    its nearest point within ``gate`` px-equivalents."""
     claimed[:] = False
     for i in range(mk.shape[0]):
-        if m0 <= i < m1:
+        if not claimers[i]:
             continue
         d, arg = cloud_nearest(mk, i, cloud, claimed[:0])
         if arg >= 0 and d <= gate:
@@ -634,17 +634,17 @@ def count_unexplained(proj, points, view_off, gate):
 
 
 @njit(cache=True, nogil=True)
-def claim_detections(proj, points, view_off, m0, m1, gate, claimed):
-    """Mark the detections that markers outside ``m0:m1`` explain: each such marker's
-    nearest detection in each view, if within ``gate`` pixels (a marker far from every
-    detection, e.g. occluded, claims nothing)."""
+def claim_detections(proj, points, view_off, claimers, gate, claimed):
+    """Mark the detections that the markers flagged in ``claimers`` (n_markers,) explain:
+    each such marker's nearest detection in each view, if within ``gate`` pixels (a marker
+    far from every detection, e.g. occluded, claims nothing)."""
     claimed[:] = False
     g2 = gate * gate
     for v in range(proj.shape[0]):
         a = view_off[v]
         b = view_off[v + 1]
         for i in range(proj.shape[1]):
-            if m0 <= i < m1:
+            if not claimers[i]:
                 continue
             best = g2
             arg = -1
@@ -823,6 +823,104 @@ def anneal_chain(start, free_idx, step, hist, nbins, th, dof_kind, lo, hi, max_r
     return e_best, it
 
 
+#: Postures the start search keeps from one stage to the next (its beam width), and at most
+#: how many of them may match the placed markers to the same points.
+BEAM = 32
+PER_MATCH = 4
+
+
+@njit(cache=True, nogil=True)
+def beam_start(work, s0, s1, stage_dof_off, stage_dofs, stage_mark, n_samples, state, hist,
+               nbins, th, dof_kind, lo, hi, rp, rr, parent, chain, pre_rot, pre_trans,
+               post_trans, elem_axis, elem_index, joint_flags, marker_joint, marker_local,
+               slide_index, kind, P, K, dist, R, t, objective, points, conf, view_off, obs3,
+               cap, j0, j1, m0, m1, claimed, penalty_cap, refine_steps, refine_gate, cs, sn,
+               rot, pos, mk, proj, nearest):
+    """A partition's start posture by a beam search along its joints, into ``work``.
+
+    Stage ``s`` (``s0:s1``, one joint's entries, root first) draws ``BEAM · n_samples``
+    values for its entries, spread over the postures kept so far — each entry uniform in
+    ``[lo, hi]``, a histogram angle redrawn (at most 16 times) while implausible — and keeps
+    the ``BEAM`` postures with the lowest :func:`partition_error` of the markers the stage
+    places (``m0:stage_mark[s]``, at most ``m1``; detections ``claimed`` by other partitions
+    left out), each kept posture's undrawn values counting too. Joint by joint the search
+    follows the limb outward along its own markers, so annealing starts in the right basin
+    where the start posture lies nearer another limb's markers. ``rot`` … ``proj`` must
+    hold the current posture of the rest of the body."""
+    ns = work.shape[0]
+    any_pinhole = _has_pinhole(kind)
+    rs = state
+    beams = np.empty((BEAM, ns))
+    beams[0, :] = work
+    nb = 1
+    most = BEAM * (n_samples + 1) * 2
+    cands = np.empty((most, ns))
+    cand_e = np.empty(most)
+    cand_sig = np.empty(most, np.uint64)
+    kept_sig = np.empty(BEAM, np.uint64)
+    for st in range(s0, s1):
+        d0 = stage_dof_off[st]
+        d1 = stage_dof_off[st + 1]
+        m_end = min(stage_mark[st], m1)
+        span = (j0, j1, m0, m_end)
+        draws = (BEAM * n_samples) // nb
+        nc = 0
+        for b in range(nb):
+            for k in range(ns):
+                sn[k], cs[k] = sincos(beams[b, k])
+            for smp in range(draws + 1):
+                cands[nc, :] = beams[b]
+                if smp > 0:  # draw 0 keeps the beam's own values
+                    for q in range(d0, d1):
+                        i = stage_dofs[q]
+                        ok = False
+                        tries = 0
+                        x = beams[b, i]
+                        while not ok and tries < 16:
+                            rs, u = next_uniform(rs)
+                            x = lo[i] + (hi[i] - lo[i]) * u
+                            ok = dof_kind[i] != DOF_HISTOGRAM or hist_at(hist, nbins, i, x) >= th
+                            tries += 1
+                        cands[nc, i] = x
+                for q in range(d0, d1):
+                    i = stage_dofs[q]
+                    sn[i], cs[i] = sincos(cands[nc, i])
+                _project_cs(cands[nc], cs, sn, rp, rr, parent, chain, pre_rot, pre_trans,
+                            post_trans, elem_axis, elem_index, joint_flags, marker_joint,
+                            marker_local, slide_index, kind, P, K, dist, R, t, rot, pos, mk,
+                            proj, any_pinhole, span)
+                cand_e[nc] = partition_error(objective, proj, mk, points, conf, view_off,
+                                             obs3, cap, m0, m_end, claimed, 0.0, penalty_cap,
+                                             nearest)
+                sig = _GOLDEN
+                for i in range(m0, m_end):
+                    sig = mix64(sig ^ np.uint64(nearest[i] + 1))
+                cand_sig[nc] = sig
+                nc += 1
+        # Keep the best posture of each distinct match (which point each placed marker
+        # takes): the prefix's best postures alone are near copies of one hypothesis, and
+        # a model that fits the first markers a little better on the wrong points (real
+        # limbs are not rigid chains) would then shut the right one out.
+        order = np.argsort(cand_e[:nc])
+        nb = 0
+        for o in order:
+            same = 0
+            for b in range(nb):
+                same += 1 if kept_sig[b] == cand_sig[o] else 0
+            if nb < BEAM and same < PER_MATCH:
+                beams[nb, :] = cands[o]
+                kept_sig[nb] = cand_sig[o]
+                nb += 1
+        if refine_steps > 0:  # polish each kept posture's entries drawn so far
+            for b in range(nb):
+                _rk.refine_posture(beams[b], stage_dofs[stage_dof_off[s0]:d1], lo, hi,
+                                   dof_kind, refine_steps, refine_gate, rp, rr, parent, chain,
+                                   pre_rot, pre_trans, post_trans, elem_axis, elem_index,
+                                   joint_flags, marker_joint, marker_local, slide_index, kind,
+                                   P, K, dist, R, t, objective, points, conf, view_off, obs3)
+    work[:] = beams[0]
+
+
 @njit(cache=True, nogil=True)
 def anneal_partitions(origin, state, rp, rr, body, cams, dofs, schedule, error, objective,
                       points, conf, view_off, obs3, parts, claimed, work, cur, cand, best, cs,
@@ -833,7 +931,10 @@ def anneal_partitions(origin, state, rp, rr, body, cams, dofs, schedule, error, 
     markers only: its limbs are not fitted yet). The first round fits every partition
     against all detections; later rounds (``rounds`` > 1) exclude the detections that the
     other partitions' markers explain (:func:`claim_detections` within ``claim_gate`` px),
-    so limbs do not share or take each other's markers. Leaves the result in ``best``.
+    so limbs do not share or take each other's markers. With ``samples`` > 0 each partition
+    of the first round starts from the best of ``samples`` drawn postures
+    (:func:`sampled_start`) and may not use the detections that the partitions fitted
+    before it explain. Leaves the result in ``best``.
 
     Returns
     -------
@@ -847,10 +948,12 @@ def anneal_partitions(origin, state, rp, rr, body, cams, dofs, schedule, error, 
     (th, max_redraws, n_end, n_l, n_tau, tau0, l0, c_l, c_tau, eps, _, _, _, _, _, _,
      _, _) = schedule
     bidirectional, weight, cap, penalty_cap = error
-    bounds, part_off, part_dofs, rounds, claim_gate = parts
+    (bounds, part_off, part_dofs, rounds, claim_gate, samples, stage_off, stage_dof_off,
+     stage_dofs, stage_mark) = parts
     work[:] = origin
     its = 0
     rs = np.uint64(state)
+    claimers = np.zeros(marker_joint.shape[0], np.bool_)
     for r in range(rounds):
         for p in range(bounds.shape[0]):
             project_posture(work, rp, rr, parent, chain, pre_rot, pre_trans, post_trans,
@@ -859,14 +962,31 @@ def anneal_partitions(origin, state, rp, rr, body, cams, dofs, schedule, error, 
             j0, j1, m0, m1 = bounds[p, 0], bounds[p, 1], bounds[p, 2], bounds[p, 3]
             if r == 0 and bounds[p, 4] > m0:
                 m1 = bounds[p, 4]  # a trunk before its limbs are fitted: its own markers
-            if r > 0 and objective == OBJ_NEAREST:
-                claim_detections(proj, points, view_off, m0, m1, claim_gate, claimed)
-            elif r > 0 and objective == OBJ_CLOUD:
-                claim_cloud(mk, obs3, m0, m1, claim_gate, claimed)
+            claimers[:] = False
+            if r > 0:  # every other partition claims
+                claimers[:] = True
+                claimers[m0:m1] = False
+            elif samples > 0:  # the partitions fitted before this one claim
+                for q in range(p):
+                    claimers[bounds[q, 2]:bounds[q, 4]] = True
+            if objective == OBJ_NEAREST:
+                claim_detections(proj, points, view_off, claimers, claim_gate, claimed)
+            elif objective == OBJ_CLOUD:
+                claim_cloud(mk, obs3, claimers, claim_gate, claimed)
             else:
                 claimed[:] = False
             rs, _ = next_uniform(rs)  # a stream of its own for each partition and round
-            _, n = anneal_chain(work, part_dofs[part_off[p]:part_off[p + 1]], step, hist,
+            dofs_p = part_dofs[part_off[p]:part_off[p + 1]]
+            if r == 0 and samples > 0:
+                beam_start(work, stage_off[p], stage_off[p + 1], stage_dof_off, stage_dofs,
+                           stage_mark, samples, mix64(rs ^ _GOLDEN), hist, nbins, th,
+                           dof_kind, lo, hi, rp, rr, parent, chain, pre_rot, pre_trans,
+                           post_trans, elem_axis, elem_index, joint_flags, marker_joint,
+                           marker_local, slide_index, kind, P, K, dist, R, t, objective,
+                           points, conf, view_off, obs3, cap, j0, j1, m0, m1, claimed,
+                           penalty_cap, schedule[13], schedule[14], cs, sn, rot, pos, mk, proj,
+                           nearest)
+            _, n = anneal_chain(work, dofs_p, step, hist,
                                 nbins, th, dof_kind, lo, hi, max_redraws, n_end, n_l, n_tau,
                                 tau0, l0, c_l, c_tau, eps, mix64(rs), rp, rr, parent, chain,
                                 pre_rot, pre_trans, post_trans, elem_axis, elem_index,
@@ -1035,10 +1155,10 @@ def fit_frames(seg_off, frame_ids, root_pos, root_rot, start, body, cams, dofs, 
     (th, max_redraws, n_end, n_l, n_tau, tau0, l0, c_l, c_tau, eps, seed,
      reanalysis_threshold, max_runs, _, _, start_previous, max_unexplained, min_runs) = schedule
     claim_gate = parts[4]
+    partitioned = parts[0].shape[0] > 1 or parts[5] > 0
     bidirectional, weight, cap, penalty_cap = error
     objective, det_points, det_conf, det_off, obs3 = obs
     out_iterations, out_pairs, out_run_angles, out_run_error = out[4:]
-    n_parts = parts[0].shape[0]
     nv = kind.shape[0]
     nj = parent.shape[0]
     nm = marker_joint.shape[0]
@@ -1078,7 +1198,7 @@ def fit_frames(seg_off, frame_ids, root_pos, root_rot, start, body, cams, dofs, 
                                 max_unexplained):
                     state = stream_state(seed, frame_ids[f], run)
                     origin = first if run == 0 else start
-                    if n_parts > 1:
+                    if partitioned:
                         e, its = anneal_partitions(origin, state, rp, rr, body, cams, dofs,
                                                    schedule, error, objective, det_points,
                                                    det_conf, vo, obs3[f], parts, claimed,

@@ -360,6 +360,10 @@ class Fitter:
             raise KinematicsError(f"observations are for views {list(obs.view_names)} but "
                                   f"the cameras are {self.view_names}", field="observations")
         if obs.kind == "points" and self.params.match == "3d":
+            if self.n_views < 3:
+                raise KinematicsError(f"match '3d' triangulates markers seen in 3 or more "
+                                      f"views; there are {self.n_views}: use 'views'",
+                                      field="match")
             obs = cloud_observations(self.cameras, obs)
         return obs
 
@@ -683,7 +687,8 @@ class Fitter:
         arrays = obs.arrays(sel)
         n, ns, nv = len(frame_ids), pr.n_state, self.n_views
         out = FitOutputs.empty(n, ns, nv, max(p.max_runs, p.candidates))
-        parts = partitions_of(pr, p.partitions, p.partition_rounds, p.claim_gate_px)
+        parts = partitions_of(pr, p.partitions, p.partition_rounds, p.claim_gate_px,
+                              p.start_samples)
         if self._use_lanes(p, arrays.objective, parts, n):
             threads = numba.get_num_threads()
             groups = np.unique(np.linspace(0, n, min(threads, n) + 1).astype(np.int64))
@@ -712,10 +717,11 @@ class Fitter:
         unlabelled points, one partition and independent frames; 'auto' also wants enough
         runs to fill the lanes of every thread."""
         valid = (objective == _ak.OBJ_NEAREST and parts.bounds.shape[0] == 1
-                 and p.start == "mean")
+                 and parts.samples == 0 and p.start == "mean")
         if p.backend == "lanes" and not valid:
             raise KinematicsError("the lanes backend fits unlabelled points with one "
-                                  "partition and start 'mean'; use backend 'auto' or 'scalar'",
+                                  "partition, start 'mean' and no start samples; use backend "
+                                  "'auto' or 'scalar'",
                                   field="backend")
         runs = n_frames * max(1, p.candidates)
         return p.backend == "lanes" or (p.backend == "auto" and valid
@@ -992,7 +998,8 @@ class Fitter:
                         n_tau=max(1, p.n_tau // 4), start="mean")
         sel = np.array([position], np.int64)
         out = FitOutputs.empty(1, self.problem.n_state, self.n_views, 1)
-        parts = partitions_of(self.problem, p.partitions, p.partition_rounds, p.claim_gate_px)
+        parts = partitions_of(self.problem, p.partitions, p.partition_rounds, p.claim_gate_px,
+                              p.start_samples)
         # keyed by frame + 1_000_003: a random stream apart from the frames' own runs
         _ak.fit_frames(np.array([0, 1], np.int64), np.array([position + 1_000_003], np.int64),
                        np.ascontiguousarray(pos[None]), np.ascontiguousarray(rot[None]),

@@ -32,6 +32,7 @@ import numpy as np
 from kinematics import _anneal_kernels as _ak
 from kinematics.cameras import CameraArrays, pack_cameras
 from kinematics.errors import KinematicsError
+from kinematics.fk import forward_kinematics
 from kinematics.histograms import Histogram
 from kinematics.model import Body, validate_body
 from kinematics.packing import pack_body
@@ -165,10 +166,68 @@ class Partitions(NamedTuple):
     dofs: np.ndarray  # (n_free,) int64
     rounds: int
     claim_gate: float
+    samples: int = 0  # postures drawn per beam and stage for a partition's start (round 1)
+    # Stages of the start search: partition p's stages are stage_off[p]:stage_off[p + 1];
+    # stage s draws the entries stage_dofs[stage_dof_off[s]:stage_dof_off[s + 1]] (one
+    # joint's) and is scored by the partition's markers before stage_mark[s].
+    stage_off: np.ndarray = np.zeros(1, np.int64)
+    stage_dof_off: np.ndarray = np.zeros(1, np.int64)
+    stage_dofs: np.ndarray = np.zeros(0, np.int64)
+    stage_mark: np.ndarray = np.zeros(0, np.int64)
+
+
+def _first_moved(problem: FitProblem, n_postures: int = 4, step_deg: float = 1.0
+                 ) -> np.ndarray:
+    """For each state entry, the first marker (in marker order) whose position it changes
+    in some of ``n_postures`` random postures within the ranges; the number of markers for
+    entries that move none (e.g. a roll about a marker's own axis). Free-root entries (past
+    the axes) move every marker of their chain: their chain's first marker."""
+    body = problem.body
+    na, nm = body.n_axes, problem.folded.marker_joint.size
+    lo, hi = body.ranges_deg().T
+    rng = np.random.default_rng(0)
+    base = rng.uniform(lo, hi, (n_postures, na))
+    moved = np.full(problem.n_state, nm, np.int64)
+    ref = forward_kinematics(body, base).markers
+    for i in range(na):
+        if lo[i] == hi[i]:
+            continue
+        bumped = base.copy()
+        bumped[:, i] = np.where(bumped[:, i] + step_deg <= hi[i], bumped[:, i] + step_deg,
+                                bumped[:, i] - step_deg)
+        shift = np.abs(forward_kinematics(body, bumped).markers - ref).max(axis=(0, 2))
+        hit = np.flatnonzero(shift > 1e-9 * (1.0 + np.abs(ref).max()))
+        moved[i] = hit[0] if hit.size else nm
+    mj = problem.folded.marker_joint
+    for j in range(mj.size and problem.folded.parent.size):
+        k = problem.folded.slide_index[j]
+        if k >= 0:
+            below = np.flatnonzero(mj >= j)
+            moved[na:] = np.minimum(moved[na:], below[0] if below.size else nm)
+    return moved
+
+
+def _stages(problem: FitProblem, parts) -> tuple[np.ndarray, ...]:
+    """The start search's stages of each partition (:class:`Partitions`): its free entries
+    grouped by the first marker they move, root side first; a stage is scored by the
+    markers before the next stage's first (those the entries drawn so far place), the last
+    by all of the partition's. An entry that moves no marker before a later stage's (a
+    joint's roll about the limb's own axis) is drawn with the stage that first shows it."""
+    moved = _first_moved(problem)
+    stage_off, dof_off, dofs, mark = [0], [0], [], []
+    for (_, _, m0, m1, _), entries in parts:
+        firsts = sorted({int(min(max(moved[i], m0), m1)) for i in entries})
+        for k, first in enumerate(firsts):
+            dofs += [int(i) for i in entries if min(max(moved[i], m0), m1) == first]
+            dof_off.append(len(dofs))
+            mark.append(firsts[k + 1] if k + 1 < len(firsts) else m1)
+        stage_off.append(len(mark))
+    return (np.array(stage_off, np.int64), np.array(dof_off, np.int64),
+            np.array(dofs, np.int64), np.array(mark, np.int64))
 
 
 def partitions_of(problem: FitProblem, mode: str = "auto", rounds: int = 2,
-                  claim_gate: float = 10.0) -> Partitions:
+                  claim_gate: float = 10.0, samples: int = 0) -> Partitions:
     """The partitions of a problem's free entries.
 
     ``"auto"``: every chain is annealed on its own; within a chain, the trunk (the root joint
@@ -177,13 +236,21 @@ def partitions_of(problem: FitProblem, mode: str = "auto", rounds: int = 2,
     is partitioned the same way (hierarchical, root before limbs; in the first round a trunk
     is scored by its own markers only, its limbs not fitted yet). ``"none"``, or a body that
     is a single unbranched chain: one partition with every free entry (the paper).
+    ``samples``: see :func:`kinematics._anneal_kernels.anneal_partitions`.
     """
     f = problem.folded
     nj, nm = f.parent.size, f.marker_joint.size
     free = problem.free_idx
+    axis_index = pack_body(problem.body).axis_index
+    owner = np.full(problem.n_state, -1, np.int64)  # the joint each state entry belongs to
+    for j in range(nj):
+        owner[axis_index[j]] = j
+        if f.slide_index[j] >= 0:
+            owner[f.slide_index[j]: f.slide_index[j] + 3] = j
+    one = [((0, nj, 0, nm, nm), [int(i) for i in free])]
     whole = Partitions(np.array([[0, nj, 0, nm, nm]], np.int64),
                        np.array([0, free.size], np.int64), free.copy(), int(rounds),
-                       float(claim_gate))
+                       float(claim_gate), int(samples), *_stages(problem, one))
     if mode == "none":
         return whole
     children: list[list[int]] = [[] for _ in range(nj)]
@@ -194,12 +261,6 @@ def partitions_of(problem: FitProblem, mode: str = "auto", rounds: int = 2,
     for j in range(nj - 1, -1, -1):
         if children[j]:
             end[j] = max(end[c] for c in children[j])
-    axis_index = pack_body(problem.body).axis_index
-    owner = np.full(problem.n_state, -1, np.int64)  # the joint each state entry belongs to
-    for j in range(nj):
-        owner[axis_index[j]] = j
-        if f.slide_index[j] >= 0:
-            owner[f.slide_index[j]: f.slide_index[j] + 3] = j
     parts: list[tuple[tuple[int, int, int, int, int], list[int]]] = []
 
     def visit(top: int) -> None:
@@ -225,7 +286,8 @@ def partitions_of(problem: FitProblem, mode: str = "auto", rounds: int = 2,
     dofs = [_kind_order(d, problem.dof_kind) for _, d in parts]
     off = np.r_[0, np.cumsum([len(d) for d in dofs])].astype(np.int64)
     return Partitions(np.array([b for b, _ in parts], np.int64), off,
-                      np.concatenate(dofs).astype(np.int64), int(rounds), float(claim_gate))
+                      np.concatenate(dofs).astype(np.int64), int(rounds), float(claim_gate),
+                      int(samples), *_stages(problem, parts))
 
 
 def free_root_chains(body: Body) -> list[int]:

@@ -51,7 +51,9 @@ def test_partition_cloud_error_leaves_claimed_points_out():
     for _ in range(20):
         mk, cloud = random_cloud(rng)
         claimed = np.zeros(len(cloud), np.bool_)
-        ak.claim_cloud(mk, cloud, 2, 5, 40.0, claimed)  # markers outside 2:5 claim
+        others = np.ones(len(mk), np.bool_)
+        others[2:5] = False
+        ak.claim_cloud(mk, cloud, others, 40.0, claimed)  # markers outside 2:5 claim
         want = set()
         for i in [0, 1, 5, 6]:
             d = cloud[:, 3] * np.linalg.norm(mk[i] - cloud[:, :3], axis=1)
@@ -133,3 +135,10 @@ def test_match_3d_needs_unlabelled_points_and_valid_settings():
     obs = Observations.points_3d(np.zeros((2, 1, 3)), ["m"], ["m"])
     with pytest.raises(KinematicsError, match="unlabelled"):
         obs.with_cloud(np.zeros((2, 1, 4)))
+
+
+def test_match_3d_refuses_two_views():
+    cams = dict(list(ring().items())[:2])
+    fitter = Fitter(three_legs(), cams, AnnealParams(match="3d"))
+    with pytest.raises(KinematicsError, match="3 or more views"):
+        fitter.observations([[np.zeros((1, 2)), np.zeros((1, 2))]])

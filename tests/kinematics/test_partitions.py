@@ -107,15 +107,16 @@ def test_claimed_detections_are_not_shared():
     pts = np.array([[10.0, 10.0], [16.0, 10.0]])
     off = np.array([0, 2], np.int64)
     claimed = np.zeros(2, np.bool_)
-    ak.claim_detections(proj, pts, off, 1, 2, 3.0, claimed)  # markers outside B claim
+    A = np.array([True, False])  # the claimers: A's marker
+    ak.claim_detections(proj, pts, off, A, 3.0, claimed)  # markers outside B claim
     assert claimed.tolist() == [True, False]
     e = ak.partition_error(0, proj, np.zeros((2, 3)), pts, np.ones(2), off, np.zeros((2, 4)),
                            np.inf, 1, 2, claimed, 0.0, 3.0, np.empty(2, np.int64))
     assert e == pytest.approx(5.0)
-    ak.claim_detections(proj, pts, off, 1, 2, 0.5, claimed)
+    ak.claim_detections(proj, pts, off, A, 0.5, claimed)
     assert claimed.tolist() == [True, False]
     far = np.array([[[40.0, 40.0], [11.0, 10.0]]])  # A's marker is far from every blob
-    ak.claim_detections(far, pts, off, 1, 2, 3.0, claimed)
+    ak.claim_detections(far, pts, off, A, 3.0, claimed)
     assert claimed.tolist() == [False, False]
 
 
@@ -176,7 +177,8 @@ def test_partition_pays_for_blobs_it_leaves_unexplained():
     pts = np.array([[0.0, 0.0], [12.0, 0.0], [14.0, 0.0], [50.0, 0.0]])
     off = np.array([0, 4], np.int64)
     claimed = np.zeros(4, np.bool_)
-    ak.claim_detections(proj, pts, off, 0, 2, 3.0, claimed)  # marker 2 claims (50, 0)
+    claimers = np.array([False, False, True])  # marker 2 claims (50, 0)
+    ak.claim_detections(proj, pts, off, claimers, 3.0, claimed)
     args = (0, proj, np.zeros((3, 3)), pts, np.ones(4), off, np.zeros((3, 4)), np.inf, 0, 2,
             claimed)
     plain = ak.partition_error(*args, 0.0, 3.0, np.empty(3, np.int64))
@@ -201,3 +203,35 @@ def test_unexplained_detections_trigger_reanalysis_and_the_flag():
     assert off[2].status != "failed" and off[2].unexplained == 1
     with pytest.raises(KinematicsError, match="max_unexplained"):
         AnnealParams.paper(max_unexplained=-2)
+
+
+def test_start_search_stages_follow_each_leg_outward():
+    """The start search draws a fly leg's axes joint by joint, each stage scored by the
+    markers those axes place (the thorax-coxa joint's three axes place the coxa's end)."""
+    fly = load_body(CHAINS / "fly_six_legs.xml")
+    parts = partitions_of(FitProblem.build(fly, locust_cameras()), samples=8)
+    assert parts.samples == 8
+    first = parts.stage_off[1]  # the first leg's stages
+    labels = fly.axis_labels
+    stages = [[labels[i] for i in parts.stage_dofs[parts.stage_dof_off[s]:
+                                                   parts.stage_dof_off[s + 1]]]
+              for s in range(first)]
+    assert [s[0].split(".")[0] for s in stages] == ["LF_ThC", "LF_CTr", "LF_FTi", "LF_TiTa"]
+    assert len(stages[0]) == 3
+    assert parts.stage_mark[:first].tolist() == [2, 3, 4, 5]  # markers placed so far
+    assert sorted(parts.stage_dofs.tolist()) == sorted(parts.dofs.tolist())
+
+
+def test_start_search_finds_limbs_the_start_posture_misses():
+    """start_samples: each limb starts from a search along its joints, so a short schedule
+    that leaves limbs where the mean posture put them still finds every planted posture."""
+    body = three_legs()
+    cams = top_and_side()
+    angles, frames = planted(body, cams, 12, seed=4)
+    base = AnnealParams.paper(refine=True, reanalysis_threshold=2.0, max_runs=1
+                              ).with_schedule(300)
+    plain = marker_errors(body, Fitter(body, cams, base).fit(frames), angles)
+    searched = marker_errors(body, Fitter(body, cams, replace(base, start_samples=32)
+                                          ).fit(frames), angles)
+    assert (searched < 1.0).sum() > (plain < 1.0).sum(), (plain, searched)
+    assert (searched < 1.0).mean() >= 0.9, searched
