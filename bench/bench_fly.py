@@ -8,6 +8,8 @@ Run from the repository root::
                               [--out DIR]
     python bench/bench_fly.py --param partitions=none --param threshold_mode=auto  # e.g.
     python bench/bench_fly.py --measure-ranges      # re-measure the chain's angle ranges
+    python bench/bench_fly.py --frames 0:660:10 --param match=3d --param start_samples=64 \
+        --param partition_rounds=3 --param max_unexplained=0   # the best measured (3D)
 
 Data: ``../shared/data/flygym_fly_kinematics/spotlight_behavior_clip.npz`` (flygym,
 Apache-2.0; ../shared/data/README.md item 1: a tethered fly, 660 frames at 330 Hz,
@@ -40,7 +42,8 @@ Protocol:
    second video draws only ``--leg``'s 5 markers.
 5. Fits, all frame-independent (``start="mean"``), unlabelled markers, refinement on, the
    Table 1 schedule shortened to ``--n-end`` (N_l, N_tau scaled), re-analysis threshold
-   ``--threshold`` px per marker image (times markers x views of that fit), marker cost
+   ``--threshold`` px per marker image (times markers x views of that fit; with
+   ``--param match=3d`` times markers: E then sums one distance per marker), marker cost
    capped at ``--cap`` px (0: no cap; a 10-px cap ruins even the lone leg, whose correct
    posture costs ~3 px per marker image at 100 px/mm), error ``--error``;
    ``--param NAME=VALUE`` sets any other

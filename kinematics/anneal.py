@@ -48,12 +48,13 @@ import numpy as np
 from kinematics import _anneal_kernels as _ak
 from kinematics import _lane_kernels as _lk
 from kinematics import placement, temporal
+from kinematics.cameras import CameraArrays
 from kinematics.cloud import cloud_observations
 from kinematics.error_function import projection_error
 from kinematics.errors import KinematicsError
 from kinematics.fk import forward_kinematics_reference
 from kinematics.model import Body
-from kinematics.observations import Observations
+from kinematics.observations import ObservationArrays, Observations
 from kinematics.problem import (  # noqa: F401 (re-exported: the packing lived here)
     FitOutputs,
     FitProblem,
@@ -684,8 +685,8 @@ class Fitter:
                    params: AnnealParams | None = None) -> list[FrameResult]:
         """Fit frames ``sel`` of ``obs`` (``frame_ids`` key their random streams)."""
         p, pr = params or self.params, self.problem
-        arrays = obs.arrays(sel)
-        n, ns, nv = len(frame_ids), pr.n_state, self.n_views
+        cams, arrays = self._kernel_inputs(obs.arrays(sel))
+        n, ns, nv = len(frame_ids), pr.n_state, len(cams.kind)
         out = FitOutputs.empty(n, ns, nv, max(p.max_runs, p.candidates))
         parts = partitions_of(pr, p.partitions, p.partition_rounds, p.claim_gate_px,
                               p.start_samples)
@@ -696,8 +697,9 @@ class Fitter:
                                  pr.dofs, schedule_of(p), error_args(p.error), arrays,
                                  float(p.claim_gate_px), _lk.LANES, out)
         else:
-            _ak.fit_frames(seg_off, frame_ids, roots, rots, start, pr.folded, pr.cams,
+            _ak.fit_frames(seg_off, frame_ids, roots, rots, start, pr.folded, cams,
                            pr.dofs, schedule_of(p), error_args(p.error), arrays, parts, out)
+        view_error = out.view_error if nv == self.n_views else np.zeros((n, self.n_views))
         results = []
         for k in range(n):
             cands = ()
@@ -707,9 +709,19 @@ class Fitter:
             results.append(self._frame_result(
                 obs, int(sel[k]), int(frame_ids[k]), out.angles[k], roots[k], rots[k], p,
                 runs=int(out.runs[k]), iterations=int(out.iterations[k]),
-                pairs=int(out.pairs[k]), error=(float(out.error[k]), out.view_error[k].copy()),
+                pairs=int(out.pairs[k]), error=(float(out.error[k]), view_error[k].copy()),
                 candidates=cands))
         return results
+
+    def _kernel_inputs(self, arrays: ObservationArrays):
+        """Cameras and observations as ``fit_frames`` takes them: for a 3D objective (a
+        cloud) without the views, whose projections such a fit never reads (they were most
+        of an iteration's cost with six pinhole cameras)."""
+        if arrays.objective != _ak.OBJ_CLOUD:
+            return self.problem.cams, arrays
+        cams = CameraArrays(*(np.ascontiguousarray(a[:0]) for a in self.problem.cams))
+        return cams, arrays._replace(points=np.empty((0, 2)), conf=np.empty(0),
+                                     offsets=np.zeros(1, np.int64))
 
     @staticmethod
     def _use_lanes(p: AnnealParams, objective: int, parts, n_frames: int) -> bool:
@@ -996,15 +1008,15 @@ class Fitter:
         local = replace(p, candidates=1, max_runs=1, tau0=p.tau0 * 0.01, l0=p.l0 * 0.1,
                         n_end=max(1, p.n_end // 4), n_l=max(1, p.n_l // 4),
                         n_tau=max(1, p.n_tau // 4), start="mean")
-        sel = np.array([position], np.int64)
-        out = FitOutputs.empty(1, self.problem.n_state, self.n_views, 1)
-        parts = partitions_of(self.problem, p.partitions, p.partition_rounds, p.claim_gate_px,
-                              p.start_samples)
+        cams, arrays = self._kernel_inputs(obs.arrays(np.array([position], np.int64)))
+        out = FitOutputs.empty(1, self.problem.n_state, len(cams.kind), 1)
+        # no start search: the neighbour's posture is the start
+        parts = partitions_of(self.problem, p.partitions, p.partition_rounds, p.claim_gate_px)
         # keyed by frame + 1_000_003: a random stream apart from the frames' own runs
         _ak.fit_frames(np.array([0, 1], np.int64), np.array([position + 1_000_003], np.int64),
                        np.ascontiguousarray(pos[None]), np.ascontiguousarray(rot[None]),
-                       state, self.problem.folded, self.problem.cams, self.problem.dofs,
-                       schedule_of(local), error_args(p.error), obs.arrays(sel), parts, out)
+                       state, self.problem.folded, cams, self.problem.dofs,
+                       schedule_of(local), error_args(p.error), arrays, parts, out)
         if not out.runs[0]:
             return None
         return self._candidates(out.run_angles[0], out.run_error[0], pos, rot, local)[0]

@@ -199,11 +199,10 @@ def _first_moved(problem: FitProblem, n_postures: int = 4, step_deg: float = 1.0
         hit = np.flatnonzero(shift > 1e-9 * (1.0 + np.abs(ref).max()))
         moved[i] = hit[0] if hit.size else nm
     mj = problem.folded.marker_joint
-    for j in range(mj.size and problem.folded.parent.size):
-        k = problem.folded.slide_index[j]
-        if k >= 0:
+    for j, k in enumerate(problem.folded.slide_index):
+        if k >= 0:  # a free root's translation: the chain's markers follow the root joint
             below = np.flatnonzero(mj >= j)
-            moved[na:] = np.minimum(moved[na:], below[0] if below.size else nm)
+            moved[k: k + 3] = below[0] if below.size else nm
     return moved
 
 
