@@ -340,6 +340,16 @@ class Fitter:
     def _frame_ragged(self, detections_frame) -> _Ragged:
         return _as_ragged([detections_frame], self.view_names)
 
+    @property
+    def matches_in_3d(self) -> bool:
+        """Whether unlabelled points are triangulated and matched in 3D (``match``: '3d', or
+        'auto' with 3 or more views and a body annealed in several partitions)."""
+        p = self.params
+        if p.match != "auto":
+            return p.match == "3d"
+        return self.n_views >= 3 and partitions_of(self.problem, p.partitions
+                                                   ).bounds.shape[0] > 1
+
     def observations(self, data) -> Observations:
         """``data`` as :class:`~kinematics.observations.Observations`: an Observations object
         (checked against the cameras), or unlabelled detections in any form
@@ -360,7 +370,7 @@ class Fitter:
         elif list(obs.view_names) != self.view_names:
             raise KinematicsError(f"observations are for views {list(obs.view_names)} but "
                                   f"the cameras are {self.view_names}", field="observations")
-        if obs.kind == "points" and self.params.match == "3d":
+        if obs.kind == "points" and self.matches_in_3d:
             if self.n_views < 3:
                 raise KinematicsError(f"match '3d' triangulates markers seen in 3 or more "
                                       f"views; there are {self.n_views}: use 'views'",
@@ -408,7 +418,7 @@ class Fitter:
         error : float
         error_per_view : ndarray, shape (n_views,) (zeros for 3D points)
         """
-        if isinstance(detections_frame, Observations) or self.params.match == "3d":
+        if isinstance(detections_frame, Observations) or self.matches_in_3d:
             obs = self.observations(detections_frame if isinstance(
                 detections_frame, Observations) else [detections_frame])
             state, pos, rot = self.state(angles_deg, root_positions)

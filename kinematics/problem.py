@@ -235,7 +235,8 @@ def partitions_of(problem: FitProblem, mode: str = "auto", rounds: int = 2,
     is partitioned the same way (hierarchical, root before limbs; in the first round a trunk
     is scored by its own markers only, its limbs not fitted yet). ``"none"``, or a body that
     is a single unbranched chain: one partition with every free entry (the paper).
-    ``samples``: see :func:`kinematics._anneal_kernels.anneal_partitions`.
+    ``samples``: the start search of :func:`kinematics._anneal_kernels.anneal_partitions`
+    (several partitions only).
     """
     f = problem.folded
     nj, nm = f.parent.size, f.marker_joint.size
@@ -246,10 +247,10 @@ def partitions_of(problem: FitProblem, mode: str = "auto", rounds: int = 2,
         owner[axis_index[j]] = j
         if f.slide_index[j] >= 0:
             owner[f.slide_index[j]: f.slide_index[j] + 3] = j
-    one = [((0, nj, 0, nm, nm), [int(i) for i in free])]
+    # one partition: the annealing's own start (the paper), no search
     whole = Partitions(np.array([[0, nj, 0, nm, nm]], np.int64),
                        np.array([0, free.size], np.int64), free.copy(), int(rounds),
-                       float(claim_gate), int(samples), *_stages(problem, one))
+                       float(claim_gate))
     if mode == "none":
         return whole
     children: list[list[int]] = [[] for _ in range(nj)]

@@ -45,7 +45,7 @@ def setting(default, doc: str, *, min=None, max=None, choices=None, none=None):
 START_MODES = ("mean", "previous")
 PARTITION_MODES = ("auto", "none")
 BACKENDS = ("auto", "scalar", "lanes")
-MATCH_MODES = ("views", "3d")
+MATCH_MODES = ("auto", "views", "3d")
 THRESHOLD_MODES = ("absolute", "auto")
 
 #: Cost of a marker with no finite projection when no cap is set (same as the kernels).
@@ -184,8 +184,9 @@ class AnnealParams:
     max_unexplained: int | None = setting(
         None, "A frame is re-analysed (and failed) also when more detections than this lie "
         "farther than claim_gate_px from every model marker: a limb on another limb's blobs "
-        "leaves its own unexplained. None, written -1 in a project file: not used (ghost "
-        "markers are unexplained too; set it above the ghosts a view shows).",
+        "leaves its own unexplained. The count is summed over the views. None, written -1 "
+        "in a project file: not used (ghost markers are unexplained too; set it to the "
+        "ghosts a frame shows in all its views).",
         min=-1, max=10**6, none=-1)
     partitions: str = setting(
         "auto", "How a body is annealed: 'auto' anneals each limb in turn (every chain, and "
@@ -197,14 +198,15 @@ class AnnealParams:
         "the detections the other partitions' markers explain (limbs cannot share or take "
         "each other's markers).", min=1, max=100)
     start_samples: int = setting(
-        0, "Start search: before a partition is annealed in a run's first round, its axes "
-        "are drawn joint by joint from its base outward (8 x this many draws per joint, "
-        "uniform within the ranges, plausible by the histograms), each joint's best postures "
-        "kept and polished, and the best of all starts the annealing; in that round a "
-        "partition may not use the detections the partitions fitted before it explain. A "
-        "limb then starts on its own markers instead of wherever the start posture puts it "
-        "(docs/fitting.md, 'Many limbs'). 0: every run starts from the start posture (the "
-        "paper).", min=0, max=10**5)
+        64, "Start search of a body annealed in several partitions: before a partition is "
+        "annealed in a run's first round, its axes are drawn joint by joint from its base "
+        "outward (8 x this many draws per joint, uniform within the ranges, plausible by the "
+        "histograms), each joint's best postures kept and polished, and the best of all "
+        "starts the annealing; in that round a partition may not use the detections the "
+        "partitions fitted before it explain. A limb then starts on its own markers instead "
+        "of wherever the start posture puts it (docs/fitting.md, 'Many limbs'). 0: every run "
+        "starts from the start posture (the paper). A single partition never searches.",
+        min=0, max=10**5)
     claim_gate_px: float = setting(
         10.0, "A marker of another partition claims its nearest detection only within this "
         "distance (pixels): an occluded marker claims nothing.", min=1e-6, max=1e9)
@@ -231,14 +233,15 @@ class AnnealParams:
     seed: int = setting(0, "Seed of the random streams; written into every result.",
                         min=0, max=2**62)
     match: str = setting(
-        "views", "Where unlabelled markers are matched to the model: 'views' — each "
+        "auto", "Where unlabelled markers are matched to the model: 'views' — each "
         "projected model marker to its nearest detection in every view (Eq. 5, the paper); "
         "'3d' — the detections are first triangulated across the calibrated views into 3D "
         "points (a marker seen in at least 3 views; kinematics.cloud), and each model marker "
         "is matched to its nearest 3D point, its distance read in pixels at that point, so "
-        "every pixel setting keeps its meaning. '3d' needs 3 or more views; it keeps the "
-        "limbs of a many-limbed body on their own markers where blobs fuse in the images "
-        "(docs/fitting.md, 'Matching in 3D').", choices=MATCH_MODES)
+        "every pixel setting keeps its meaning; 'auto' — '3d' for a body annealed in several "
+        "partitions (many limbs) seen by 3 or more views, where blobs of different limbs "
+        "fuse in the images, else 'views' (docs/fitting.md, 'Matching in 3D').",
+        choices=MATCH_MODES)
     backend: str = setting(
         "auto", "Which kernel anneals: 'scalar' one run at a time, 'lanes' many runs at once "
         "in SIMD lanes (the same results to the last bit; faster on many frames), 'auto' "
@@ -371,8 +374,8 @@ BEST_ERROR = {"mode": "bounded", "cap_px": 10.0}
 
 #: Profiles: 'best' (the defaults) and 'paper' (what differs from them in the paper's).
 PROFILES = ("best", "paper")
-PAPER = {"refine": False, "threshold_mode": "absolute", "candidates": 1,
-         "error": ErrorOptions()}
+PAPER = {"refine": False, "threshold_mode": "absolute", "candidates": 1, "match": "views",
+         "start_samples": 0, "error": ErrorOptions()}
 
 
 def _is_real(value) -> bool:
