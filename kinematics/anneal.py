@@ -668,8 +668,10 @@ class Fitter:
     def _video_threshold(self, obs: Observations, idx, roots, rots) -> float:
         """The re-analysis threshold on E measured on the video itself (threshold_mode
         'auto'): a sample of frames is fitted once, and the threshold per marker image is
-        median + auto_k · 1.4826 · MAD of their E per marker image, at least auto_floor_px;
-        times the marker images of a frame seen in every view."""
+        median + auto_k · 1.4826 · MAD of their E per marker image (the 10-90 % range /
+        2.563 where the MAD collapses below 1 % of the median), at least auto_floor_px;
+        times the marker images of a frame seen in every view (a cloud's or 3D points': one
+        per marker)."""
         p = self.params
         pick = np.unique(np.linspace(0, len(idx) - 1, min(p.auto_sample, len(idx))).astype(int))
         once = replace(p, max_runs=1, candidates=1, threshold_mode="absolute")
@@ -681,11 +683,9 @@ class Fitter:
         score = score[np.isfinite(score) & (images > 0)]
         if score.size == 0:
             return float(p.reanalysis_threshold)
-        med = float(np.median(score))
-        per_image = max(p.auto_floor_px, med + p.auto_k * 1.4826 * float(
-            np.median(np.abs(score - med))))
-        full = len(self.body.marker_names) * max(obs.n_views, 1)
-        return per_image * full
+        per_image = auto_threshold(score, p.auto_k, p.auto_floor_px)
+        views = 1 if obs.kind in ("cloud", "points3d") else max(obs.n_views, 1)
+        return per_image * len(self.body.marker_names) * views
 
     def fit(self, detections, frames=None, **kwargs) -> list[FrameResult]:
         """All results of :meth:`iter_fit` as a list."""
@@ -1064,6 +1064,20 @@ REDO_JUMP_RATIO, REDO_JUMP_MIN = 16.0, 0.02
 REFIT_KEEP_PX = 1.0
 #: The least difference in E per marker image (px) that still counts as "about as well".
 AMBIGUOUS_FLOOR_PX = 1e-3
+
+
+def auto_threshold(score: np.ndarray, k: float, floor: float) -> float:
+    """Threshold per marker image from a sample's E per marker image ``score``: median + k ·
+    1.4826 · MAD, at least ``floor``. Where E comes in steps (each unclaimed ghost adds the
+    same cost) and over half the sample sits on one, the MAD collapses (below 1 % of the
+    median) and every frame on the next step would fail: the spread is then the 10-90 %
+    range / 2.563, the same for normal data."""
+    med = float(np.median(score))
+    spread = 1.4826 * float(np.median(np.abs(score - med)))
+    if spread < 0.01 * med:
+        lo, hi = np.percentile(score, [10.0, 90.0])
+        spread = max(spread, float(hi - lo) / 2.563)
+    return max(floor, med + k * spread)
 
 
 def marker_images(obs: Observations, frames, n_markers: int) -> np.ndarray:

@@ -235,3 +235,21 @@ def test_start_search_finds_limbs_the_start_posture_misses():
                                           ).fit(frames), angles)
     assert (searched < 1.0).sum() > (plain < 1.0).sum(), (plain, searched)
     assert (searched < 1.0).mean() >= 0.9, searched
+
+
+def test_auto_threshold_survives_e_in_steps():
+    """E per marker image in steps (a flickering ghost adds a fixed cost): the MAD of a
+    sample mostly on one step is ~0, which would fail every frame on the next step."""
+    from kinematics.anneal import auto_threshold
+
+    rng = np.random.default_rng(1)
+    normal = 2.0 + 0.1 * rng.standard_normal(400)
+    med = np.median(normal)
+    mad = np.median(np.abs(normal - med))
+    assert auto_threshold(normal, 6.0, 0.5) == pytest.approx(med + 6 * 1.4826 * mad)
+    steps = np.r_[np.full(40, 1.880), 1.880 + 1e-3 * rng.random(20), np.full(30, 2.255),
+                  np.full(10, 3.13)]
+    med = np.median(steps)
+    assert med + 6 * 1.4826 * np.median(np.abs(steps - med)) < 1.9  # the MAD alone
+    assert auto_threshold(steps, 6.0, 0.5) > 2.255  # the next step is not a failure
+    assert auto_threshold(np.full(10, 0.1), 6.0, 0.5) == 0.5  # the floor
