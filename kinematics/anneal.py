@@ -757,7 +757,7 @@ class Fitter:
         pr, nv = self.problem, self.n_views
         arrays = obs.arrays(np.array([position], np.int64))
         counts = obs.view_counts(np.array([position], np.int64))[0]
-        missing = tuple(self.view_names[v] for v in range(nv) if counts[v] == 0)
+        missing = tuple(self.view_names[v] for v in range(len(counts)) if counts[v] == 0)
         angles, fitted_roots = pr.posture(state, root_pos, root_rot)
         residuals = np.full((nv, pr.folded.marker_joint.size), np.nan)
         unexplained = 0
@@ -1041,7 +1041,7 @@ class Fitter:
         pts, view_off = arrays.points, arrays.offsets
         out = np.full(proj.shape[:2], np.nan)
         unexplained = 0
-        for v in range(self.n_views):
+        for v in range(obs.n_views):  # 3D points have none, even with cameras
             d = pts[view_off[v]: view_off[v + 1]]
             if len(d) and obs.labelled:
                 out[v] = np.linalg.norm(proj[v] - d, axis=1)

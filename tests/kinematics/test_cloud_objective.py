@@ -142,3 +142,18 @@ def test_match_3d_refuses_two_views():
     fitter = Fitter(three_legs(), cams, AnnealParams(match="3d"))
     with pytest.raises(KinematicsError, match="3 or more views"):
         fitter.observations([[np.zeros((1, 2)), np.zeros((1, 2))]])
+
+
+def test_3d_points_fit_with_cameras_given():
+    """Labelled 3D points need no cameras, but a fitter made with them fits them too (the
+    views simply have no observations)."""
+    body = three_legs()
+    cams = ring()
+    angles, _ = planted_frames(body, cams, 3, seed=2)
+    pts = forward_kinematics_reference(body, angles[0]).markers[None].repeat(2, axis=0)
+    obs = Observations.points_3d(pts, body.marker_names, body.marker_names)
+    params = AnnealParams(tau0=5.0, candidates=1, threshold_mode="absolute",
+                          reanalysis_threshold=1.0).with_schedule(2000)
+    res = Fitter(body, cams, params).fit(obs)
+    assert len(res) == 2 and all(np.isfinite(r.error) for r in res)
+    assert res[0].missing_views == ()
