@@ -69,6 +69,9 @@ from kinematics.rotations import euler_yxz
 from kinematics.settings import START_MODES, AnnealParams, ErrorOptions  # noqa: F401 (re-exported)
 
 STATUSES = ("ok", "reanalysed", "ambiguous", "failed", "no-detections")
+#: The start search's draws per joint and kept posture (``start_samples`` None) for a body
+#: of several partitions (docs/benchmarks.md, the fly).
+DEFAULT_START_SAMPLES = 64
 
 
 class Candidate(NamedTuple):
@@ -347,8 +350,20 @@ class Fitter:
         p = self.params
         if p.match != "auto":
             return p.match == "3d"
-        return self.n_views >= 3 and partitions_of(self.problem, p.partitions
-                                                   ).bounds.shape[0] > 1
+        return self.n_views >= 3 and self._limbs(p)
+
+    def _limbs(self, p: AnnealParams) -> bool:
+        """Whether the body is annealed in several partitions (many limbs)."""
+        return partitions_of(self.problem, p.partitions).bounds.shape[0] > 1
+
+    def _partitions(self, p: AnnealParams, search: bool = True):
+        """The fit's partitions; the start search as ``start_samples`` says (None: 64 for
+        several partitions, none for one), or none (``search`` False)."""
+        samples = p.start_samples
+        if samples is None:
+            samples = DEFAULT_START_SAMPLES if self._limbs(p) else 0
+        return partitions_of(self.problem, p.partitions, p.partition_rounds, p.claim_gate_px,
+                             samples if search else 0)
 
     def observations(self, data) -> Observations:
         """``data`` as :class:`~kinematics.observations.Observations`: an Observations object
@@ -698,8 +713,7 @@ class Fitter:
         cams, arrays = self._kernel_inputs(obs.arrays(sel))
         n, ns, nv = len(frame_ids), pr.n_state, len(cams.kind)
         out = FitOutputs.empty(n, ns, nv, max(p.max_runs, p.candidates))
-        parts = partitions_of(pr, p.partitions, p.partition_rounds, p.claim_gate_px,
-                              p.start_samples)
+        parts = self._partitions(p)
         if self._use_lanes(p, arrays.objective, parts, n):
             threads = numba.get_num_threads()
             groups = np.unique(np.linspace(0, n, min(threads, n) + 1).astype(np.int64))
@@ -1021,7 +1035,7 @@ class Fitter:
         cams, arrays = self._kernel_inputs(obs.arrays(np.array([position], np.int64)))
         out = FitOutputs.empty(1, self.problem.n_state, len(cams.kind), 1)
         # no start search: the neighbour's posture is the start
-        parts = partitions_of(self.problem, p.partitions, p.partition_rounds, p.claim_gate_px)
+        parts = self._partitions(p, search=False)
         # keyed by frame + 1_000_003: a random stream apart from the frames' own runs
         _ak.fit_frames(np.array([0, 1], np.int64), np.array([position + 1_000_003], np.int64),
                        np.ascontiguousarray(pos[None]), np.ascontiguousarray(rot[None]),

@@ -23,6 +23,7 @@ plain Eq. 1 angles whatever the root mode.
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import NamedTuple
@@ -176,12 +177,18 @@ class Partitions(NamedTuple):
     stage_mark: np.ndarray = np.zeros(0, np.int64)
 
 
+#: _first_moved of each problem (a problem is immutable; partitions are built per fit block)
+_FIRST_MOVED: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
 def _first_moved(problem: FitProblem, n_postures: int = 4, step_deg: float = 1.0
                  ) -> np.ndarray:
     """For each state entry, the first marker (in marker order) whose position it changes
     in some of ``n_postures`` random postures within the ranges; the number of markers for
     entries that move none (e.g. a roll about a marker's own axis). Free-root entries (past
     the axes) move every marker of their chain: their chain's first marker."""
+    if problem in _FIRST_MOVED:
+        return _FIRST_MOVED[problem]
     body = problem.body
     na, nm = body.n_axes, problem.folded.marker_joint.size
     lo, hi = body.ranges_deg().T
@@ -203,6 +210,7 @@ def _first_moved(problem: FitProblem, n_postures: int = 4, step_deg: float = 1.0
         if k >= 0:  # a free root's translation: the chain's markers follow the root joint
             below = np.flatnonzero(mj >= j)
             moved[k: k + 3] = below[0] if below.size else nm
+    _FIRST_MOVED[problem] = moved
     return moved
 
 
@@ -235,8 +243,7 @@ def partitions_of(problem: FitProblem, mode: str = "auto", rounds: int = 2,
     is partitioned the same way (hierarchical, root before limbs; in the first round a trunk
     is scored by its own markers only, its limbs not fitted yet). ``"none"``, or a body that
     is a single unbranched chain: one partition with every free entry (the paper).
-    ``samples``: the start search of :func:`kinematics._anneal_kernels.anneal_partitions`
-    (several partitions only).
+    ``samples``: the start search of :func:`kinematics._anneal_kernels.anneal_partitions`.
     """
     f = problem.folded
     nj, nm = f.parent.size, f.marker_joint.size
@@ -247,10 +254,10 @@ def partitions_of(problem: FitProblem, mode: str = "auto", rounds: int = 2,
         owner[axis_index[j]] = j
         if f.slide_index[j] >= 0:
             owner[f.slide_index[j]: f.slide_index[j] + 3] = j
-    # one partition: the annealing's own start (the paper), no search
     whole = Partitions(np.array([[0, nj, 0, nm, nm]], np.int64),
                        np.array([0, free.size], np.int64), free.copy(), int(rounds),
-                       float(claim_gate))
+                       float(claim_gate), int(samples),
+                       *_stages(problem, [((0, nj, 0, nm, nm), [int(i) for i in free])]))
     if mode == "none":
         return whole
     children: list[list[int]] = [[] for _ in range(nj)]

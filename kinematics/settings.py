@@ -197,16 +197,16 @@ class AnnealParams:
         2, "Rounds over the partitions per run; from the second on, a partition may not use "
         "the detections the other partitions' markers explain (limbs cannot share or take "
         "each other's markers).", min=1, max=100)
-    start_samples: int = setting(
-        64, "Start search of a body annealed in several partitions: before a partition is "
-        "annealed in a run's first round, its axes are drawn joint by joint from its base "
-        "outward (8 x this many draws per joint, uniform within the ranges, plausible by the "
-        "histograms), each joint's best postures kept and polished, and the best of all "
-        "starts the annealing; in that round a partition may not use the detections the "
-        "partitions fitted before it explain. A limb then starts on its own markers instead "
-        "of wherever the start posture puts it (docs/fitting.md, 'Many limbs'). 0: every run "
-        "starts from the start posture (the paper). A single partition never searches.",
-        min=0, max=10**5)
+    start_samples: int | None = setting(
+        None, "Start search: before a partition is annealed in a run's first round, its axes "
+        "are drawn joint by joint from its base outward (8 x this many draws per joint, "
+        "uniform within the ranges, plausible by the histograms), each joint's best postures "
+        "kept and polished, and the best of all starts the annealing; in that round a "
+        "partition may not use the detections the partitions fitted before it explain. A "
+        "limb then starts on its own markers instead of wherever the start posture puts it "
+        "(docs/fitting.md, 'Many limbs'). 0: every run starts from the start posture (the "
+        "paper). None, written -1 in a project file: 64 for a body annealed in several "
+        "partitions, 0 for one.", min=-1, max=10**5, none=-1)
     claim_gate_px: float = setting(
         10.0, "A marker of another partition claims its nearest detection only within this "
         "distance (pixels): an occluded marker claims nothing.", min=1e-6, max=1e9)
@@ -255,7 +255,7 @@ class AnnealParams:
         """Raise :class:`KinematicsError` naming the first invalid field."""
         ints = {"n_end": 1, "n_l": 1, "n_tau": 1, "max_redraws": 0, "max_runs": 1,
                 "segment_length": 1, "refine_steps": 0, "seed": 0, "partition_rounds": 1,
-                "auto_sample": 3, "candidates": 1, "start_samples": 0}
+                "auto_sample": 3, "candidates": 1}
         for name, least in ints.items():
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int | np.integer) or (
@@ -295,6 +295,11 @@ class AnnealParams:
         if not _is_real(self.ambiguous_deg) or not 0 < self.ambiguous_deg <= 360:
             raise KinematicsError(f"must be in (0, 360], got {self.ambiguous_deg!r}",
                                   field="ambiguous_deg")
+        ss = self.start_samples
+        if ss is not None and (isinstance(ss, bool) or not isinstance(ss, int | np.integer)
+                               or ss < 0):
+            raise KinematicsError(f"must be None or an integer >= 0, got {ss!r}",
+                                  field="start_samples")
         mu = self.max_unexplained
         if mu is not None and (isinstance(mu, bool) or not isinstance(mu, int | np.integer)
                                or mu < 0):

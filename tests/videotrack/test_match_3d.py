@@ -37,7 +37,7 @@ def test_run_matches_a_two_legged_body_in_3d(tmp_path, capsys):
     assert main(["run", str(tmp_path / "project.toml"), "--n-end", "3000"]) == 0
     res = read_results(tmp_path / "detections.results.csv")
     side = read_sidecar(tmp_path / "detections.results.csv")
-    assert side["anneal"]["match"] == "auto" and side["anneal"]["start_samples"] == 64
+    assert side["anneal"]["match"] == "auto" and side["anneal"]["start_samples"] is None
     assert load_model(load_config(tmp_path / "project.toml")).fitter().matches_in_3d
     cols, truth = read_table(tmp_path / "truth.csv")
     want = truth[:, [cols.index(lb) for lb in res.axis_labels]]
