@@ -846,8 +846,10 @@ def beam_start(work, s0, s1, stage_dof_off, stage_dofs, stage_mark, n_samples, s
     left out), each kept posture's undrawn values counting too. Joint by joint the search
     follows the limb outward along its own markers, so annealing starts in the right basin
     where the start posture lies nearer another limb's markers. ``rot`` … ``proj`` must
-    hold the current posture of the rest of the body."""
+    hold the current posture of the rest of the body. Returns the E of the partition's
+    markers at the best posture before its last polish."""
     ns = work.shape[0]
+    e_first = np.inf
     any_pinhole = _has_pinhole(kind)
     rs = state
     beams = np.empty((BEAM, ns))
@@ -902,6 +904,7 @@ def beam_start(work, s0, s1, stage_dof_off, stage_dofs, stage_mark, n_samples, s
         # a model that fits the first markers a little better on the wrong points (real
         # limbs are not rigid chains) would then shut the right one out.
         order = np.argsort(cand_e[:nc])
+        e_first = cand_e[order[0]]
         nb = 0
         for o in order:
             same = 0
@@ -919,6 +922,7 @@ def beam_start(work, s0, s1, stage_dof_off, stage_dofs, stage_mark, n_samples, s
                                    joint_flags, marker_joint, marker_local, slide_index, kind,
                                    P, K, dist, R, t, objective, points, conf, view_off, obs3)
     work[:] = beams[0]
+    return e_first
 
 
 @njit(cache=True, nogil=True)
@@ -954,8 +958,35 @@ def anneal_partitions(origin, state, rp, rr, body, cams, dofs, schedule, error, 
     its = 0
     rs = np.uint64(state)
     claimers = np.zeros(marker_joint.shape[0], np.bool_)
+    n_parts = bounds.shape[0]
+    order = np.arange(n_parts)
+    limbs_only = n_parts > 1
+    for p in range(n_parts):
+        limbs_only = limbs_only and bounds[p, 4] >= bounds[p, 3]
+    if samples > 0 and limbs_only:
+        # Limbs on roots of their own (no trunk to fit first): each searches its start
+        # without claims, and the clearest (lowest E per marker) go first and claim their
+        # points, so a limb that happens to come first cannot take a clearer one's.
+        project_posture(work, rp, rr, parent, chain, pre_rot, pre_trans, post_trans,
+                        elem_axis, elem_index, joint_flags, marker_joint, marker_local,
+                        slide_index, kind, P, K, dist, R, t, cs, sn, rot, pos, mk, proj)
+        claimed[:] = False
+        clear = np.empty(n_parts)
+        for p in range(n_parts):
+            cur[:] = work
+            rs, _ = next_uniform(rs)
+            clear[p] = beam_start(
+                cur, stage_off[p], stage_off[p + 1], stage_dof_off, stage_dofs, stage_mark,
+                samples, mix64(rs ^ _GOLDEN), hist, nbins, th, dof_kind, lo, hi, rp, rr,
+                parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index,
+                joint_flags, marker_joint, marker_local, slide_index, kind, P, K, dist, R, t,
+                objective, points, conf, view_off, obs3, cap, bounds[p, 0], bounds[p, 1],
+                bounds[p, 2], bounds[p, 3], claimed, penalty_cap, schedule[13], schedule[14],
+                cs, sn, rot, pos, mk, proj, nearest) / max(1, bounds[p, 3] - bounds[p, 2])
+        order = np.argsort(clear)
     for r in range(rounds):
-        for p in range(bounds.shape[0]):
+        for k in range(n_parts):
+            p = order[k] if r == 0 else k
             project_posture(work, rp, rr, parent, chain, pre_rot, pre_trans, post_trans,
                             elem_axis, elem_index, joint_flags, marker_joint, marker_local,
                             slide_index, kind, P, K, dist, R, t, cs, sn, rot, pos, mk, proj)
@@ -967,7 +998,7 @@ def anneal_partitions(origin, state, rp, rr, body, cams, dofs, schedule, error, 
                 claimers[:] = True
                 claimers[m0:m1] = False
             elif samples > 0:  # the partitions fitted before this one claim
-                for q in range(p):
+                for q in order[:k]:
                     claimers[bounds[q, 2]:bounds[q, 4]] = True
             if objective == OBJ_NEAREST:
                 claim_detections(proj, points, view_off, claimers, claim_gate, claimed)
