@@ -384,9 +384,16 @@ def build_params(args, threshold_px: float):
         else:
             kw[name] = value
     try:
-        params = AnnealParams.paper(error=ErrorOptions(**error), **kw)
+        best = args.profile == "best"
+        if best:  # the defaults; --error, --cap and --threshold not applied
+            given = {parse_param(text)[0] for text in args.param}
+            if "reanalysis_threshold" not in given:
+                kw.pop("reanalysis_threshold")
+            params = AnnealParams(**kw)
+        else:
+            params = AnnealParams.paper(error=ErrorOptions(**error), **kw)
         params = params.with_schedule(kw.get("n_end", args.n_end))
-        if params.match == "3d":  # E sums one distance per marker, not per marker image
+        if params.match == "3d" and not best:  # E sums one distance per marker
             scheduled["reanalysis_threshold"] = threshold_px / args.cameras
         return dataclasses.replace(params, **scheduled)
     except (KinematicsError, TypeError) as err:
@@ -485,6 +492,10 @@ def main() -> int:
     ap.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                     help="any AnnealParams field (error.NAME: an ErrorOptions field), value "
                          "read as a Python literal, else a string; repeatable; applied last")
+    ap.add_argument("--profile", choices=("paper", "best"), default="paper",
+                    help="settings the fits start from: the paper's (Table 1, Eq. 5) with "
+                         "--error, --cap, --threshold and refinement, or 'best', the "
+                         "defaults a user gets (those three options then unused)")
     ap.add_argument("--leg", choices=LEGS, default="LF", help="the leg of the one-leg fits")
     ap.add_argument("--fits", default="floor,body,among,alone",
                     help="comma list of the fits to run: floor, body, among, alone")
