@@ -120,7 +120,9 @@ def test_claimed_detections_are_not_shared():
     assert claimed.tolist() == [False, False]
 
 
-def planted(body, cams, n, seed):
+def planted(body, cams, n, seed, shuffle=False):
+    """n planted postures within the ranges and their detections (0.05 px noise), in marker
+    order or (``shuffle``) in a random order per view."""
     rng = np.random.default_rng(seed)
     lo, hi = body.ranges_deg().T
     margin = np.minimum(5.0, (hi - lo) / 4)
@@ -129,7 +131,8 @@ def planted(body, cams, n, seed):
     frames = []
     for a in angles:
         m = forward_kinematics_reference(body, a).markers
-        frames.append([c.project(m) + rng.normal(0, 0.05, (len(m), 2)) for c in cams.values()])
+        views = [c.project(m) + rng.normal(0, 0.05, (len(m), 2)) for c in cams.values()]
+        frames.append([v[rng.permutation(len(v))] for v in views] if shuffle else views)
     return angles, frames
 
 
