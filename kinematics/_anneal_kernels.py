@@ -963,7 +963,10 @@ def anneal_partitions(origin, state, rp, rr, body, cams, dofs, schedule, error, 
     limbs_only = n_parts > 1
     for p in range(n_parts):
         limbs_only = limbs_only and bounds[p, 4] >= bounds[p, 3]
-    if samples > 0 and limbs_only:
+    ordered = samples > 0 and limbs_only
+    found = np.empty((n_parts if ordered else 0, work.shape[0]))  # each limb's own search
+    unclaimed = np.zeros(claimed.shape[0] if ordered else 0, np.bool_)
+    if ordered:
         # Limbs on roots of their own (no trunk to fit first): each searches its start
         # without claims, and the clearest (lowest E per marker) go first and claim their
         # points, so a limb that happens to come first cannot take a clearer one's.
@@ -983,6 +986,7 @@ def anneal_partitions(origin, state, rp, rr, body, cams, dofs, schedule, error, 
                 objective, points, conf, view_off, obs3, cap, bounds[p, 0], bounds[p, 1],
                 bounds[p, 2], bounds[p, 3], claimed, penalty_cap, schedule[13], schedule[14],
                 cs, sn, rot, pos, mk, proj, nearest) / max(1, bounds[p, 3] - bounds[p, 2])
+            found[p, :] = cur
         order = np.argsort(clear)
     for r in range(rounds):
         for k in range(n_parts):
@@ -1008,7 +1012,20 @@ def anneal_partitions(origin, state, rp, rr, body, cams, dofs, schedule, error, 
                 claimed[:] = False
             rs, _ = next_uniform(rs)  # a stream of its own for each partition and round
             dofs_p = part_dofs[part_off[p]:part_off[p + 1]]
-            if r == 0 and samples > 0:
+            searched = False
+            if r == 0 and ordered:
+                # the limb's own search stands unless a clearer limb claimed its points
+                for q in range(dofs_p.shape[0]):
+                    work[dofs_p[q]] = found[p, dofs_p[q]]
+                project_posture(work, rp, rr, parent, chain, pre_rot, pre_trans, post_trans,
+                                elem_axis, elem_index, joint_flags, marker_joint, marker_local,
+                                slide_index, kind, P, K, dist, R, t, cs, sn, rot, pos, mk, proj)
+                searched = partition_error(
+                    objective, proj, mk, points, conf, view_off, obs3, cap, m0, m1, claimed,
+                    0.0, penalty_cap, nearest) == partition_error(
+                    objective, proj, mk, points, conf, view_off, obs3, cap, m0, m1, unclaimed,
+                    0.0, penalty_cap, nearest)
+            if r == 0 and samples > 0 and not searched:
                 beam_start(work, stage_off[p], stage_off[p + 1], stage_dof_off, stage_dofs,
                            stage_mark, samples, mix64(rs ^ _GOLDEN), hist, nbins, th,
                            dof_kind, lo, hi, rp, rr, parent, chain, pre_rot, pre_trans,
