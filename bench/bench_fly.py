@@ -588,9 +588,12 @@ def run(args, out: Path, keep: bool) -> int:
         det_leg, _, _ = render_and_detect(out / f"{leg}_alone", names[leg_cols],
                                           truth[:, leg_cols], cams, args.diameter, args.seed)
     p = build_params(args, args.threshold * 30 * args.cameras)
-    print(f"Fit: AnnealParams.paper(refine=True, n_end={p.n_end}, n_l={p.n_l}, n_tau={p.n_tau}, "
+    threshold = ("threshold_mode='auto'" if args.profile == "best" else
+                 f"reanalysis_threshold={args.threshold:g} px x markers x views")
+    print(f"Fit: {'AnnealParams' if args.profile == 'best' else 'AnnealParams.paper'}"
+          f"(refine=True, n_end={p.n_end}, n_l={p.n_l}, n_tau={p.n_tau}, "
           f"max_runs={p.max_runs}, error={p.error.mode!r}, cap_px={p.error.cap_px}, "
-          f"reanalysis_threshold={args.threshold:g} px x markers x views"
+          f"match={p.match!r}, {threshold}"
           + (f"; --param {' '.join(args.param)}" if args.param else "") + ").\n")
 
     if "body" in args.fit_set:
