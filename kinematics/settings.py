@@ -295,31 +295,19 @@ class AnnealParams:
         if not _is_real(self.ambiguous_deg) or not 0 < self.ambiguous_deg <= 360:
             raise KinematicsError(f"must be in (0, 360], got {self.ambiguous_deg!r}",
                                   field="ambiguous_deg")
-        ss = self.start_samples
-        if ss is not None and (isinstance(ss, bool) or not isinstance(ss, int | np.integer)
-                               or ss < 0):
-            raise KinematicsError(f"must be None or an integer >= 0, got {ss!r}",
-                                  field="start_samples")
-        mu = self.max_unexplained
-        if mu is not None and (isinstance(mu, bool) or not isinstance(mu, int | np.integer)
-                               or mu < 0):
-            raise KinematicsError(f"must be None or an integer >= 0, got {mu!r}",
-                                  field="max_unexplained")
-        if self.threshold_mode not in THRESHOLD_MODES:
-            raise KinematicsError(f"must be one of {', '.join(THRESHOLD_MODES)}, got "
-                                  f"{self.threshold_mode!r}", field="threshold_mode")
-        if self.partitions not in PARTITION_MODES:
-            raise KinematicsError(f"must be one of {', '.join(PARTITION_MODES)}, got "
-                                  f"{self.partitions!r}", field="partitions")
-        if self.match not in MATCH_MODES:
-            raise KinematicsError(f"must be one of {', '.join(MATCH_MODES)}, got "
-                                  f"{self.match!r}", field="match")
-        if self.backend not in BACKENDS:
-            raise KinematicsError(f"must be one of {', '.join(BACKENDS)}, got "
-                                  f"{self.backend!r}", field="backend")
-        if self.start not in START_MODES:
-            raise KinematicsError(f"must be one of {', '.join(START_MODES)}, got "
-                                  f"{self.start!r}", field="start")
+        for name in ("start_samples", "max_unexplained"):
+            value = getattr(self, name)
+            if value is not None and (isinstance(value, bool) or not isinstance(
+                    value, int | np.integer) or value < 0):
+                raise KinematicsError(f"must be None or an integer >= 0, got {value!r}",
+                                      field=name)
+        for name, choices in (("threshold_mode", THRESHOLD_MODES),
+                              ("partitions", PARTITION_MODES), ("match", MATCH_MODES),
+                              ("backend", BACKENDS), ("start", START_MODES)):
+            value = getattr(self, name)
+            if value not in choices:
+                raise KinematicsError(f"must be one of {', '.join(choices)}, got {value!r}",
+                                      field=name)
         if not isinstance(self.refine, bool | np.bool_):
             raise KinematicsError(f"must be true or false, got {self.refine!r}",
                                   field="refine")
