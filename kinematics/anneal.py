@@ -360,11 +360,11 @@ class Fitter:
     def _partitions(self, p: AnnealParams, search: bool = True):
         """The fit's partitions; the start search as ``start_samples`` says (None: 64 for
         several partitions, none for one), or none (``search`` False)."""
+        parts = partitions_of(self.problem, p.partitions, p.partition_rounds, p.claim_gate_px)
         samples = p.start_samples
         if samples is None:
-            samples = DEFAULT_START_SAMPLES if self._limbs(p) else 0
-        return partitions_of(self.problem, p.partitions, p.partition_rounds, p.claim_gate_px,
-                             samples if search else 0)
+            samples = DEFAULT_START_SAMPLES if parts.bounds.shape[0] > 1 else 0
+        return parts._replace(samples=int(samples) if search else 0)
 
     def observations(self, data) -> Observations:
         """``data`` as :class:`~kinematics.observations.Observations`: an Observations object

@@ -53,7 +53,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import cv2
@@ -454,7 +454,7 @@ def pixels_per_unit(cameras, xyz: np.ndarray, seen: np.ndarray) -> np.ndarray:
     for a pinhole camera), so a 3D distance times it reads like a distance in the images.
 
     xyz (n, 3); seen (n_views, n) bool; returns (n,) (0 where no view sees a point)."""
-    cams = list(cameras.values()) if isinstance(cameras, Mapping) else list(cameras)
+    cams = _camera_list(cameras)
     n = len(xyz)
     total = np.zeros(n)
     for v, cam in enumerate(cams):
