@@ -530,6 +530,14 @@ def fit_warnings(table: Results, detections=None) -> list[str]:
             what = ", ".join(f"{v} {k}" for k, v in kinds.items())
             found.append(f"{failed.size} of {n} frames ({100 * failed.size / n:.1f} %) were "
                          f"not fitted ({what}): video frames {_listing(frames)}")
+        empty = [i for i, s in enumerate(table.status) if s == "no-detections"]
+        if empty and hasattr(detections, "counts") and detections.n_records == n:
+            seen = [i for i in empty if detections.counts()[i].sum() > 0]
+            if seen:  # only matching in 3D leaves a frame with detections unfitted
+                found.append(f"{len(seen)} frame(s) have detections but no 3D point (video "
+                             f"frames {_listing([int(table.video_frames[i]) for i in seen])}): "
+                             "matching in 3D needs a marker seen by 3 or more views; set "
+                             "[anneal] match = \"views\" to match per view")
         unsure = [i for i, s in enumerate(table.status) if s == "ambiguous"]
         if len(unsure) > BAD_SHARE_WARNING * n:
             frames = [int(table.video_frames[i]) for i in unsure]

@@ -44,3 +44,33 @@ def test_run_matches_a_two_legged_body_in_3d(tmp_path, capsys):
     err = np.abs((res.angles_deg - want + 180) % 360 - 180)
     assert np.median(err) < 1.0 and err.max() < 5.0, err
     assert set(res.status) <= {"ok", "reanalysed", "ambiguous"}
+
+
+def test_frames_with_detections_but_no_3d_point_are_named():
+    """A frame whose markers only two views see has no 3D point: the fit warns by name
+    instead of reporting a frame without detections and nothing else."""
+    from kinematics.anneal import AnnealParams, Fitter
+    from kinematics.fk import forward_kinematics
+    from videotrack.detections import build_detections
+    from videotrack.pipeline import fit_warnings
+    from videotrack.results import results_from_fit
+
+    body = loads_body(CHAIN)
+    k = [[900.0, 0, 320], [0, 900.0, 240], [0, 0, 1]]
+    cams = {f"cam{i}": PinholeCamera(f"cam{i}", k, rvec=[0.5, yaw, 0], t=[0, 0, 120])
+            for i, yaw in enumerate((-0.9, -0.3, 0.3, 0.9))}
+    markers = forward_kinematics(body, np.zeros((3, body.n_axes)) + [0, 0, 20, 0, 0, -60] * 2
+                                 ).markers
+    records = [[(c.project(m), np.ones(len(m), np.int64)) for c in cams.values()]
+               for m in markers]
+    for v in (2, 3):  # record 1: seen by two views only
+        records[1][v] = (np.empty((0, 2)), np.empty(0, np.int64))
+    meta = {"view_names": list(cams), "videos": [{"fps": 50.0}],
+            "settings": {"deinterlace": {"field_order": "top"}}}
+    det = build_detections(records, [0, 1, 2], [-1, -1, -1], meta)
+    res = Fitter(body, cams, AnnealParams().with_schedule(500)).fit(
+        [[det.points_of(r, v) for v in range(4)] for r in range(3)])
+    assert [r.status != "no-detections" for r in res] == [True, False, True]
+    warnings = fit_warnings(results_from_fit(body, res, list(cams), det), det)
+    assert any("1 frame(s) have detections but no 3D point (video frames 1)" in w
+               and 'match = "views"' in w for w in warnings), warnings
