@@ -142,6 +142,19 @@ def hist_at(hist, nbins, i, x):
 
 # -- forward kinematics and projection (Eq. 1-3), folded layout --------------------------
 @njit(cache=True, nogil=True, inline="always")
+def mul33(q00, q01, q02, q10, q11, q12, q20, q21, q22, m00, m01, m02, m10, m11, m12, m20, m21,
+          m22):
+    """The 3×3 product Q·M of two matrices given entry by entry (row-major), as nine
+    numbers: kept to scalars so a loop over SIMD lanes that calls it still vectorises
+    (:mod:`kinematics._lane_kernels`)."""
+    return (q00 * m00 + q01 * m10 + q02 * m20, q00 * m01 + q01 * m11 + q02 * m21,
+            q00 * m02 + q01 * m12 + q02 * m22, q10 * m00 + q11 * m10 + q12 * m20,
+            q10 * m01 + q11 * m11 + q12 * m21, q10 * m02 + q11 * m12 + q12 * m22,
+            q20 * m00 + q21 * m10 + q22 * m20, q20 * m01 + q21 * m11 + q22 * m21,
+            q20 * m02 + q21 * m12 + q22 * m22)
+
+
+@njit(cache=True, nogil=True, inline="always")
 def _project_cs(values, cs, sn, root_pos, root_rot, parent, chain, pre_rot, pre_trans,
                 post_trans, elem_axis, elem_index, joint_flags, marker_joint, marker_local,
                 slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj, any_pinhole, span):
@@ -166,18 +179,9 @@ def _project_cs(values, cs, sn, root_pos, root_rot, parent, chain, pre_rot, pre_
                 # A free root: the frame's seed rotation root_rot[c] comes first and the
                 # state's translation entries (slide_index) move the root in the world.
                 q = root_rot[c]
-                m00, m01, m02 = b00, b01, b02
-                m10, m11, m12 = b10, b11, b12
-                m20, m21, m22 = b20, b21, b22
-                b00 = q[0, 0] * m00 + q[0, 1] * m10 + q[0, 2] * m20
-                b01 = q[0, 0] * m01 + q[0, 1] * m11 + q[0, 2] * m21
-                b02 = q[0, 0] * m02 + q[0, 1] * m12 + q[0, 2] * m22
-                b10 = q[1, 0] * m00 + q[1, 1] * m10 + q[1, 2] * m20
-                b11 = q[1, 0] * m01 + q[1, 1] * m11 + q[1, 2] * m21
-                b12 = q[1, 0] * m02 + q[1, 1] * m12 + q[1, 2] * m22
-                b20 = q[2, 0] * m00 + q[2, 1] * m10 + q[2, 2] * m20
-                b21 = q[2, 0] * m01 + q[2, 1] * m11 + q[2, 2] * m21
-                b22 = q[2, 0] * m02 + q[2, 1] * m12 + q[2, 2] * m22
+                b00, b01, b02, b10, b11, b12, b20, b21, b22 = mul33(
+                    q[0, 0], q[0, 1], q[0, 2], q[1, 0], q[1, 1], q[1, 2], q[2, 0], q[2, 1],
+                    q[2, 2], b00, b01, b02, b10, b11, b12, b20, b21, b22)
                 k = slide_index[j]
                 px += values[k]
                 py += values[k + 1]
@@ -198,15 +202,9 @@ def _project_cs(values, cs, sn, root_pos, root_rot, parent, chain, pre_rot, pre_
                 m00, m01, m02 = pre_rot[j, 0, 0], pre_rot[j, 0, 1], pre_rot[j, 0, 2]
                 m10, m11, m12 = pre_rot[j, 1, 0], pre_rot[j, 1, 1], pre_rot[j, 1, 2]
                 m20, m21, m22 = pre_rot[j, 2, 0], pre_rot[j, 2, 1], pre_rot[j, 2, 2]
-                b00 = q00 * m00 + q01 * m10 + q02 * m20
-                b01 = q00 * m01 + q01 * m11 + q02 * m21
-                b02 = q00 * m02 + q01 * m12 + q02 * m22
-                b10 = q10 * m00 + q11 * m10 + q12 * m20
-                b11 = q10 * m01 + q11 * m11 + q12 * m21
-                b12 = q10 * m02 + q11 * m12 + q12 * m22
-                b20 = q20 * m00 + q21 * m10 + q22 * m20
-                b21 = q20 * m01 + q21 * m11 + q22 * m21
-                b22 = q20 * m02 + q21 * m12 + q22 * m22
+                b00, b01, b02, b10, b11, b12, b20, b21, b22 = mul33(
+                    q00, q01, q02, q10, q11, q12, q20, q21, q22, m00, m01, m02, m10, m11, m12,
+                    m20, m21, m22)
         for e in range(3):
             a = elem_axis[j, e]
             if a >= 0:

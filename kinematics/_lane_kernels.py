@@ -45,6 +45,7 @@ from kinematics._anneal_kernels import (
     evaluate,
     finish_run,
     keeps,
+    mul33,
     next_uniform,
     project_posture,
     sincos,
@@ -103,15 +104,9 @@ def project_lanes(vals, cs, sn, parent, chain, pre_rot, pre_trans, post_trans, e
             q00, q01, q02 = rot[q, 0, ln], rot[q, 1, ln], rot[q, 2, ln]
             q10, q11, q12 = rot[q, 3, ln], rot[q, 4, ln], rot[q, 5, ln]
             q20, q21, q22 = rot[q, 6, ln], rot[q, 7, ln], rot[q, 8, ln]
-            b00 = q00 * m00 + q01 * m10 + q02 * m20
-            b01 = q00 * m01 + q01 * m11 + q02 * m21
-            b02 = q00 * m02 + q01 * m12 + q02 * m22
-            b10 = q10 * m00 + q11 * m10 + q12 * m20
-            b11 = q10 * m01 + q11 * m11 + q12 * m21
-            b12 = q10 * m02 + q11 * m12 + q12 * m22
-            b20 = q20 * m00 + q21 * m10 + q22 * m20
-            b21 = q20 * m01 + q21 * m11 + q22 * m21
-            b22 = q20 * m02 + q21 * m12 + q22 * m22
+            b00, b01, b02, b10, b11, b12, b20, b21, b22 = mul33(
+                q00, q01, q02, q10, q11, q12, q20, q21, q22, m00, m01, m02, m10, m11, m12,
+                m20, m21, m22)
             rot[j, 0, ln], rot[j, 1, ln], rot[j, 2, ln] = b00, b01, b02
             rot[j, 3, ln], rot[j, 4, ln], rot[j, 5, ln] = b10, b11, b12
             rot[j, 6, ln], rot[j, 7, ln], rot[j, 8, ln] = b20, b21, b22
