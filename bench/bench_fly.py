@@ -390,6 +390,9 @@ def build_params(args, threshold_px: float):
             if "reanalysis_threshold" not in given:
                 kw.pop("reanalysis_threshold")
             params = AnnealParams(**kw)
+            given_error = {k: error[k] for k in error if f"error.{k}" in given}
+            params = dataclasses.replace(params, error=dataclasses.replace(params.error,
+                                                                           **given_error))
         else:
             params = AnnealParams.paper(error=ErrorOptions(**error), **kw)
         params = params.with_schedule(kw.get("n_end", args.n_end))

@@ -289,15 +289,16 @@ def project_posture(angles, root_pos, root_rot, parent, chain, pre_rot, pre_tran
 
 # -- Eq. 5 -------------------------------------------------------------------------------
 @njit(cache=True, nogil=True)
-def projection_error(proj, points, view_off, bidirectional, weight, cap, penalty_cap, per_view,
-                     nearest):
+def projection_error(proj, points, view_off, bidirectional, weight, cap, penalty_cap, one,
+                     per_view, nearest):
     """Eq. 5 and its variants for given marker projections; returns E (pixels).
 
     ``E = sum_v sum_i min(min_c |p_i^v - d_c^v|, cap)`` over views with at least one
     detection (a view without detections contributes nothing). With ``bidirectional``, each
     detection that is no marker's nearest detection adds ``weight * min(min_i |p_i^v -
     d_c^v|, penalty_cap)`` (the heuristic of Sect. 4; bounded, a ghost costs at most
-    ``weight * penalty_cap``). ``cap = inf`` is the paper's Eq. 5. Ties go
+    ``weight * penalty_cap``). ``cap = inf`` is the paper's Eq. 5. With ``one`` (one-to-one)
+    each detection explains at most one marker of its view (:func:`one_to_one`). Ties go
     to the lower detection index. A marker without a finite projection costs ``cap``, or
     :data:`NAN_MARKER_COST` without a cap.
 
@@ -331,12 +332,14 @@ def projection_error(proj, points, view_off, bidirectional, weight, cap, penalty
                 nearest[i] = arg
                 d = np.sqrt(best) if arg >= 0 else missing
                 ev += min(d, cap)
+            if one:
+                ev = one_to_one(proj[v], points, a, b, 0, nm, False, NO_CLAIMS, cap, nearest)
             if bidirectional:
                 for c in range(a, b):
                     matched = False
                     best = np.inf
                     for i in range(nm):
-                        matched = matched or nearest[i] == c
+                        matched = matched or takes(nearest[i], c)
                         dx = proj[v, i, 0] - points[c, 0]
                         dy = proj[v, i, 1] - points[c, 1]
                         best = min(best, dx * dx + dy * dy)
@@ -345,6 +348,75 @@ def projection_error(proj, points, view_off, bidirectional, weight, cap, penalty
                         ev += weight * min(d, penalty_cap)
         per_view[v] = ev
         total += ev
+    return total
+
+
+@njit(cache=True, nogil=True, inline="always")
+def takes(n, c):
+    """Whether a marker's ``nearest`` entry ``n`` takes point ``c``: its nearest point, or
+    the point :func:`one_to_one` gave it instead, written ``-(c + 2)``."""
+    return n == c or n == -c - 2
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _dist2(X, i, Y, c, scaled):
+    """Squared distance of marker ``X[i]`` to point ``Y[c]``: 2D, or with ``scaled`` 3D times
+    the point's px per length unit ``Y[c, 3]`` squared (a cloud)."""
+    dx = X[i, 0] - Y[c, 0]
+    dy = X[i, 1] - Y[c, 1]
+    d2 = dx * dx + dy * dy
+    if scaled:
+        dz = X[i, 2] - Y[c, 2]
+        d2 = (d2 + dz * dz) * (Y[c, 3] * Y[c, 3])
+    return d2
+
+
+@njit(cache=True, nogil=True)
+def one_to_one(X, Y, a, b, m0, m1, scaled, claimed, cap, nearest):
+    """One-to-one matching of the markers ``m0:m1`` (``X``) with the points ``a:b`` (``Y``;
+    with ``scaled`` a cloud, :func:`_dist2`), greedy by distance: a point several markers
+    have as their nearest stays with the closest (ties: the lower marker); each other marker
+    takes its nearest point that is no marker's nearest and not ``claimed``, or costs
+    ``cap`` (:data:`NAN_MARKER_COST` without one) where none is left. On entry ``nearest``
+    holds each marker's nearest point (-1: none); on return a marker that lost its point
+    holds ``-(c + 2)`` for the point ``c`` it took instead (:func:`takes`). Returns
+    ``sum_i min(distance_i, cap)``. So two limbs cannot share a blob: the second marker
+    pays for its next point, and the marker it leaves out pays the bidirectional term."""
+    missing = cap if cap < np.inf else NAN_MARKER_COST
+    for i in range(m0, m1):  # losers: nearest = -(their point + 2)
+        c = nearest[i]
+        if c >= 0:
+            di = _dist2(X, i, Y, c, scaled)
+            lost = False
+            for j in range(m0, m1):
+                cj = nearest[j] if nearest[j] >= 0 else -nearest[j] - 2
+                if j != i and cj == c:
+                    dj = _dist2(X, j, Y, c, scaled)
+                    lost = lost or dj < di or (dj == di and j < i)
+            if lost:
+                nearest[i] = -c - 2
+    total = 0.0
+    for i in range(m0, m1):
+        c = nearest[i]
+        if c >= 0:
+            total += min(np.sqrt(_dist2(X, i, Y, c, scaled)), cap)
+        elif c == -1:
+            total += min(missing, cap)
+        else:  # lost its point: the nearest one no marker has as its nearest
+            best = np.inf
+            arg = -1
+            for c2 in range(a, b):
+                free = not (c2 < claimed.shape[0] and claimed[c2])
+                free = free and (not scaled or Y[c2, 3] > 0.0)
+                for j in range(m0, m1):
+                    free = free and nearest[j] != c2
+                if free:
+                    d2 = _dist2(X, i, Y, c2, scaled)
+                    if d2 < best:
+                        best = d2
+                        arg = c2
+            nearest[i] = -arg - 2 if arg >= 0 else -1
+            total += min(np.sqrt(best) if arg >= 0 else missing, cap)
     return total
 
 
@@ -468,26 +540,29 @@ def cloud_nearest(mk, i, cloud, claimed):
 
 
 @njit(cache=True, nogil=True)
-def cloud_error(mk, cloud, m0, m1, claimed, penalty, cap, penalty_cap, nearest):
+def cloud_error(mk, cloud, m0, m1, claimed, penalty, cap, penalty_cap, one, nearest):
     """Unlabelled 3D points (:data:`OBJ_CLOUD`), the 3D twin of Eq. 5: ``E = sum_i
     min(s_c |X_i - Y_c|, cap)`` over the markers ``m0:m1``, ``Y_c`` marker i's nearest cloud
     point among those not ``claimed`` (by other partitions; an empty ``claimed`` claims
     nothing) and ``s_c`` its px per length unit (``cloud`` (k, 4): x, y, z, s; s = 0 marks
     padding), so E reads in pixels like Eq. 5's. With ``penalty > 0`` (the bidirectional
     modes) each unclaimed point that none of these markers takes adds ``penalty · min(s_c ·
-    distance to the nearest of them, penalty_cap)``. ``nearest`` (n_markers,) is scratch."""
+    distance to the nearest of them, penalty_cap)``. With ``one`` each point explains at
+    most one marker (:func:`one_to_one`). ``nearest`` (n_markers,) is scratch."""
     missing = cap if cap < np.inf else NAN_MARKER_COST
     total = 0.0
     for i in range(m0, m1):
         d, nearest[i] = cloud_nearest(mk, i, cloud, claimed)
         total += min(d if nearest[i] >= 0 else missing, cap)
+    if one:
+        total = one_to_one(mk, cloud, 0, cloud.shape[0], m0, m1, True, claimed, cap, nearest)
     if penalty > 0.0:
         for c in range(cloud.shape[0]):
             s = cloud[c, 3]
             taken = s <= 0.0 or (c < claimed.shape[0] and claimed[c])
             best = np.inf
             for i in range(m0, m1):
-                taken = taken or nearest[i] == c
+                taken = taken or takes(nearest[i], c)
                 dx = mk[i, 0] - cloud[c, 0]
                 dy = mk[i, 1] - cloud[c, 1]
                 dz = mk[i, 2] - cloud[c, 2]
@@ -528,25 +603,25 @@ def count_unexplained_cloud(mk, cloud, gate):
 
 @njit(cache=True, nogil=True, inline="always")
 def evaluate(objective, proj, mk, points, conf, view_off, obs3, bidirectional, weight, cap,
-             penalty_cap, per_view, nearest):
+             penalty_cap, one, per_view, nearest):
     """E of projected (``proj``) and 3D (``mk``) markers under ``objective``; fills
     ``per_view`` (zeros for 3D points, which have no views)."""
     if objective == OBJ_NEAREST:
         return projection_error(proj, points, view_off, bidirectional, weight, cap,
-                                penalty_cap, per_view, nearest)
+                                penalty_cap, one, per_view, nearest)
     if objective == OBJ_LABELLED:
         return labelled_error(proj, points, conf, view_off, cap, per_view)
     per_view[:] = 0.0
     if objective == OBJ_CLOUD:
         return cloud_error(mk, obs3, 0, mk.shape[0], NO_CLAIMS, weight if bidirectional
-                           else 0.0, cap, penalty_cap, nearest)
+                           else 0.0, cap, penalty_cap, one, nearest)
     return points3d_error(mk, obs3, cap)
 
 
 
 @njit(cache=True, nogil=True)
 def partition_error(objective, proj, mk, points, conf, view_off, obs3, cap, m0, m1, claimed,
-                    penalty, penalty_cap, nearest):
+                    penalty, penalty_cap, one, nearest):
     """E of the markers ``m0:m1`` only (one partition; the rest is constant while it moves).
 
     Unlabelled points: each marker's nearest detection among those not ``claimed`` by the
@@ -555,12 +630,15 @@ def partition_error(objective, proj, mk, points, conf, view_off, obs3, cap, m0, 
     detection that none of these markers takes adds ``penalty · min(distance to the nearest
     of them, penalty_cap)``: a leg is pulled to explain the blobs left over, not to share
     another's. Labelled keypoints and 3D points: each marker against its own, as
-    :func:`labelled_error` and :func:`points3d_error`. ``nearest`` (n_markers,) is scratch.
+    :func:`labelled_error` and :func:`points3d_error`. With ``one`` each detection (point)
+    explains at most one of these markers (:func:`one_to_one`). ``nearest`` (n_markers,) is
+    scratch.
     """
     missing = cap if cap < np.inf else NAN_MARKER_COST
     total = 0.0
     if objective == OBJ_CLOUD:
-        return cloud_error(mk, obs3, m0, m1, claimed, penalty, cap, penalty_cap, nearest)
+        return cloud_error(mk, obs3, m0, m1, claimed, penalty, cap, penalty_cap, one,
+                           nearest)
     if objective == OBJ_POINTS3D:
         for i in range(m0, m1):
             w = obs3[i, 3]
@@ -586,6 +664,7 @@ def partition_error(objective, proj, mk, points, conf, view_off, obs3, cap, m0, 
                         d = np.sqrt(dx * dx + dy * dy)
                         total += w * min(d if np.isfinite(d) else missing, cap)
             continue
+        ev = 0.0
         for i in range(m0, m1):
             px = proj[v, i, 0]
             py = proj[v, i, 1]
@@ -600,13 +679,16 @@ def partition_error(objective, proj, mk, points, conf, view_off, obs3, cap, m0, 
                     arg = c
             nearest[i] = arg
             d = np.sqrt(best) if best < np.inf else missing
-            total += min(d, cap)
+            ev += min(d, cap)
+        if one:
+            ev = one_to_one(proj[v], points, a, b, m0, m1, False, claimed, cap, nearest)
+        total += ev
         if penalty > 0.0:
             for c in range(a, b):
                 taken = claimed[c]
                 best = np.inf
                 for i in range(m0, m1):
-                    taken = taken or nearest[i] == c
+                    taken = taken or takes(nearest[i], c)
                     dx = proj[v, i, 0] - points[c, 0]
                     dy = proj[v, i, 1] - points[c, 1]
                     best = min(best, dx * dx + dy * dy)
@@ -661,7 +743,7 @@ def claim_detections(proj, points, view_off, claimers, gate, claimed):
 def posture_error(angles, root_pos, root_rot, parent, chain, pre_rot, pre_trans, post_trans,
                   elem_axis, elem_index, joint_flags, marker_joint, marker_local, slide_index,
                   kind, P, K, dist, R, t, objective, points, conf, view_off, obs3,
-                  bidirectional, weight, cap, penalty_cap, per_view):
+                  bidirectional, weight, cap, penalty_cap, one, per_view):
     """E (Eq. 5, a variant or another objective, :func:`evaluate`) of one posture ``angles``
     (n_state,); fills ``per_view`` (n_views,). Allocates its scratch: for single evaluations,
     not for loops."""
@@ -679,7 +761,7 @@ def posture_error(angles, root_pos, root_rot, parent, chain, pre_rot, pre_trans,
                     elem_axis, elem_index, joint_flags, marker_joint, marker_local, slide_index,
                     kind, P, K, dist, R, t, cs, sn, rot, pos, mk, proj)
     return evaluate(objective, proj, mk, points, conf, view_off, obs3, bidirectional, weight,
-                    cap, penalty_cap, per_view, nearest)
+                    cap, penalty_cap, one, per_view, nearest)
 
 
 # -- simulated annealing (Sect. 2.3, Eq. 6) ----------------------------------------------
@@ -690,7 +772,7 @@ def anneal_chain(start, free_idx, step, hist, nbins, th, dof_kind, lo, hi, max_r
                  elem_index, joint_flags, marker_joint, marker_local, slide_index, kind, P, K,
                  dist, R, t,
                  objective, points, conf, view_off, obs3, bidirectional, weight, cap,
-                 penalty_cap, j0, j1, m0, m1, claimed,
+                 penalty_cap, one, j0, j1, m0, m1, claimed,
                  cur, cand, best, cs, sn, rot, pos, mk, proj, per_view, nearest):
     """One annealing run from ``start``; the best posture seen is left in ``best``.
 
@@ -742,10 +824,10 @@ def anneal_chain(start, free_idx, step, hist, nbins, th, dof_kind, lo, hi, max_r
                 slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj, any_pinhole, span)
     if not whole:
         e_cur = partition_error(objective, proj, mk, points, conf, view_off, obs3, cap, m0,
-                                m1, claimed, unexplained, penalty_cap, nearest)
+                                m1, claimed, unexplained, penalty_cap, one, nearest)
     else:
         e_cur = evaluate(objective, proj, mk, points, conf, view_off, obs3, bidirectional,
-                         weight, cap, penalty_cap, per_view, nearest)
+                         weight, cap, penalty_cap, one, per_view, nearest)
     e_best = e_cur
     tau = tau0
     length = l0
@@ -794,12 +876,12 @@ def anneal_chain(start, free_idx, step, hist, nbins, th, dof_kind, lo, hi, max_r
                     slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj, any_pinhole, span)
         if not whole:
             e = partition_error(objective, proj, mk, points, conf, view_off, obs3, cap, m0,
-                                m1, claimed, unexplained, penalty_cap, nearest)
-        elif objective == OBJ_NEAREST and not bidirectional:
+                                m1, claimed, unexplained, penalty_cap, one, nearest)
+        elif objective == OBJ_NEAREST and not bidirectional and not one:
             e = _paper_error(proj, points, view_off, cap)
         else:
             e = evaluate(objective, proj, mk, points, conf, view_off, obs3, bidirectional,
-                         weight, cap, penalty_cap, per_view, nearest)
+                         weight, cap, penalty_cap, one, per_view, nearest)
         if e <= e_cur or e < e_accept:
             e_cur = e
             for q in range(n_free):
@@ -832,8 +914,8 @@ def beam_start(work, s0, s1, stage_dof_off, stage_dofs, stage_mark, n_samples, s
                nbins, th, dof_kind, lo, hi, rp, rr, parent, chain, pre_rot, pre_trans,
                post_trans, elem_axis, elem_index, joint_flags, marker_joint, marker_local,
                slide_index, kind, P, K, dist, R, t, objective, points, conf, view_off, obs3,
-               cap, j0, j1, m0, m1, claimed, penalty_cap, refine_steps, refine_gate, cs, sn,
-               rot, pos, mk, proj, nearest):
+               cap, j0, j1, m0, m1, claimed, penalty_cap, one, refine_steps, refine_gate, cs,
+               sn, rot, pos, mk, proj, nearest):
     """A partition's start posture by a beam search along its joints, into ``work``.
 
     Stage ``s`` (``s0:s1``, one joint's entries, root first) draws ``BEAM · n_samples``
@@ -891,7 +973,7 @@ def beam_start(work, s0, s1, stage_dof_off, stage_dofs, stage_mark, n_samples, s
                             proj, any_pinhole, span)
                 cand_e[nc] = partition_error(objective, proj, mk, points, conf, view_off,
                                              obs3, cap, m0, m_end, claimed, 0.0, penalty_cap,
-                                             nearest)
+                                             one, nearest)
                 sig = _GOLDEN
                 for i in range(m0, m_end):
                     sig = mix64(sig ^ np.uint64(nearest[i] + 1))
@@ -949,7 +1031,7 @@ def anneal_partitions(origin, state, rp, rr, body, cams, dofs, schedule, error, 
     _, step, hist, nbins, dof_kind, lo, hi = dofs
     (th, max_redraws, n_end, n_l, n_tau, tau0, l0, c_l, c_tau, eps, _, _, _, _, _, _,
      _, _) = schedule
-    bidirectional, weight, cap, penalty_cap = error
+    bidirectional, weight, cap, penalty_cap, one = error
     (bounds, part_off, part_dofs, rounds, claim_gate, samples, stage_off, stage_dof_off,
      stage_dofs, stage_mark) = parts
     work[:] = origin
@@ -982,8 +1064,9 @@ def anneal_partitions(origin, state, rp, rr, body, cams, dofs, schedule, error, 
                 parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index,
                 joint_flags, marker_joint, marker_local, slide_index, kind, P, K, dist, R, t,
                 objective, points, conf, view_off, obs3, cap, bounds[p, 0], bounds[p, 1],
-                bounds[p, 2], bounds[p, 3], claimed, penalty_cap, schedule[13], schedule[14],
-                cs, sn, rot, pos, mk, proj, nearest) / max(1, bounds[p, 3] - bounds[p, 2])
+                bounds[p, 2], bounds[p, 3], claimed, penalty_cap, one, schedule[13],
+                schedule[14], cs, sn, rot, pos, mk, proj, nearest) / max(
+                    1, bounds[p, 3] - bounds[p, 2])
             found[p, :] = cur
         order = np.argsort(clear)
     for r in range(rounds):
@@ -1020,9 +1103,9 @@ def anneal_partitions(origin, state, rp, rr, body, cams, dofs, schedule, error, 
                                 slide_index, kind, P, K, dist, R, t, cs, sn, rot, pos, mk, proj)
                 searched = partition_error(
                     objective, proj, mk, points, conf, view_off, obs3, cap, m0, m1, claimed,
-                    0.0, penalty_cap, nearest) == partition_error(
+                    0.0, penalty_cap, one, nearest) == partition_error(
                     objective, proj, mk, points, conf, view_off, obs3, cap, m0, m1, unclaimed,
-                    0.0, penalty_cap, nearest)
+                    0.0, penalty_cap, one, nearest)
             if r == 0 and samples > 0 and not searched:
                 beam_start(work, stage_off[p], stage_off[p + 1], stage_dof_off, stage_dofs,
                            stage_mark, samples, mix64(rs ^ _GOLDEN), hist, nbins, th,
@@ -1030,16 +1113,16 @@ def anneal_partitions(origin, state, rp, rr, body, cams, dofs, schedule, error, 
                            post_trans, elem_axis, elem_index, joint_flags, marker_joint,
                            marker_local, slide_index, kind, P, K, dist, R, t, objective,
                            points, conf, view_off, obs3, cap, j0, j1, m0, m1, claimed,
-                           penalty_cap, schedule[13], schedule[14], cs, sn, rot, pos, mk, proj,
-                           nearest)
+                           penalty_cap, one, schedule[13], schedule[14], cs, sn, rot, pos, mk,
+                           proj, nearest)
             _, n = anneal_chain(work, dofs_p, step, hist,
                                 nbins, th, dof_kind, lo, hi, max_redraws, n_end, n_l, n_tau,
                                 tau0, l0, c_l, c_tau, eps, mix64(rs), rp, rr, parent, chain,
                                 pre_rot, pre_trans, post_trans, elem_axis, elem_index,
                                 joint_flags, marker_joint, marker_local, slide_index, kind, P,
                                 K, dist, R, t, objective, points, conf, view_off, obs3,
-                                bidirectional, weight, cap, penalty_cap, j0, j1, m0, m1,
-                                claimed, cur, cand, best, cs, sn, rot, pos, mk, proj,
+                                bidirectional, weight, cap, penalty_cap, one, j0, j1, m0,
+                                m1, claimed, cur, cand, best, cs, sn, rot, pos, mk, proj,
                                 per_view, nearest)
             its += n
             work[:] = best
@@ -1048,7 +1131,7 @@ def anneal_partitions(origin, state, rp, rr, body, cams, dofs, schedule, error, 
                     K, dist, R, t, cs, sn, rot, pos, mk, proj)
     best[:] = work
     return evaluate(objective, proj, mk, points, conf, view_off, obs3, bidirectional, weight,
-                    cap, penalty_cap, per_view, nearest), its
+                    cap, penalty_cap, one, per_view, nearest), its
 
 
 # -- the per-frame procedure, shared by fit_frames and the lane kernel ---------------------
@@ -1098,7 +1181,7 @@ def finish_run(best, e, rp, rr, body, cams, dofs, schedule, error, objective, po
     kind, P, K, dist, R, t = cams
     free_idx, _, _, _, dof_kind, lo, hi = dofs
     refine_steps, refine_gate, max_unexplained = schedule[13], schedule[14], schedule[16]
-    bidirectional, weight, cap, penalty_cap = error
+    bidirectional, weight, cap, penalty_cap, one = error
     pairs = 0
     if refine_steps > 0:
         # Refinement minimises squared pair residuals, not E: keep its result only if E
@@ -1113,7 +1196,7 @@ def finish_run(best, e, rp, rr, body, cams, dofs, schedule, error, objective, po
                         elem_axis, elem_index, joint_flags, marker_joint, marker_local,
                         slide_index, kind, P, K, dist, R, t, cs, sn, rot, pos, mk, proj)
         e_refined = evaluate(objective, proj, mk, points, conf, view_off, obs3, bidirectional,
-                             weight, cap, penalty_cap, per_view, nearest)
+                             weight, cap, penalty_cap, one, per_view, nearest)
         if e_refined <= e:
             e = e_refined
         else:
@@ -1142,12 +1225,12 @@ def write_frame(out, f, keep, runs, rp, rr, body, cams, error, objective, points
     (parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index, joint_flags,
      marker_joint, marker_local, slide_index) = body
     kind, P, K, dist, R, t = cams
-    bidirectional, weight, cap, penalty_cap = error
+    bidirectional, weight, cap, penalty_cap, one = error
     project_posture(keep, rp, rr, parent, chain, pre_rot, pre_trans, post_trans, elem_axis,
                     elem_index, joint_flags, marker_joint, marker_local, slide_index, kind, P,
                     K, dist, R, t, cs, sn, rot, pos, mk, proj)
     out.error[f] = evaluate(objective, proj, mk, points, conf, view_off, obs3, bidirectional,
-                            weight, cap, penalty_cap, per_view, nearest)
+                            weight, cap, penalty_cap, one, per_view, nearest)
     out.view_error[f, :] = per_view
     out.angles[f, :] = keep
     out.runs[f] = runs
@@ -1202,7 +1285,7 @@ def fit_frames(seg_off, frame_ids, root_pos, root_rot, start, body, cams, dofs, 
      reanalysis_threshold, max_runs, _, _, start_previous, max_unexplained, min_runs) = schedule
     claim_gate = parts[4]
     partitioned = parts[0].shape[0] > 1 or parts[5] > 0
-    bidirectional, weight, cap, penalty_cap = error
+    bidirectional, weight, cap, penalty_cap, one = error
     objective, det_points, det_conf, det_off, obs3 = obs
     out_iterations, out_pairs, out_run_angles, out_run_error = out[4:]
     nv = kind.shape[0]
@@ -1259,7 +1342,7 @@ def fit_frames(seg_off, frame_ids, root_pos, root_rot, start, body, cams, dofs, 
                                               marker_joint, marker_local, slide_index, kind,
                                               P, K, dist, R, t, objective, det_points,
                                               det_conf, vo, obs3[f], bidirectional, weight,
-                                              cap, penalty_cap, 0, nj, 0, nm, claimed, cur,
+                                              cap, penalty_cap, one, 0, nj, 0, nm, claimed, cur,
                                               cand, best, cs, sn, rot, pos, mk, proj,
                                               per_view, nearest)
                     out_iterations[f] += its

@@ -441,7 +441,7 @@ def _fit_group(f0, f1, frame_ids, root_pos, root_rot, start, body, cams, dofs, s
     free_idx, step, hist, nbins, dof_kind, lo, hi = dofs
     (th, max_redraws, n_end, n_l, n_tau, tau0, l0, c_l, c_tau, eps, seed,
      reanalysis_threshold, max_runs, _, _, _, max_unexplained, min_runs) = schedule
-    bidirectional, weight, cap, penalty_cap = error
+    bidirectional, weight, cap, penalty_cap, one = error
     objective, det_points, det_conf, det_off, obs3 = obs
     nv = kind.shape[0]
     nj = parent.shape[0]
@@ -554,7 +554,7 @@ def _fit_group(f0, f1, frame_ids, root_pos, root_rot, start, body, cams, dofs, s
                                 marker_joint, marker_local, slide_index, kind, P, K, dist, R,
                                 t, s_cs, s_sn, s_rot, s_pos, s_mk, s_proj)
                 e0 = evaluate(objective, s_proj, s_mk, det_points, det_conf, vo, obs3[f],
-                              bidirectional, weight, cap, penalty_cap, s_view, s_near)
+                              bidirectional, weight, cap, penalty_cap, one, s_view, s_near)
                 e_cur[ln] = e0
                 e_best[ln] = e0
                 tau[ln] = tau0

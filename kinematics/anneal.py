@@ -447,9 +447,7 @@ class Fitter:
         nm = self.problem.folded.marker_joint.size
         e = _ak.posture_error(state, pos, rot, *self.problem.folded, *self.problem.cams,
                               _ak.OBJ_NEAREST, rag.points, np.ones(len(rag.points)),
-                              rag.offsets, np.zeros((nm, 4)), opts.bidirectional,
-                              float(opts.penalty_weight), opts.cap, opts.penalty_cap,
-                              per_view)
+                              rag.offsets, np.zeros((nm, 4)), *error_args(opts), per_view)
         return float(e), per_view
 
     # -- root placement -------------------------------------------------------------------
@@ -756,7 +754,7 @@ class Fitter:
         unlabelled points, one partition and independent frames; 'auto' also wants enough
         runs to fill the lanes of every thread."""
         valid = (objective == _ak.OBJ_NEAREST and parts.bounds.shape[0] == 1
-                 and parts.samples == 0 and p.start == "mean")
+                 and parts.samples == 0 and p.start == "mean" and not p.error.one_to_one)
         if p.backend == "lanes" and not valid:
             raise KinematicsError("the lanes backend fits unlabelled points with one "
                                   "partition, start 'mean' and no start samples; use backend "

@@ -24,6 +24,12 @@ Variants (:class:`ErrorOptions`):
   still separates fused-marker postures (two markers on one detection leave a real marker
   unclaimed, at a distance the cap clips only when it is large) without exploding on clutter.
 
+* ``one_to_one`` — each detection explains at most one marker (:func:`one_to_one`): where
+  several markers of a view have one detection as their nearest, the closest keeps it and
+  each other takes its nearest detection that is no marker's nearest, so two limbs cannot
+  share a blob. Meant for the 3D points of ``match = "3d"``, where fused blobs are resolved;
+  per view two markers that really fuse into one blob pay for it.
+
 Conventions shared with the kernels: a view without any detection contributes nothing; ties
 in the nearest detection go to the lower index; a marker whose projection is not finite
 (behind a pinhole camera) costs ``cap_px``, or :data:`NAN_MARKER_COST` pixels without a cap.
@@ -38,6 +44,43 @@ import numpy as np
 from kinematics.errors import KinematicsError
 from kinematics.fk import forward_kinematics_reference
 from kinematics.settings import ERROR_MODES, NAN_MARKER_COST, ErrorOptions  # noqa: F401
+
+
+def one_to_one(dist) -> tuple[np.ndarray, np.ndarray]:
+    """One-to-one matching of markers with points, greedy by distance (the rule of the
+    kernels' ``one_to_one``).
+
+    Parameters
+    ----------
+    dist : (n_markers, n_points) distances, ``inf`` where a point may not be used (claimed,
+        padding) or the marker has no finite position.
+
+    Returns
+    -------
+    point : (n_markers,) int, the point each marker takes, -1 for none: its nearest (ties:
+        the lower point), unless another marker is closer to that point (ties: the lower
+        marker); then its nearest point that is no winning marker's nearest.
+    distance : (n_markers,) the distance to it, ``inf`` for none.
+    """
+    d = np.asarray(dist, dtype=float)
+    n_m, n_p = d.shape
+    if n_p == 0:
+        return np.full(n_m, -1), np.full(n_m, np.inf)
+    first = np.where(np.isfinite(d).any(axis=1), np.argmin(d, axis=1), -1)
+    d_first = np.where(first >= 0, d[np.arange(n_m), np.maximum(first, 0)], np.inf)
+    lost = np.zeros(n_m, bool)
+    for i in np.flatnonzero(first >= 0):
+        rivals = np.flatnonzero((first == first[i]) & (np.arange(n_m) != i))
+        lost[i] = any(d_first[j] < d_first[i] or (d_first[j] == d_first[i] and j < i)
+                      for j in rivals)
+    point, distance = first.copy(), d_first.copy()
+    won = np.zeros(n_p, bool)
+    won[first[(first >= 0) & ~lost]] = True
+    for i in np.flatnonzero(lost):
+        free = np.where(won, np.inf, d[i])
+        point[i] = int(np.argmin(free)) if np.isfinite(free).any() else -1
+        distance[i] = free[point[i]] if point[i] >= 0 else np.inf
+    return point, distance
 
 
 def projection_error(
@@ -83,6 +126,9 @@ def projection_error(
         nearest = np.where(finite, np.argmin(np.where(finite[:, None], dist, 0.0), axis=1), -1)
         marker_cost = np.where(finite, dist.min(axis=1, initial=np.inf, where=finite[:, None]),
                                missing)
+        if opts.one_to_one:
+            nearest, taken = one_to_one(np.where(finite[:, None], dist, np.inf))
+            marker_cost = np.where(nearest >= 0, taken, missing)
         per_view[v] = np.minimum(marker_cost, cap).sum()
         if opts.bidirectional:
             claimed = np.zeros(len(d), dtype=bool)
@@ -181,7 +227,8 @@ def cloud_error(markers, cloud, options: ErrorOptions | None = None, claimed=Non
     ``Y_c`` is model marker i's nearest cloud point by ``s_c · distance`` (ties: the lower
     row), ``s_c`` the pixels per length unit at that point, so E reads in pixels. With the
     bidirectional modes every point that is no marker's nearest adds ``penalty_weight ·
-    min(s_c · its distance to the nearest marker, penalty_cap)``.
+    min(s_c · its distance to the nearest marker, penalty_cap)``. With ``one_to_one`` a point
+    explains at most one marker (:func:`one_to_one`).
 
     Parameters
     ----------
@@ -201,10 +248,15 @@ def cloud_error(markers, cloud, options: ErrorOptions | None = None, claimed=Non
         return float(len(mk) * min(missing, opts.cap))
     diff = mk[:, None, :] - c[None, use, :3]
     dist = c[use, 3] * np.sqrt((diff * diff).sum(axis=2))  # (markers, used points)
-    e = float(np.minimum(dist.min(axis=1), opts.cap).sum())
+    nearest, cost = np.argmin(dist, axis=1), dist.min(axis=1)
+    if opts.one_to_one:
+        missing = opts.cap if np.isfinite(opts.cap) else NAN_MARKER_COST
+        nearest, cost = one_to_one(dist)
+        cost = np.where(nearest >= 0, cost, missing)
+    e = float(np.minimum(cost, opts.cap).sum())
     if opts.bidirectional:
         taken = np.zeros(dist.shape[1], bool)
-        taken[np.argmin(dist, axis=1)] = True
+        taken[nearest[nearest >= 0]] = True
         e += opts.penalty_weight * float(np.minimum(dist.min(axis=0)[~taken],
                                                     opts.penalty_cap).sum())
     return e

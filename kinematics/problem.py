@@ -115,6 +115,7 @@ class ErrorArgs(NamedTuple):
     weight: float
     cap: float
     penalty_cap: float
+    one_to_one: bool
 
 
 class FitOutputs(NamedTuple):
@@ -153,7 +154,7 @@ def schedule_of(params) -> Schedule:
 def error_args(options) -> ErrorArgs:
     """:class:`ErrorArgs` of an :class:`~kinematics.settings.ErrorOptions`."""
     return ErrorArgs(bool(options.bidirectional), float(options.penalty_weight),
-                     float(options.cap), float(options.penalty_cap))
+                     float(options.cap), float(options.penalty_cap), bool(options.one_to_one))
 
 
 class Partitions(NamedTuple):

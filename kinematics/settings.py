@@ -73,6 +73,10 @@ class ErrorOptions:
     penalty_cap_px: float = setting(
         3.0, "Largest cost of one unclaimed detection in pixels with error 'bounded' (a ghost "
         "marker costs at most penalty_weight times this).", min=1e-6, max=1e9)
+    one_to_one: bool = setting(
+        False, "Each detection (in 3D: each triangulated point) explains at most one model "
+        "marker: where several markers have one as their nearest, the closest keeps it and "
+        "each other takes its nearest free one, so two limbs cannot share a blob.")
 
     def __post_init__(self) -> None:
         if self.mode not in ERROR_MODES:
@@ -87,6 +91,9 @@ class ErrorOptions:
         if not (np.isfinite(self.penalty_cap_px) and self.penalty_cap_px > 0):
             raise KinematicsError(f"must be a finite number > 0, got {self.penalty_cap_px!r}",
                                   field="error.penalty_cap_px")
+        if not isinstance(self.one_to_one, bool | np.bool_):
+            raise KinematicsError(f"must be true or false, got {self.one_to_one!r}",
+                                  field="error.one_to_one")
 
     @property
     def bidirectional(self) -> bool:
@@ -106,7 +113,7 @@ class ErrorOptions:
 
     def to_dict(self) -> dict:
         return {"mode": self.mode, "penalty_weight": self.penalty_weight, "cap_px": self.cap_px,
-                "penalty_cap_px": self.penalty_cap_px}
+                "penalty_cap_px": self.penalty_cap_px, "one_to_one": self.one_to_one}
 
 
 

@@ -454,7 +454,7 @@ def test_annealing_loop_allocates_nothing(locust):
                    pr.lo, pr.hi, 16, 500, 100, 100, 200.0, 1.0, 0.75, 0.75, 0.0,
                    ak.stream_state(0, 0, 0), np.zeros((1, 3)), pr.identity_rotations(),
                    *pr.folded, *pr.cams, 0, pts, np.ones(len(pts)), off, np.zeros((nm, 4)),
-                   False, 1.0, np.inf, np.inf, 0, nj, 0, nm, np.zeros(len(pts), np.bool_),
+                   False, 1.0, np.inf, np.inf, False, 0, nj, 0, nm, np.zeros(len(pts), np.bool_),
                    *scratch)
     assert its == 500
     ir = fresh.inspect_llvm(fresh.signatures[0])

@@ -21,7 +21,9 @@ from tests.kinematics.test_partitions import marker_errors, planted, three_legs
 
 OPTIONS = [ErrorOptions(), ErrorOptions(cap_px=4.0), ErrorOptions(mode="bidirectional"),
            ErrorOptions(mode="bounded", cap_px=6.0), ErrorOptions(mode="bidirectional",
-                                                                  penalty_weight=0.5)]
+                                                                  penalty_weight=0.5),
+           ErrorOptions(one_to_one=True), ErrorOptions(mode="bounded", cap_px=6.0,
+                                                       one_to_one=True)]
 
 
 def random_cloud(rng, n_markers=7, n_points=9, pad=3):
@@ -33,7 +35,7 @@ def random_cloud(rng, n_markers=7, n_points=9, pad=3):
     return mk, cloud
 
 
-@pytest.mark.parametrize("opts", OPTIONS, ids=lambda o: f"{o.mode}-{o.cap_px}")
+@pytest.mark.parametrize("opts", OPTIONS, ids=lambda o: f"{o.mode}-{o.cap_px}-{o.one_to_one}")
 def test_cloud_error_kernel_equals_twin(opts):
     rng = np.random.default_rng(3)
     for _ in range(20):
@@ -41,7 +43,7 @@ def test_cloud_error_kernel_equals_twin(opts):
         nearest = np.empty(len(mk), np.int64)
         got = ak.cloud_error(mk, cloud, 0, len(mk), ak.NO_CLAIMS,
                              opts.penalty_weight if opts.bidirectional else 0.0, opts.cap,
-                             opts.penalty_cap, nearest)
+                             opts.penalty_cap, opts.one_to_one, nearest)
         assert got == pytest.approx(cloud_error(mk, cloud, opts), rel=1e-12)
 
 
@@ -64,7 +66,7 @@ def test_partition_cloud_error_leaves_claimed_points_out():
         got = ak.partition_error(ak.OBJ_CLOUD, np.zeros((0, len(mk), 2)), mk, np.empty((0, 2)),
                                  np.empty(0), np.zeros(1, np.int64), cloud, opts.cap, 2, 5,
                                  claimed, opts.penalty_weight, opts.penalty_cap,
-                                 np.empty(len(mk), np.int64))
+                                 opts.one_to_one, np.empty(len(mk), np.int64))
         assert got == pytest.approx(cloud_error(mk[2:5], cloud, opts, claimed), rel=1e-12)
 
 

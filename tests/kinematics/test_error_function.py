@@ -24,8 +24,10 @@ VARIANTS = [
     ErrorOptions("bidirectional", penalty_weight=0.5, cap_px=4.0),
     ErrorOptions("bounded"),
     ErrorOptions("bounded", penalty_weight=2.0, cap_px=6.0, penalty_cap_px=1.5),
+    ErrorOptions(one_to_one=True),
+    ErrorOptions("bounded", cap_px=6.0, one_to_one=True),
 ]
-VARIANT_IDS = ["paper", "cap", "bidir", "bidir-cap", "bounded", "bounded-cap"]
+VARIANT_IDS = ["paper", "cap", "bidir", "bidir-cap", "bounded", "bounded-cap", "one", "bounded-one"]
 
 
 def kernel_error(proj, detections, opts: ErrorOptions):
@@ -36,8 +38,8 @@ def kernel_error(proj, detections, opts: ErrorOptions):
     per_view = np.empty(len(detections))
     nearest = np.empty(proj.shape[1], np.int64)
     e = ak.projection_error(np.ascontiguousarray(proj), pts, off, opts.bidirectional,
-                            float(opts.penalty_weight), opts.cap, opts.penalty_cap, per_view,
-                            nearest)
+                            float(opts.penalty_weight), opts.cap, opts.penalty_cap,
+                            opts.one_to_one, per_view, nearest)
     fast = ak._paper_error(np.ascontiguousarray(proj), pts, off, opts.cap)
     return e, per_view, fast
 
@@ -79,7 +81,7 @@ def test_kernel_equals_twin_random(opts):
         got, got_views, fast = kernel_error(proj, dets, opts)
         assert got == pytest.approx(want, rel=1e-12, abs=1e-9)
         np.testing.assert_allclose(got_views, want_views, rtol=1e-12, atol=1e-9)
-        if not opts.bidirectional:  # the annealing loop's fast path gives the same sum
+        if not (opts.bidirectional or opts.one_to_one):  # the loop's fast path: the same sum
             assert fast == pytest.approx(want, rel=1e-12, abs=1e-9)
 
 

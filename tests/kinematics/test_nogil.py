@@ -54,7 +54,7 @@ def test_main_thread_runs_while_one_annealing_run_goes_on(locust):
                                1.0, 0.75, 0.75, 0.0, ak.stream_state(0, 0, 0),
                                np.zeros((1, 3)), pr.identity_rotations(), *pr.folded,
                                *pr.cams, 0, pts, np.ones(len(pts)), off, np.zeros((nm, 4)),
-                               False, 1.0, np.inf, np.inf, 0, nj, 0, nm,
+                               False, 1.0, np.inf, np.inf, False, 0, nj, 0, nm,
                                np.zeros(len(pts), np.bool_), *scratch)
 
     run(10)  # compile outside the measurement

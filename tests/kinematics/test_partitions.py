@@ -91,7 +91,7 @@ def test_partition_cost_equals_the_twin_on_its_markers():
         for m0, m1 in ((0, 7), (2, 5), (6, 7)):
             got = ak.partition_error(0, proj, np.zeros((nm, 3)), pts, np.ones(len(pts)), off,
                                      np.zeros((nm, 4)), cap, m0, m1,
-                                     np.zeros(len(pts), np.bool_), 0.0, 3.0,
+                                     np.zeros(len(pts), np.bool_), 0.0, 3.0, False,
                                      np.empty(nm, np.int64))
             want = 0.0
             for v in range(nv):
@@ -111,7 +111,7 @@ def test_claimed_detections_are_not_shared():
     ak.claim_detections(proj, pts, off, A, 3.0, claimed)  # markers outside B claim
     assert claimed.tolist() == [True, False]
     e = ak.partition_error(0, proj, np.zeros((2, 3)), pts, np.ones(2), off, np.zeros((2, 4)),
-                           np.inf, 1, 2, claimed, 0.0, 3.0, np.empty(2, np.int64))
+                           np.inf, 1, 2, claimed, 0.0, 3.0, False, np.empty(2, np.int64))
     assert e == pytest.approx(5.0)
     ak.claim_detections(proj, pts, off, A, 0.5, claimed)
     assert claimed.tolist() == [True, False]
@@ -184,9 +184,9 @@ def test_partition_pays_for_blobs_it_leaves_unexplained():
     ak.claim_detections(proj, pts, off, claimers, 3.0, claimed)
     args = (0, proj, np.zeros((3, 3)), pts, np.ones(4), off, np.zeros((3, 4)), np.inf, 0, 2,
             claimed)
-    plain = ak.partition_error(*args, 0.0, 3.0, np.empty(3, np.int64))
+    plain = ak.partition_error(*args, 0.0, 3.0, False, np.empty(3, np.int64))
     assert plain == pytest.approx(0.0 + 2.0)
-    bounded = ak.partition_error(*args, 2.0, 3.0, np.empty(3, np.int64))
+    bounded = ak.partition_error(*args, 2.0, 3.0, False, np.empty(3, np.int64))
     assert bounded == pytest.approx(2.0 + 2.0 * min(4.0, 3.0))  # (14, 0) is left over
 
 
