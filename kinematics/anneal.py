@@ -52,7 +52,7 @@ from kinematics.cameras import CameraArrays
 from kinematics.cloud import cloud_observations
 from kinematics.error_function import projection_error
 from kinematics.errors import KinematicsError
-from kinematics.fk import forward_kinematics_reference
+from kinematics.fk import forward_kinematics, forward_kinematics_reference
 from kinematics.model import Body
 from kinematics.observations import ObservationArrays, Observations
 from kinematics.problem import (  # noqa: F401 (re-exported: the packing lived here)
@@ -246,12 +246,20 @@ def _as_ragged(detections, view_names: Sequence[str]) -> _Ragged:
     good = np.isfinite(pts).all(axis=1)
     n_frames = (off.size - 1) // nv
     if good.all():
-        return _Ragged(np.ascontiguousarray(pts), off, np.zeros(n_frames, np.int64), nv)
+        return _Ragged(_sorted_by_x(pts, off), off, np.zeros(n_frames, np.int64), nv)
     keep_before = np.concatenate([[0], np.cumsum(good)])
     new_off = keep_before[off].astype(np.int64)
     bad_per_cell = np.diff(off) - np.diff(new_off)
     dropped = bad_per_cell.reshape(n_frames, nv).sum(axis=1)
-    return _Ragged(np.ascontiguousarray(pts[good]), new_off, dropped.astype(np.int64), nv)
+    return _Ragged(_sorted_by_x(pts[good], new_off), new_off, dropped.astype(np.int64), nv)
+
+
+def _sorted_by_x(pts: np.ndarray, off: np.ndarray) -> np.ndarray:
+    """The points of each (frame, view) cell sorted by x (stable): the kernels search a view
+    with many detections by a sweep along x (``_anneal_kernels.nearest_sorted``). Which
+    detection is which does not matter to an unlabelled fit."""
+    cell = np.repeat(np.arange(len(off) - 1), np.diff(off))
+    return np.ascontiguousarray(pts[np.lexsort((pts[:, 0], cell))])
 
 
 # -- the fitter -----------------------------------------------------------------------------
@@ -364,7 +372,11 @@ class Fitter:
         samples = p.start_samples
         if samples is None:
             samples = DEFAULT_START_SAMPLES if parts.bounds.shape[0] > 1 else 0
-        return parts._replace(samples=int(samples) if search else 0)
+        confirm = p.confirm_runs == "on" or (p.confirm_runs == "auto"
+                                             and parts.bounds.shape[0] > 1)
+        return parts._replace(samples=int(samples) if search else 0,
+                              confirm=float(p.ambiguous_move * self._segment_scale)
+                              if confirm and search else 0.0)
 
     def observations(self, data) -> Observations:
         """``data`` as :class:`~kinematics.observations.Observations`: an Observations object
@@ -735,7 +747,9 @@ class Fitter:
                 obs, int(sel[k]), int(frame_ids[k]), out.angles[k], roots[k], rots[k], p,
                 runs=int(out.runs[k]), iterations=int(out.iterations[k]),
                 pairs=int(out.pairs[k]), error=(float(out.error[k]), view_error[k].copy()),
-                candidates=cands))
+                candidates=cands, confirmed_only=parts.confirm > 0 and bool(
+                    np.nanmin(out.run_error[k, :max(1, p.candidates)], initial=np.inf)
+                    <= p.reanalysis_threshold)))
         return results
 
     def _kernel_inputs(self, arrays: ObservationArrays):
@@ -754,7 +768,8 @@ class Fitter:
         unlabelled points, one partition and independent frames; 'auto' also wants enough
         runs to fill the lanes of every thread."""
         valid = (objective == _ak.OBJ_NEAREST and parts.bounds.shape[0] == 1
-                 and parts.samples == 0 and p.start == "mean" and not p.error.one_to_one)
+                 and parts.samples == 0 and p.start == "mean" and not p.error.one_to_one
+                 and parts.confirm == 0)
         if p.backend == "lanes" and not valid:
             raise KinematicsError("the lanes backend fits unlabelled points with one "
                                   "partition, start 'mean' and no start samples; use backend "
@@ -766,9 +781,12 @@ class Fitter:
 
     def _frame_result(self, obs: Observations, position: int, frame_id: int, state, root_pos,
                       root_rot, p: AnnealParams, *, runs: int, iterations: int, pairs: int,
-                      error=None, candidates=(), ambiguous: bool = False) -> FrameResult:
+                      error=None, candidates=(), ambiguous: bool = False,
+                      confirmed_only: bool = False) -> FrameResult:
         """The :class:`FrameResult` of ``state`` fitted to frame ``position`` of ``obs``;
-        ``error`` (E, E per view) is computed unless given."""
+        ``error`` (E, E per view) is computed unless given. ``confirmed_only``: the runs
+        beyond the candidates' only confirmed a result already within the threshold (not a
+        re-analysis)."""
         pr, nv = self.problem, self.n_views
         arrays = obs.arrays(np.array([position], np.int64))
         counts = obs.view_counts(np.array([position], np.int64))[0]
@@ -790,8 +808,8 @@ class Fitter:
             status = "failed"
         elif ambiguous:
             status = "ambiguous"
-        else:  # the runs made for candidates are not re-analyses
-            status = "ok" if runs <= p.candidates else "reanalysed"
+        else:  # the runs made for candidates, or to confirm a result, are not re-analyses
+            status = "ok" if runs <= p.candidates or confirmed_only else "reanalysed"
         return FrameResult(
             frame=frame_id,
             angles_deg=self._to_range_deg(angles),
@@ -1019,7 +1037,12 @@ class Fitter:
                 continue
             chosen = r.candidates[choice[i]]
             near = np.abs(unary[i] - unary[i, choice[i]]) <= margin
-            ambiguous = int(near.sum()) > 1 or i in still_jumping
+            near[choice[i]] = False
+            if near.any() and p.ambiguous_move > 0:  # ... and visibly elsewhere
+                moves = np.zeros(len(near))  # (the window's rows are padded)
+                moves[:len(r.candidates)] = self._marker_moves(chosen, r.candidates)
+                near &= moves > p.ambiguous_move * self._segment_scale
+            ambiguous = bool(near.any()) or i in still_jumping
             cands = (chosen, *(c for k, c in enumerate(r.candidates) if k != choice[i]))
             if np.array_equal(chosen.angles_deg, r.angles_deg) and np.array_equal(
                     chosen.root_positions, r.root_positions):
@@ -1032,8 +1055,22 @@ class Fitter:
                 obs, int(idx[first + i]), r.frame, chosen.state, chosen.seed_pos,
                 chosen.seed_rot, p,
                 runs=r.runs, iterations=r.iterations, pairs=r.refined_pairs or 0,
-                candidates=cands, ambiguous=ambiguous))
+                candidates=cands, ambiguous=ambiguous, confirmed_only=r.status == "ok"))
         return results
+
+    def _marker_moves(self, chosen: Candidate, cands: Sequence[Candidate]) -> np.ndarray:
+        """Per candidate, the largest distance of a model marker from where the chosen
+        posture puts it (length units)."""
+        angles = np.array([chosen.angles_deg, *(c.angles_deg for c in cands)])
+        roots = np.array([chosen.root_positions, *(c.root_positions for c in cands)])
+        mk = forward_kinematics(self.body, angles, roots).markers
+        return np.linalg.norm(mk[1:] - mk[0], axis=-1).max(axis=-1)
+
+    @property
+    def _segment_scale(self) -> float:
+        """The body's median segment length (the unit of ``ambiguous_move``)."""
+        lengths = [abs(float(seg.length)) for _, seg in self.body.segments()]
+        return float(np.median([v for v in lengths if v > 0] or [1.0]))
 
     def _refit_from(self, obs: Observations, position: int, neighbour: Candidate,
                     p: AnnealParams) -> Candidate | None:

@@ -176,6 +176,9 @@ class Partitions(NamedTuple):
     stage_dof_off: np.ndarray = np.zeros(1, np.int64)
     stage_dofs: np.ndarray = np.zeros(0, np.int64)
     stage_mark: np.ndarray = np.zeros(0, np.int64)
+    # Runs agree when every marker of one lies within this distance (length units) of the
+    # other's; a frame runs until its best run is confirmed by another (0: not used).
+    confirm: float = 0.0
 
 
 #: _first_moved of each problem (a problem is immutable; partitions are built per fit block)

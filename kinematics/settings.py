@@ -47,6 +47,7 @@ PARTITION_MODES = ("auto", "none")
 BACKENDS = ("auto", "scalar", "lanes")
 MATCH_MODES = ("auto", "views", "3d")
 THRESHOLD_MODES = ("absolute", "auto")
+CONFIRM_MODES = ("auto", "on", "off")
 
 #: Cost of a marker with no finite projection when no cap is set (same as the kernels).
 NAN_MARKER_COST = 1.0e6
@@ -230,6 +231,17 @@ class AnnealParams:
         "marker image is within this many pixels of the chosen one's (and within half the "
         "typical E per marker image of the video) while its posture is far from it (more "
         "than ambiguous_deg on some axis).", min=0.0, max=1e6)
+    confirm_runs: str = setting(
+        "auto", "Re-run a frame (up to max_runs) until two of its runs put every model "
+        "marker within ambiguous_move segment lengths of each other, the best run one of "
+        "them: a search that found its minimum once may have been lucky. 'auto': for a body "
+        "annealed in several partitions (many limbs), where runs land on different limb "
+        "assignments; 'on'; 'off' (the paper).", choices=CONFIRM_MODES)
+    ambiguous_move: float = setting(
+        0.25, "With candidates > 1: a candidate that fits about as well makes a frame "
+        "ambiguous only if it moves some model marker by more than this fraction of the "
+        "body's median segment length; 0: any candidate ambiguous_deg away does (axes that "
+        "barely move a marker then flag frames).", min=0.0, max=1e6)
     ambiguous_deg: float = setting(
         5.0, "With candidates > 1: candidates nearer than this on every axis (degrees, or "
         "length units for translations) are the same posture.", min=1e-6, max=360.0)
@@ -294,7 +306,7 @@ class AnnealParams:
         if g is not None and not (_is_real(g) and g > 0):
             raise KinematicsError(f"must be None or a number > 0, got {g!r}",
                                   field="root_gate_px")
-        for name in ("auto_k", "path_weight", "ambiguous_px"):
+        for name in ("auto_k", "path_weight", "ambiguous_px", "ambiguous_move"):
             value = getattr(self, name)
             if not _is_real(value) or not (math.isfinite(value) and value >= 0):
                 raise KinematicsError(f"must be a finite number >= 0, got {value!r}",
@@ -310,7 +322,8 @@ class AnnealParams:
                                       field=name)
         for name, choices in (("threshold_mode", THRESHOLD_MODES),
                               ("partitions", PARTITION_MODES), ("match", MATCH_MODES),
-                              ("backend", BACKENDS), ("start", START_MODES)):
+                              ("backend", BACKENDS), ("start", START_MODES),
+                              ("confirm_runs", CONFIRM_MODES)):
             value = getattr(self, name)
             if value not in choices:
                 raise KinematicsError(f"must be one of {', '.join(choices)}, got {value!r}",
@@ -375,7 +388,7 @@ BEST_ERROR = {"mode": "bounded", "cap_px": 10.0}
 #: Profiles: 'best' (the defaults) and 'paper' (what differs from them in the paper's).
 PROFILES = ("best", "paper")
 PAPER = {"refine": False, "threshold_mode": "absolute", "candidates": 1, "match": "views",
-         "start_samples": 0, "error": ErrorOptions()}
+         "start_samples": 0, "confirm_runs": "off", "error": ErrorOptions()}
 
 
 def _is_real(value) -> bool:

@@ -256,3 +256,29 @@ def test_auto_threshold_survives_e_in_steps():
     assert med + 6 * 1.4826 * np.median(np.abs(steps - med)) < 1.9  # the MAD alone
     assert auto_threshold(steps, 6.0, 0.5) > 2.255  # the next step is not a failure
     assert auto_threshold(np.full(10, 0.1), 6.0, 0.5) == 0.5  # the floor
+
+
+def test_runs_confirm_each_other():
+    """confirm_runs: a frame is re-run until two runs put every marker within ambiguous_move
+    segment lengths of each other; it keeps the lowest E, never worse than without, its
+    status stays 'ok' (confirming is no re-analysis), and 'auto' confirms only bodies of
+    several partitions."""
+    body = three_legs()
+    cams = top_and_side()
+    _, frames = planted(body, cams, 10, seed=6)
+    base = AnnealParams(candidates=1, threshold_mode="absolute", reanalysis_threshold=1e6,
+                        max_runs=6, start_samples=0, ambiguous_move=0.02, confirm_runs="off"
+                        ).with_schedule(60)
+    plain = Fitter(body, cams, base).fit(frames)
+    confirmed = Fitter(body, cams, replace(base, confirm_runs="on")).fit(frames)
+    assert all(r.runs == 1 for r in plain)
+    assert all(2 <= r.runs <= 6 for r in confirmed)
+    assert any(r.runs > 2 for r in confirmed), [r.runs for r in confirmed]
+    assert all(c.error <= p.error for c, p in zip(confirmed, plain, strict=True))
+    assert all(r.status == "ok" for r in confirmed)
+    assert Fitter(body, cams, base)._partitions(replace(base, confirm_runs="auto")).confirm > 0
+    single = load_body(CHAINS / "fly_six_legs.xml").chains[:1]
+    one = Fitter(Body("leg", single, "mm"), locust_cameras(), base)
+    assert one._partitions(replace(base, confirm_runs="auto")).confirm == 0
+    with pytest.raises(KinematicsError, match="confirm_runs"):
+        AnnealParams(confirm_runs="maybe")
