@@ -319,8 +319,8 @@ def nearest_sorted(px, py, points, a, b, claimed):
     best = np.inf
     arg = -1
     nc = claimed.shape[0]
-    c = lo
-    gap = 0.0
+    c = lo  # rightward from the insertion point, then leftward (two loops: a merged one
+    gap = 0.0  # with a step was 1.3x slower per query at 1000 detections)
     while c < b and gap <= best:
         dx = points[c, 0] - px
         gap = dx * dx
@@ -341,6 +341,26 @@ def nearest_sorted(px, py, points, a, b, claimed):
             best = d2
             arg = c
         c -= 1
+    return best, arg
+
+
+@njit(cache=True, nogil=True, inline="always")
+def nearest_in_view(px, py, points, a, b, claimed):
+    """The nearest detection to (px, py) among rows ``a:b`` not ``claimed`` (an empty
+    ``claimed`` claims nothing): by :func:`nearest_sorted` in a view with many detections,
+    else by a scan. Returns (squared distance, row), (inf, -1) for none."""
+    if b - a > SWEEP_MIN:
+        return nearest_sorted(px, py, points, a, b, claimed)
+    best = np.inf
+    arg = -1
+    nc = claimed.shape[0]
+    for c in range(a, b):
+        dx = px - points[c, 0]
+        dy = py - points[c, 1]
+        d2 = dx * dx + dy * dy
+        if d2 < best and not (c < nc and claimed[c]):
+            best = d2
+            arg = c
     return best, arg
 
 
@@ -374,20 +394,8 @@ def projection_error(proj, points, view_off, bidirectional, weight, cap, penalty
         ev = 0.0
         if b > a:
             for i in range(nm):
-                px = proj[v, i, 0]
-                py = proj[v, i, 1]
-                best = np.inf
-                arg = -1
-                if b - a > SWEEP_MIN:
-                    best, arg = nearest_sorted(px, py, points, a, b, NO_CLAIMS)
-                else:
-                    for c in range(a, b):
-                        dx = px - points[c, 0]
-                        dy = py - points[c, 1]
-                        d2 = dx * dx + dy * dy
-                        if d2 < best:
-                            best = d2
-                            arg = c
+                best, arg = nearest_in_view(proj[v, i, 0], proj[v, i, 1], points, a, b,
+                                            NO_CLAIMS)
                 nearest[i] = arg
                 d = np.sqrt(best) if arg >= 0 else missing
                 ev += min(d, cap)
@@ -730,20 +738,7 @@ def partition_error(objective, proj, mk, points, conf, view_off, obs3, cap, m0, 
             continue
         ev = 0.0
         for i in range(m0, m1):
-            px = proj[v, i, 0]
-            py = proj[v, i, 1]
-            best = np.inf
-            arg = -1
-            if b - a > SWEEP_MIN:
-                best, arg = nearest_sorted(px, py, points, a, b, claimed)
-            else:
-                for c in range(a, b):
-                    dx = px - points[c, 0]
-                    dy = py - points[c, 1]
-                    d2 = dx * dx + dy * dy
-                    if d2 < best and not claimed[c]:
-                        best = d2
-                        arg = c
+            best, arg = nearest_in_view(proj[v, i, 0], proj[v, i, 1], points, a, b, claimed)
             nearest[i] = arg
             d = np.sqrt(best) if best < np.inf else missing
             ev += min(d, cap)
