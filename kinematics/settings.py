@@ -157,7 +157,8 @@ class AnnealParams:
     reanalysis_threshold: float = setting(
         10.0, "A frame whose final E exceeds this (pixels) is fitted again (Table 1 note); "
         "> 0.", min=0.0, max=1e9)
-    max_runs: int = setting(5, "Runs per frame at most, the first included.", min=1, max=1000)
+    max_runs: int = setting(8, "Runs per frame at most, the first included (the paper: 5).",
+                            min=1, max=1000)
     start: str = setting("mean", "Start posture of a frame's first run: the histogram means "
                          "(frames independent) or the previous frame's result.",
                          choices=START_MODES)
@@ -388,6 +389,7 @@ BEST_ERROR = {"mode": "bounded", "cap_px": 10.0}
 #: Profiles: 'best' (the defaults) and 'paper' (what differs from them in the paper's).
 PROFILES = ("best", "paper")
 PAPER = {"refine": False, "threshold_mode": "absolute", "candidates": 1, "match": "views",
+         "max_runs": 5,
          "start_samples": 0, "confirm_runs": "off", "error": ErrorOptions()}
 
 
