@@ -110,10 +110,12 @@ class FrameResult:
     seed : int
         The seed; run r drew from the stream of (seed, frame, r).
     status : str
-        ``"ok"`` (E within the threshold at the first run), ``"reanalysed"`` (within it after
-        re-runs), ``"ambiguous"`` (within it, but another candidate posture far from this
-        one fits about as well, or the chosen posture jumps from a neighbour's and no re-fit
-        found one that continues the movement: see ``candidates``), ``"failed"`` (above it after
+        ``"ok"`` (E within the threshold at the first run; runs made for candidates or to
+        confirm a result, ``confirm_runs``, are no re-analyses), ``"reanalysed"`` (within it
+        after re-runs), ``"ambiguous"`` (within it, but another candidate posture far from
+        this one, ``ambiguous_deg`` on an axis and ``ambiguous_move`` at a marker, fits about
+        as well, or the chosen posture jumps from a neighbour's and no re-fit found one that
+        continues the movement: see ``candidates``), ``"failed"`` (above it after
         ``max_runs``), ``"no-detections"``.
     root_positions : ndarray, shape (n_chains, 3)
         Root of each chain used for this frame (configured or tracked).
