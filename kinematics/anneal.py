@@ -374,8 +374,8 @@ class Fitter:
         samples = p.start_samples
         if samples is None:
             samples = DEFAULT_START_SAMPLES if parts.bounds.shape[0] > 1 else 0
-        confirm = p.confirm_runs == "on" or (p.confirm_runs == "auto"
-                                             and parts.bounds.shape[0] > 1)
+        confirm = p.confirm_runs == "on" or (p.confirm_runs == "auto" and (
+            parts.bounds.shape[0] > 1 or p.match == "3d"))
         return parts._replace(samples=int(samples) if search else 0,
                               confirm=float(p.ambiguous_move * self._segment_scale)
                               if confirm and search else 0.0)

@@ -237,7 +237,8 @@ class AnnealParams:
         "marker within ambiguous_move segment lengths of each other, the best run one of "
         "them: a search that found its minimum once may have been lucky. 'auto': for a body "
         "annealed in several partitions (many limbs), where runs land on different limb "
-        "assignments; 'on'; 'off' (the paper).", choices=CONFIRM_MODES)
+        "assignments, and for any body with match '3d'; 'on'; 'off' (the paper).",
+        choices=CONFIRM_MODES)
     ambiguous_move: float = setting(
         0.25, "With candidates > 1: a candidate that fits about as well makes a frame "
         "ambiguous only if it moves some model marker by more than this fraction of the "
