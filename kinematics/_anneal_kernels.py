@@ -1078,9 +1078,9 @@ def anneal_partitions(origin, state, rp, rr, body, cams, dofs, schedule, error, 
     against all detections; later rounds (``rounds`` > 1) exclude the detections that the
     other partitions' markers explain (:func:`claim_detections` within ``claim_gate`` px),
     so limbs do not share or take each other's markers. With ``samples`` > 0 each partition
-    of the first round starts from the best of ``samples`` drawn postures
-    (:func:`sampled_start`) and may not use the detections that the partitions fitted
-    before it explain. Leaves the result in ``best``.
+    of the first round starts from a beam search along its joints (:func:`beam_start`) and
+    may not use the detections that the partitions fitted before it explain. Leaves the
+    result in ``best``.
 
     Returns
     -------

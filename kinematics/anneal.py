@@ -369,7 +369,8 @@ class Fitter:
 
     def _partitions(self, p: AnnealParams, search: bool = True):
         """The fit's partitions; the start search as ``start_samples`` says (None: 64 for
-        several partitions, none for one), or none (``search`` False)."""
+        several partitions, none for one) and runs confirmed as ``confirm_runs`` says, or
+        neither (``search`` False: a re-fit from a neighbour's posture)."""
         parts = partitions_of(self.problem, p.partitions, p.partition_rounds, p.claim_gate_px)
         samples = p.start_samples
         if samples is None:

@@ -208,7 +208,7 @@ class AnnealParams:
         "each other's markers).", min=1, max=100)
     start_samples: int | None = setting(
         None, "Start search: before a partition is annealed in a run's first round, its axes "
-        "are drawn joint by joint from its base outward (8 x this many draws per joint, "
+        "are drawn joint by joint from its base outward (32 x this many draws per joint, "
         "uniform within the ranges, plausible by the histograms), each joint's best postures "
         "kept and polished, and the best of all starts the annealing; in that round a "
         "partition may not use the detections the partitions fitted before it explain. A "
@@ -243,7 +243,8 @@ class AnnealParams:
         0.25, "With candidates > 1: a candidate that fits about as well makes a frame "
         "ambiguous only if it moves some model marker by more than this fraction of the "
         "body's median segment length; 0: any candidate ambiguous_deg away does (axes that "
-        "barely move a marker then flag frames).", min=0.0, max=1e6)
+        "barely move a marker then flag frames). Also how close two runs must put every "
+        "marker to confirm each other (confirm_runs).", min=0.0, max=1e6)
     ambiguous_deg: float = setting(
         5.0, "With candidates > 1: candidates nearer than this on every axis (degrees, or "
         "length units for translations) are the same posture.", min=1e-6, max=360.0)

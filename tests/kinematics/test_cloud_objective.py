@@ -95,14 +95,17 @@ def ring(n=5, distance=80.0, focal=800.0):
     return cams
 
 
-def test_three_legs_fitted_to_their_triangulated_markers():
+@pytest.mark.parametrize("one_to_one", [False, True], ids=["nearest", "one-to-one"])
+def test_three_legs_fitted_to_their_triangulated_markers(one_to_one):
     body = three_legs()
     cams = ring()
     angles, frames = planted(body, cams, 8, seed=11, shuffle=True)
     # the defaults (bounded error, 10-px cap, start search); without the search the cap
     # leaves far limbs no slope to follow and 4 of 8 frames end off
     params = AnnealParams(match="3d", candidates=1, threshold_mode="absolute",
-                          reanalysis_threshold=8.0).with_schedule(3000)
+                          reanalysis_threshold=8.0,
+                          error=ErrorOptions("bounded", cap_px=10.0, one_to_one=one_to_one)
+                          ).with_schedule(3000)
     fitter = Fitter(body, cams, params)
     obs = fitter.observations(frames)
     assert obs.kind == "cloud" and (obs.points3d[..., 3] > 0).sum(axis=1).tolist() == [8] * 8

@@ -13,9 +13,10 @@ from kinematics import _anneal_kernels as ak
 from kinematics.anneal import AnnealParams, Fitter
 from kinematics.error_function import cloud_error, one_to_one, projection_error
 from kinematics.errors import KinematicsError
+from kinematics.fk import forward_kinematics_reference
 from kinematics.settings import ErrorOptions
 from tests.kinematics.test_cloud_objective import random_cloud, ring
-from tests.kinematics.test_partitions import marker_errors, planted, three_legs
+from tests.kinematics.test_partitions import planted, three_legs
 
 ONE = ErrorOptions(one_to_one=True)
 
@@ -103,19 +104,31 @@ def test_cloud_kernel_equals_twin_with_claims():
         assert got == pytest.approx(cloud_error(mk[1:6], cloud, opts, claimed), rel=1e-12)
 
 
-def test_three_legs_fitted_one_to_one():
+def test_the_fitter_scores_one_to_one():
+    """The setting reaches the kernels through the fitter: at the start posture, where
+    markers of different legs share their nearest points, the fitter's E is the twin's
+    one-to-one E, per view and in 3D (the planted fit with it: test_cloud_objective.py)."""
     body = three_legs()
     cams = ring()
-    angles, frames = planted(body, cams, 6, seed=5, shuffle=True)
-    params = AnnealParams(match="3d", candidates=1, threshold_mode="absolute",
-                          reanalysis_threshold=8.0).with_schedule(3000)
-    params = replace(params, error=replace(params.error, one_to_one=True))
-    fitter = Fitter(body, cams, params)
-    res = fitter.fit(frames)
-    err = marker_errors(body, res, angles)
-    assert np.median(err) < 0.05 and err.max() < 0.2, err
-    e, _ = fitter.error(res[0].angles_deg, frames[0])
-    assert e == pytest.approx(res[0].error, rel=1e-9)
+    _, frames = planted(body, cams, 1, seed=5, shuffle=True)
+    start = body.mean_posture_deg()
+    markers = forward_kinematics_reference(body, start).markers
+    nv = len(cams)
+    for match in ("views", "3d"):
+        plain = AnnealParams(match=match)
+        one = replace(plain, error=replace(plain.error, one_to_one=True))
+        fitter = Fitter(body, cams, one)
+        e_one, _ = fitter.error(start, frames[0])
+        e_plain, _ = Fitter(body, cams, plain).error(start, frames[0])
+        if match == "views":
+            proj = np.stack([c.project(markers) for c in cams.values()])
+            want = projection_error(proj, frames[0], one.error)[0]
+        else:  # in 3D a marker counts once: the caps are the views' together
+            cloud = fitter.observations([frames[0]]).points3d[0]
+            want = cloud_error(markers, cloud, replace(one.error, cap_px=10.0 * nv,
+                                                       penalty_cap_px=3.0 * nv))
+        assert e_one == pytest.approx(want, rel=1e-9), match
+        assert e_one != pytest.approx(e_plain, rel=1e-6), match
 
 
 def test_one_to_one_must_be_a_boolean():
