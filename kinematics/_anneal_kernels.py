@@ -299,6 +299,20 @@ def project_posture(angles, root_pos, root_rot, parent, chain, pre_rot, pre_tran
 SWEEP_MIN = 64
 SWEEP_MIN_FAST = 192
 NO_CLAIMS = np.zeros(0, np.bool_)  # the whole body: no partition claims a point
+#: ``nearest`` entry of a model marker hidden in the view (:func:`hidden_in`): it takes no
+#: point (:func:`takes` is false for every point) and costs nothing.
+UNSEEN = -(1 << 62)
+NO_HIDDEN = np.zeros((0, 4))  # a frame's obs3 without hidden marks (:func:`hidden_in`)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def hidden_in(obs3, i, v):
+    """Whether unlabelled 2D points skip model marker ``i`` in view ``v`` because the user
+    marked it hidden there (occluded, or its blob merged with another). For unlabelled
+    points a frame's ``obs3`` holds these marks, shape (n_markers, n_views), nonzero =
+    hidden; an array of any other shape (e.g. (0, 4)) hides nothing. A hidden marker costs
+    nothing in that view, takes no detection and explains none."""
+    return i < obs3.shape[0] and v < obs3.shape[1] and obs3[i, v] != 0.0
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -365,8 +379,8 @@ def nearest_in_view(px, py, points, a, b, claimed):
 
 
 @njit(cache=True, nogil=True)
-def projection_error(proj, points, view_off, bidirectional, weight, cap, penalty_cap, one,
-                     per_view, nearest):
+def projection_error(proj, points, view_off, obs3, bidirectional, weight, cap, penalty_cap,
+                     one, per_view, nearest):
     """Eq. 5 and its variants for given marker projections; returns E (pixels).
 
     ``E = sum_v sum_i min(min_c |p_i^v - d_c^v|, cap)`` over views with at least one
@@ -376,12 +390,13 @@ def projection_error(proj, points, view_off, bidirectional, weight, cap, penalty
     ``weight * penalty_cap``). ``cap = inf`` is the paper's Eq. 5. With ``one`` (one-to-one)
     each detection explains at most one marker of its view (:func:`one_to_one`). Ties go
     to the lower detection index. A marker without a finite projection costs ``cap``, or
-    :data:`NAN_MARKER_COST` without a cap.
+    :data:`NAN_MARKER_COST` without a cap. A marker hidden in a view (:func:`hidden_in`)
+    is left out of that view.
 
     Parameters
     ----------
     proj : (n_views, n_markers, 2)
-    points : (n_points, 2); view_off : (n_views + 1,)
+    points : (n_points, 2); view_off : (n_views + 1,); obs3 : hidden marks (:func:`hidden_in`)
     per_view : (n_views,) out, E of each view; nearest : (n_markers,) int64 scratch.
     """
     nv = proj.shape[0]
@@ -394,6 +409,9 @@ def projection_error(proj, points, view_off, bidirectional, weight, cap, penalty
         ev = 0.0
         if b > a:
             for i in range(nm):
+                if hidden_in(obs3, i, v):
+                    nearest[i] = UNSEEN
+                    continue
                 best, arg = nearest_in_view(proj[v, i, 0], proj[v, i, 1], points, a, b,
                                             NO_CLAIMS)
                 nearest[i] = arg
@@ -409,7 +427,8 @@ def projection_error(proj, points, view_off, bidirectional, weight, cap, penalty
                         matched = matched or takes(nearest[i], c)
                         dx = proj[v, i, 0] - points[c, 0]
                         dy = proj[v, i, 1] - points[c, 1]
-                        best = min(best, dx * dx + dy * dy)
+                        seen = nearest[i] != UNSEEN
+                        best = min(best, dx * dx + dy * dy) if seen else best
                     if not matched:
                         d = np.sqrt(best) if best < np.inf else missing
                         ev += weight * min(d, penalty_cap)
@@ -445,8 +464,9 @@ def one_to_one(X, Y, a, b, m0, m1, scaled, claimed, cap, nearest):
     have as their nearest stays with the closest (ties: the lower marker); each other marker
     takes its nearest point that is no marker's nearest and not ``claimed``, or costs
     ``cap`` (:data:`NAN_MARKER_COST` without one) where none is left. On entry ``nearest``
-    holds each marker's nearest point (-1: none); on return a marker that lost its point
-    holds ``-(c + 2)`` for the point ``c`` it took instead (:func:`takes`). Returns
+    holds each marker's nearest point (-1: none; :data:`UNSEEN`: hidden, left out); on
+    return a marker that lost its point holds ``-(c + 2)`` for the point ``c`` it took
+    instead (:func:`takes`). Returns
     ``sum_i min(distance_i, cap)``. So two limbs cannot share a blob: the second marker
     pays for its next point, and the marker it leaves out pays the bidirectional term."""
     missing = cap if cap < np.inf else NAN_MARKER_COST
@@ -469,7 +489,7 @@ def one_to_one(X, Y, a, b, m0, m1, scaled, claimed, cap, nearest):
             total += min(np.sqrt(_dist2(X, i, Y, c, scaled)), cap)
         elif c == -1:
             total += min(missing, cap)
-        else:  # lost its point: the nearest one no marker has as its nearest
+        elif c != UNSEEN:  # lost its point: the nearest one no marker has as its nearest
             best = np.inf
             arg = -1
             for c2 in range(a, b):
@@ -679,7 +699,7 @@ def evaluate(objective, proj, mk, points, conf, view_off, obs3, bidirectional, w
     """E of projected (``proj``) and 3D (``mk``) markers under ``objective``; fills
     ``per_view`` (zeros for 3D points, which have no views)."""
     if objective == OBJ_NEAREST:
-        return projection_error(proj, points, view_off, bidirectional, weight, cap,
+        return projection_error(proj, points, view_off, obs3, bidirectional, weight, cap,
                                 penalty_cap, one, per_view, nearest)
     if objective == OBJ_LABELLED:
         return labelled_error(proj, points, conf, view_off, cap, per_view)
@@ -703,8 +723,8 @@ def partition_error(objective, proj, mk, points, conf, view_off, obs3, cap, m0, 
     of them, penalty_cap)``: a leg is pulled to explain the blobs left over, not to share
     another's. Labelled keypoints and 3D points: each marker against its own, as
     :func:`labelled_error` and :func:`points3d_error`. With ``one`` each detection (point)
-    explains at most one of these markers (:func:`one_to_one`). ``nearest`` (n_markers,) is
-    scratch.
+    explains at most one of these markers (:func:`one_to_one`). A marker hidden in a view
+    (:func:`hidden_in`) is left out of it. ``nearest`` (n_markers,) is scratch.
     """
     missing = cap if cap < np.inf else NAN_MARKER_COST
     total = 0.0
@@ -738,6 +758,9 @@ def partition_error(objective, proj, mk, points, conf, view_off, obs3, cap, m0, 
             continue
         ev = 0.0
         for i in range(m0, m1):
+            if hidden_in(obs3, i, v):
+                nearest[i] = UNSEEN
+                continue
             best, arg = nearest_in_view(proj[v, i, 0], proj[v, i, 1], points, a, b, claimed)
             nearest[i] = arg
             d = np.sqrt(best) if best < np.inf else missing
@@ -753,15 +776,18 @@ def partition_error(objective, proj, mk, points, conf, view_off, obs3, cap, m0, 
                     taken = taken or takes(nearest[i], c)
                     dx = proj[v, i, 0] - points[c, 0]
                     dy = proj[v, i, 1] - points[c, 1]
-                    best = min(best, dx * dx + dy * dy)
-                if not taken:
-                    total += penalty * min(np.sqrt(best), penalty_cap)
+                    seen = nearest[i] != UNSEEN
+                    best = min(best, dx * dx + dy * dy) if seen else best
+                if not taken:  # as projection_error: no marker to measure from costs missing
+                    d = np.sqrt(best) if best < np.inf else missing
+                    total += penalty * min(d, penalty_cap)
     return total
 
 
 @njit(cache=True, nogil=True)
-def count_unexplained(proj, points, view_off, gate):
-    """Detections farther than ``gate`` pixels from every projected model marker."""
+def count_unexplained(proj, points, view_off, obs3, gate):
+    """Detections farther than ``gate`` pixels from every projected model marker not hidden
+    in their view (:func:`hidden_in`)."""
     g2 = gate * gate
     n = 0
     for v in range(proj.shape[0]):
@@ -770,23 +796,23 @@ def count_unexplained(proj, points, view_off, gate):
             for i in range(proj.shape[1]):
                 dx = proj[v, i, 0] - points[c, 0]
                 dy = proj[v, i, 1] - points[c, 1]
-                near = near or dx * dx + dy * dy <= g2
+                near = near or (dx * dx + dy * dy <= g2 and not hidden_in(obs3, i, v))
             n += 0 if near else 1
     return n
 
 
 @njit(cache=True, nogil=True)
-def claim_detections(proj, points, view_off, claimers, gate, claimed):
+def claim_detections(proj, points, view_off, obs3, claimers, gate, claimed):
     """Mark the detections that the markers flagged in ``claimers`` (n_markers,) explain:
     each such marker's nearest detection in each view, if within ``gate`` pixels (a marker
-    far from every detection, e.g. occluded, claims nothing)."""
+    far from every detection, e.g. occluded, or hidden in the view, claims nothing)."""
     claimed[:] = False
     g2 = gate * gate
     for v in range(proj.shape[0]):
         a = view_off[v]
         b = view_off[v + 1]
         for i in range(proj.shape[1]):
-            if not claimers[i]:
+            if not claimers[i] or hidden_in(obs3, i, v):
                 continue
             best = g2
             arg = -1
@@ -939,7 +965,8 @@ def anneal_chain(start, free_idx, step, hist, nbins, th, dof_kind, lo, hi, max_r
         if not whole:
             e = partition_error(objective, proj, mk, points, conf, view_off, obs3, cap, m0,
                                 m1, claimed, unexplained, penalty_cap, one, nearest)
-        elif objective == OBJ_NEAREST and not bidirectional and not one:
+        elif objective == OBJ_NEAREST and not bidirectional and not one and \
+                obs3.shape[0] == 0:  # the paper's case: no marker marked hidden
             e = _paper_error(proj, points, view_off, cap)
         else:
             e = evaluate(objective, proj, mk, points, conf, view_off, obs3, bidirectional,
@@ -1148,7 +1175,8 @@ def anneal_partitions(origin, state, rp, rr, body, cams, dofs, schedule, error, 
                 for q in order[:k]:
                     claimers[bounds[q, 2]:bounds[q, 4]] = True
             if objective == OBJ_NEAREST:
-                claim_detections(proj, points, view_off, claimers, claim_gate, claimed)
+                claim_detections(proj, points, view_off, obs3, claimers, claim_gate,
+                                 claimed)
             elif objective == OBJ_CLOUD:
                 claim_cloud(mk, obs3, claimers, claim_gate, claimed)
             else:
@@ -1283,7 +1311,7 @@ def finish_run(best, e, rp, rr, body, cams, dofs, schedule, error, objective, po
         project_posture(best, rp, rr, parent, chain, pre_rot, pre_trans, post_trans,
                         elem_axis, elem_index, joint_flags, marker_joint, marker_local,
                         slide_index, kind, P, K, dist, R, t, cs, sn, rot, pos, mk, proj)
-        u = count_unexplained(proj, points, view_off, claim_gate)
+        u = count_unexplained(proj, points, view_off, obs3, claim_gate)
     elif max_unexplained >= 0 and objective == OBJ_CLOUD:
         project_posture(best, rp, rr, parent, chain, pre_rot, pre_trans, post_trans,
                         elem_axis, elem_index, joint_flags, marker_joint, marker_local,

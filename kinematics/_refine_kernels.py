@@ -24,6 +24,7 @@ from kinematics._anneal_kernels import (
     OBJ_LABELLED,
     OBJ_POINTS3D,
     cloud_nearest,
+    hidden_in,
     project_posture,
     solve_spd,
 )
@@ -52,11 +53,13 @@ def assign_pairs(objective, proj, mk, points, conf, view_off, obs3, gate, pair):
     """Pairs of model markers and observations within ``gate``; returns their number.
 
     Unlabelled points (``OBJ_NEAREST``): ``pair[v * nm + i]`` = index of marker i's nearest
-    detection in view v. Labelled keypoints: the row of marker i's own keypoint in view v (if
-    present, with confidence > 0). 3D points: ``pair[i] = i`` where marker i's point is
-    present. Unlabelled 3D points (``OBJ_CLOUD``): ``pair[i]`` = the row of marker i's
-    nearest cloud point (px-equivalents, as :func:`kinematics._anneal_kernels.cloud_error`).
-    -1 marks no pair (farther than ``gate``: pixels, or length units for labelled 3D).
+    detection in view v, none where it is hidden
+    (:func:`kinematics._anneal_kernels.hidden_in`). Labelled keypoints: the row of marker
+    i's own keypoint in view v (if present, with confidence > 0). 3D points: ``pair[i] =
+    i`` where marker i's point is present. Unlabelled 3D points (``OBJ_CLOUD``):
+    ``pair[i]`` = the row of marker i's nearest cloud point (px-equivalents, as
+    :func:`kinematics._anneal_kernels.cloud_error`). -1 marks no pair (farther than
+    ``gate``: pixels, or length units for labelled 3D).
     """
     nv = proj.shape[0]
     nm = mk.shape[0]
@@ -90,7 +93,7 @@ def assign_pairs(objective, proj, mk, points, conf, view_off, obs3, gate, pair):
                     best = (proj[v, i, 0] - points[a + i, 0]) ** 2 + (
                         proj[v, i, 1] - points[a + i, 1]) ** 2
                     arg = a + i
-            else:
+            elif not hidden_in(obs3, i, v):
                 for c in range(a, b):
                     dx = proj[v, i, 0] - points[c, 0]
                     dy = proj[v, i, 1] - points[c, 1]

@@ -401,6 +401,10 @@ class Fitter:
         elif list(obs.view_names) != self.view_names:
             raise KinematicsError(f"observations are for views {list(obs.view_names)} but "
                                   f"the cameras are {self.view_names}", field="observations")
+        nm = len(self.body.marker_names)
+        if obs.hidden is not None and obs.hidden.shape[2] != nm:
+            raise KinematicsError(f"hidden marks are for {obs.hidden.shape[2]} markers, the "
+                                  f"body has {nm}", field="hidden")
         if obs.kind == "points" and self.matches_in_3d:
             if self.n_views < 3:
                 raise KinematicsError(f"match '3d' triangulates markers seen in 3 or more "
@@ -432,8 +436,8 @@ class Fitter:
                             np.empty(ns), np.empty((nj, 3, 3)), np.empty((nj, 3)), mk, proj)
         return (proj, mk) if markers else proj
 
-    def error(self, angles_deg, detections_frame, root_positions=None) -> tuple[float,
-                                                                                np.ndarray]:
+    def error(self, angles_deg, detections_frame, root_positions=None, hidden=None
+              ) -> tuple[float, np.ndarray]:
         """E of a posture for one frame (kernel; e.g. for a manual correction).
 
         Parameters
@@ -443,15 +447,21 @@ class Fitter:
             :class:`~kinematics.observations.Observations` (labelled keypoints or 3D points:
             E is then the objective they are fitted by)
         root_positions : array_like, shape (n_chains, 3), optional
+        hidden : array_like of bool, shape (n_views, n_markers), optional
+            Markers hidden in a view (:meth:`Observations.with_hidden`), for detections
+            given per view.
 
         Returns
         -------
         error : float
         error_per_view : ndarray, shape (n_views,) (zeros for 3D points)
         """
-        if isinstance(detections_frame, Observations) or self.matches_in_3d:
+        if isinstance(detections_frame, Observations) or self.matches_in_3d or (
+                hidden is not None):
             obs = self.observations(detections_frame if isinstance(
                 detections_frame, Observations) else [detections_frame])
+            if hidden is not None:
+                obs = obs.with_hidden(np.asarray(hidden, bool)[None])
             state, pos, rot = self.state(angles_deg, root_positions)
             return self._state_error(obs.arrays(np.array([0], np.int64)), state, pos, rot,
                                      self.params)
@@ -728,7 +738,7 @@ class Fitter:
         n, ns, nv = len(frame_ids), pr.n_state, len(cams.kind)
         out = FitOutputs.empty(n, ns, nv, max(p.max_runs, p.candidates))
         parts = self._partitions(p)
-        if self._use_lanes(p, arrays.objective, parts, n):
+        if self._use_lanes(p, arrays.objective, parts, n, hidden=obs.hidden is not None):
             threads = numba.get_num_threads()
             groups = np.unique(np.linspace(0, n, min(threads, n) + 1).astype(np.int64))
             _lk.fit_frames_lanes(groups, frame_ids, roots, rots, start, pr.folded, pr.cams,
@@ -766,17 +776,19 @@ class Fitter:
                                      offsets=np.zeros(1, np.int64))
 
     @staticmethod
-    def _use_lanes(p: AnnealParams, objective: int, parts, n_frames: int) -> bool:
+    def _use_lanes(p: AnnealParams, objective: int, parts, n_frames: int, *,
+                   hidden: bool = False) -> bool:
         """Whether the lane kernel fits this block: it does what the scalar kernel does for
-        unlabelled points, one partition and independent frames; 'auto' also wants enough
-        runs to fill the lanes of every thread."""
+        unlabelled points, one partition and independent frames, without markers marked
+        hidden (``hidden``); 'auto' also wants enough runs to fill the lanes of every
+        thread."""
         valid = (objective == _ak.OBJ_NEAREST and parts.bounds.shape[0] == 1
                  and parts.samples == 0 and p.start == "mean" and not p.error.one_to_one
-                 and parts.confirm == 0)
+                 and parts.confirm == 0 and not hidden)
         if p.backend == "lanes" and not valid:
             raise KinematicsError("the lanes backend fits unlabelled points with one "
-                                  "partition, start 'mean' and no start samples; use backend "
-                                  "'auto' or 'scalar'",
+                                  "partition, start 'mean', no start samples and no hidden "
+                                  "markers; use backend 'auto' or 'scalar'",
                                   field="backend")
         runs = n_frames * max(1, p.candidates)
         return p.backend == "lanes" or (p.backend == "auto" and valid
@@ -1105,15 +1117,21 @@ class Fitter:
         proj, mk = self._project_state(state, root_pos, root_rot, markers=True)
         pts, view_off = arrays.points, arrays.offsets
         out = np.full(proj.shape[:2], np.nan)
+        seen = np.ones(proj.shape[:2], bool)
+        if obs.hidden is not None:  # hidden markers: no residual, explain nothing
+            seen = arrays.points3d[0].T == 0.0
         unexplained = 0
         for v in range(obs.n_views):  # 3D points have none, even with cameras
             d = pts[view_off[v]: view_off[v + 1]]
-            if len(d) and obs.labelled:
-                out[v] = np.linalg.norm(proj[v] - d, axis=1)
-            elif len(d):
-                dist = np.linalg.norm(proj[v][:, None] - d[None], axis=2)
-                out[v] = dist.min(axis=1)
+            if len(d) and obs.labelled:  # a missing keypoint (weight 0) has no residual
+                out[v] = np.where(arrays.conf[view_off[v]: view_off[v + 1]] > 0,
+                                  np.linalg.norm(proj[v] - d, axis=1), np.nan)
+            elif len(d) and seen[v].any():
+                dist = np.linalg.norm(proj[v][seen[v]][:, None] - d[None], axis=2)
+                out[v, seen[v]] = dist.min(axis=1)
                 unexplained += int((dist.min(axis=0) > gate).sum())
+            elif len(d):
+                unexplained += len(d)
         if obs.kind == "cloud":
             unexplained = int(_ak.count_unexplained_cloud(mk, arrays.points3d[0], gate))
         return out, unexplained
@@ -1152,7 +1170,8 @@ def marker_images(obs: Observations, frames, n_markers: int) -> np.ndarray:
         return (obs.points3d[frames, :, 3] > 0).sum(axis=1)
     if obs.kind == "cloud":  # E sums one distance per marker
         return n_markers * (obs.points3d[frames, :, 3] > 0).any(axis=1)
-    return n_markers * (obs.view_counts(frames) > 0).sum(axis=1)
+    seen = n_markers if obs.hidden is None else n_markers - obs.hidden[frames].sum(axis=2)
+    return (seen * (obs.view_counts(frames) > 0)).sum(axis=1)
 
 
 def _carry_forward(points: np.ndarray, first: np.ndarray) -> np.ndarray:

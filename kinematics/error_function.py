@@ -30,6 +30,9 @@ Variants (:class:`ErrorOptions`):
   share a blob. Meant for the 3D points of ``match = "3d"``, where fused blobs are resolved;
   per view two markers that really fuse into one blob pay for it.
 
+Markers marked hidden in a view (``hidden``, e.g. occluded there, as a user says in the
+GUI) are left out of that view: they cost nothing and explain no detection.
+
 Conventions shared with the kernels: a view without any detection contributes nothing; ties
 in the nearest detection go to the lower index; a marker whose projection is not finite
 (behind a pinhole camera) costs ``cap_px``, or :data:`NAN_MARKER_COST` pixels without a cap.
@@ -84,7 +87,7 @@ def one_to_one(dist) -> tuple[np.ndarray, np.ndarray]:
 
 
 def projection_error(
-    projections, detections: Sequence, options: ErrorOptions | None = None
+    projections, detections: Sequence, options: ErrorOptions | None = None, hidden=None
 ) -> tuple[float, np.ndarray]:
     """Eq. 5 (or a variant) for given marker projections.
 
@@ -96,6 +99,10 @@ def projection_error(
         Detected points of each view, pixels (finite).
     options : ErrorOptions, optional
         Defaults to the paper's Eq. 5.
+    hidden : array_like of bool, shape (n_views, n_markers), optional
+        Markers the user marked hidden in a view (occluded there): such a marker is left out
+        of that view, as if the body had no such marker in it. It costs nothing, takes no
+        detection, and is no detection's nearest marker in the bidirectional term.
 
     Returns
     -------
@@ -115,14 +122,20 @@ def projection_error(
     cap = opts.cap
     missing = cap if np.isfinite(cap) else NAN_MARKER_COST
     per_view = np.zeros(proj.shape[0])
+    seen = np.ones(proj.shape[:2], bool)
+    if hidden is not None:
+        if np.shape(hidden) != proj.shape[:2]:
+            raise KinematicsError(f"hidden marks must have shape {proj.shape[:2]} (views, "
+                                  f"markers), got {np.shape(hidden)}")
+        seen = ~np.asarray(hidden, bool)
     for v, det in enumerate(detections):
         d = np.asarray(det, dtype=float).reshape(-1, 2)
         if len(d) == 0:
             continue
         # dist[i, c]: model marker i to detection c, as the kernel: sqrt(dx*dx + dy*dy).
-        diff = proj[v][:, None, :] - d[None, :, :]
+        diff = proj[v][seen[v]][:, None, :] - d[None, :, :]
         dist = np.sqrt(diff[..., 0] * diff[..., 0] + diff[..., 1] * diff[..., 1])
-        finite = np.isfinite(proj[v]).all(axis=1)
+        finite = np.isfinite(proj[v][seen[v]]).all(axis=1)
         nearest = np.where(finite, np.argmin(np.where(finite[:, None], dist, 0.0), axis=1), -1)
         marker_cost = np.where(finite, dist.min(axis=1, initial=np.inf, where=finite[:, None]),
                                missing)
@@ -141,7 +154,7 @@ def projection_error(
 
 def posture_error(
     body, cameras, angles_deg, detections: Sequence, root_positions=None,
-    options: ErrorOptions | None = None,
+    options: ErrorOptions | None = None, hidden=None,
 ) -> tuple[float, np.ndarray]:
     """Eq. 5 (or a variant) of one posture, computed literally: forward kinematics by 4×4
     matrices (:func:`kinematics.fk.forward_kinematics_reference`), projection by each
@@ -156,6 +169,8 @@ def posture_error(
     root_positions : array_like, shape (n_chains, 3), optional
         Defaults to the chains' configured positions.
     options : ErrorOptions, optional
+    hidden : array_like of bool, shape (n_views, n_markers), optional
+        Markers hidden in a view (:func:`projection_error`).
 
     Returns
     -------
@@ -165,7 +180,7 @@ def posture_error(
     cams = list(cameras.values()) if hasattr(cameras, "values") else list(cameras)
     markers = forward_kinematics_reference(body, angles_deg, root_positions).markers
     proj = np.stack([cam.project(markers) for cam in cams])
-    return projection_error(proj, detections, options)
+    return projection_error(proj, detections, options, hidden)
 
 
 def labelled_error(projections, keypoints, options: ErrorOptions | None = None

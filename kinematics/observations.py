@@ -29,7 +29,7 @@ the body's markers in order (``n_markers`` rows) or none. 3D points are ``points
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import NamedTuple
 
 import numpy as np
@@ -67,6 +67,8 @@ class Observations:
     points3d : ndarray (n_frames, n_markers, 4) (n_markers 0 for 2D kinds; for a cloud
         (n_frames, k, 4) x, y, z, pixels per length unit, 0 in padding rows)
     dropped : ndarray (n_frames,) unlabelled points dropped for a NaN coordinate
+    hidden : ndarray (n_frames, n_views, n_markers) of bool, or None: model markers the user
+        marked hidden in a view (unlabelled points only; :meth:`with_hidden`)
     """
 
     kind: str
@@ -77,6 +79,7 @@ class Observations:
     offsets: np.ndarray
     points3d: np.ndarray
     dropped: np.ndarray
+    hidden: np.ndarray | None = None
 
     @property
     def n_views(self) -> int:
@@ -110,6 +113,9 @@ class Observations:
         if self.kind != "points":
             raise KinematicsError(f"a cloud is made of unlabelled points, not {self.kind}",
                                   field="observations")
+        if self.hidden is not None:
+            raise KinematicsError("markers hidden in a view cannot be matched in 3D: set "
+                                  "match = 'views'", field="hidden")
         c = np.array(cloud, dtype=float, copy=True)
         if c.ndim != 3 or c.shape[0] != self.n_frames or c.shape[2] != 4:
             raise KinematicsError(f"a cloud needs shape ({self.n_frames} frames, points, 4), "
@@ -118,6 +124,38 @@ class Observations:
         c[bad] = 0.0
         return Observations("cloud", self.view_names, self.n_frames, self.points, self.conf,
                             self.offsets, np.ascontiguousarray(c), self.dropped)
+
+    def with_hidden(self, hidden) -> Observations:
+        """These observations with model markers marked hidden in some views, ``hidden``
+        (n_frames, n_views, n_markers) of bool, e.g. a marker occluded in one view, or whose
+        blob merged with another's. For unlabelled points such a marker is left out of that
+        view's E: it costs nothing and explains no point
+        (:func:`kinematics._anneal_kernels.hidden_in`). For labelled keypoints its keypoint
+        there counts as missing. Not for 3D points or a cloud, which have no views to hide a
+        marker in. No mark at all gives these observations back."""
+        h = np.asarray(hidden)
+        if h.ndim != 3 or h.shape[:2] != (self.n_frames, self.n_views) or h.dtype != bool:
+            raise KinematicsError(f"hidden marks need a boolean array of shape "
+                                  f"({self.n_frames} frames, {self.n_views} views, markers), "
+                                  f"got {h.dtype} {h.shape}", field="hidden")
+        if not h.any():
+            return self
+        if self.kind not in ("points", "keypoints"):
+            raise KinematicsError(f"a marker is hidden in a view of 2D points, not of "
+                                  f"{self.kind} (matching in 3D: set match = 'views')",
+                                  field="hidden")
+        if self.kind == "points":
+            return replace(self, hidden=np.ascontiguousarray(h))
+        conf = self.conf.copy()
+        counts = np.diff(self.offsets).reshape(self.n_frames, self.n_views)
+        for f, v in zip(*np.nonzero(h.any(axis=2)), strict=True):
+            if counts[f, v] == h.shape[2]:  # the view has its rows (the body's markers)
+                start = self.offsets[f * self.n_views + v]
+                conf[start: start + h.shape[2]][h[f, v]] = 0.0
+            elif counts[f, v]:
+                raise KinematicsError(f"hidden marks are for {h.shape[2]} markers, the "
+                                      f"keypoints for {counts[f, v]}", field="hidden")
+        return replace(self, conf=conf)
 
     @classmethod
     def keypoints(cls, keypoints, view_names: Sequence[str], marker_names: Sequence[str],
@@ -191,6 +229,8 @@ class Observations:
         frames = np.asarray(frames, dtype=np.int64)
         nv = self.n_views
         p3 = np.ascontiguousarray(self.points3d[frames])
+        if self.hidden is not None:  # the kernels' hidden marks (n, n_markers, n_views)
+            p3 = np.ascontiguousarray(self.hidden[frames].transpose(0, 2, 1), dtype=float)
         if nv == 0:
             return self.points, self.conf, np.zeros(1, np.int64), p3
         starts = self.offsets[frames * nv]
@@ -202,6 +242,15 @@ class Observations:
         np.cumsum(counts, out=off[1:])
         return (np.ascontiguousarray(self.points[rows].reshape(-1, 2)),
                 np.ascontiguousarray(self.conf[rows]), off, p3)
+
+    def take(self, frames) -> Observations:
+        """The observations of these frames only, in this order."""
+        frames = np.asarray(frames, dtype=np.int64)
+        points, conf, offsets, _ = self.select(frames)
+        hidden = None if self.hidden is None else self.hidden[frames]
+        return Observations(self.kind, self.view_names, len(frames), points, conf, offsets,
+                            np.ascontiguousarray(self.points3d[frames]), self.dropped[frames],
+                            hidden)
 
     def arrays(self, frames: np.ndarray) -> ObservationArrays:
         """:meth:`select` as the kernels' namedtuple."""

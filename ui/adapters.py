@@ -102,10 +102,12 @@ def view_overlays(body: Body, cameras: Sequence, angles_deg, roots=None) -> list
     return project_geometry(posture_geometry(body, angles_deg, roots), cameras)
 
 
-def marker_residuals(overlays: Sequence[ViewOverlay], detections: Sequence) -> np.ndarray:
+def marker_residuals(overlays: Sequence[ViewOverlay], detections: Sequence,
+                     hidden=None) -> np.ndarray:
     """(n_views, n_markers) distance in pixels from each drawn model marker to its nearest
-    detection in each view (Eq. 5's term; NaN where the view has no detection): which
-    marker is off, for the posture shown (a preview or a correction included)."""
+    detection in each view (Eq. 5's term; NaN where the view has no detection or the marker
+    is ``hidden`` there, (n_views, n_markers) of bool): which marker is off, for the posture
+    shown (a preview or a correction included)."""
     n_markers = max((len(o.markers) for o in overlays), default=0)
     out = np.full((len(overlays), n_markers), np.nan)
     for v, (overlay, pts) in enumerate(zip(overlays, detections, strict=False)):
@@ -113,6 +115,9 @@ def marker_residuals(overlays: Sequence[ViewOverlay], detections: Sequence) -> n
         if len(pts) and len(overlay.markers):
             d = np.asarray(overlay.markers, float)[:, None] - pts[None]
             out[v, :len(overlay.markers)] = np.hypot(d[..., 0], d[..., 1]).min(axis=1)
+    if hidden is not None:
+        h = np.asarray(hidden, bool)
+        out[:h.shape[0], :h.shape[1]][h[:out.shape[0], :out.shape[1]]] = np.nan
     return out
 
 

@@ -170,10 +170,7 @@ def frame_input(data, record: int, n_views: int):
     (detections), or that record's :class:`Observations` (keypoints, 3D points)."""
     if not isinstance(data, Observations):
         return frame_detections(data, record, n_views)
-    one = np.array([record], np.int64)
-    points, conf, offsets, points3d = data.select(one)
-    return Observations(data.kind, data.view_names, 1, points, conf, offsets, points3d,
-                        data.dropped[one])
+    return data.take([record])
 
 
 def has_observations(frame) -> bool:

@@ -388,7 +388,9 @@ class MainWindow(QMainWindow):
         detections = s.frame_detections()
         keypoints = s.frame_keypoints()
         result = s.results.get(s.frame)
+        hidden = s.hidden_in_frame()
         for k, view in enumerate(self.video_views):
+            view.set_hidden(hidden[k] if k < len(hidden) else ())
             view.set_overlay(overlays[k] if k < len(overlays) else None, names)
             if keypoints is None:
                 lines = [f"{len(detections[k])} detected"]
@@ -402,9 +404,9 @@ class MainWindow(QMainWindow):
                 lines.append("(no video)")
             view.set_info("  ".join(lines))
         self.posture_view.set_geometry(s.geometry())
-        residuals = (adapters.marker_residuals(overlays, detections) if keypoints is None
-                     else adapters.keypoint_residuals(overlays, keypoints))
-        self.marker_table.set_residuals(residuals, names, s.view_names)
+        residuals = (adapters.marker_residuals(overlays, detections, hidden)
+                     if keypoints is None else adapters.keypoint_residuals(overlays, keypoints))
+        self.marker_table.set_residuals(residuals, names, s.view_names, hidden)
 
     def _results_changed(self, frames) -> None:
         if self.session.frame in frames:
@@ -446,6 +448,20 @@ class MainWindow(QMainWindow):
         if s.display_body is not None and marker < len(s.display_body.marker_names):
             s.status.emit(f"Alt+arrows move {s.display_body.marker_names[marker]} in "
                           f"{s.view_names[view]} by {MARKER_NUDGE_PX:g} px")
+
+    def toggle_hidden(self) -> None:
+        """Mark the selected model marker hidden in its view, or seen again: in the frames
+        selected in the table if the frame shown is one of several, else in this frame."""
+        s = self.session
+        if self.selected_marker is None or self.selected_marker[0] >= len(self.video_views):
+            s.status.emit("click a model marker in a video view first (H hides it there)")
+            return
+        self.correction.flush()
+        self.flush_marker_nudge()
+        frames = self.table.selected_frames()
+        view, marker = self.selected_marker
+        s.toggle_hidden(view, marker, frames if len(frames) > 1 and s.frame in frames
+                        else None)
 
     def nudge_marker(self, dx: int, dy: int) -> None:
         """Move the selected model marker by (dx, dy) nudges: drawn at once, then, once the

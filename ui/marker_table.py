@@ -24,9 +24,12 @@ class MarkerTable(QTableWidget):
                         "(pixels); the largest is shaded")
         self.residuals = np.empty((0, 0))
 
-    def set_residuals(self, residuals: np.ndarray, markers, views) -> None:
-        """Show an (n_views, n_markers) array of :func:`ui.adapters.marker_residuals`."""
+    def set_residuals(self, residuals: np.ndarray, markers, views, hidden=None) -> None:
+        """Show an (n_views, n_markers) array of :func:`ui.adapters.marker_residuals`; a
+        marker ``hidden`` in a view ((n_views, n_markers) of bool) reads "hidden" there."""
         self.residuals = np.asarray(residuals, float)
+        hidden = np.zeros(self.residuals.shape, bool) if hidden is None else np.asarray(
+            hidden, bool)
         markers, views = list(markers), list(views)
         if self.rowCount() != len(markers) or self.columnCount() != len(views):
             self.setRowCount(len(markers))
@@ -46,7 +49,9 @@ class MarkerTable(QTableWidget):
             for c in range(len(views)):
                 value = self.residuals[c, r] if self.residuals.size else np.nan
                 item = self.item(r, c)
-                item.setText(f"{value:.2f}" if np.isfinite(value) else "–")
+                gone = c < hidden.shape[0] and r < hidden.shape[1] and hidden[c, r]
+                item.setText("hidden" if gone else f"{value:.2f}" if np.isfinite(value)
+                             else "–")
                 shaded = worst is not None and (c, r) == tuple(worst)
                 item.setBackground(style.BAD_ROW if shaded else Qt.GlobalColor.transparent)
                 item.setForeground(style.TEXT_ON_SHADE if shaded else self.palette().text())

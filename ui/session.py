@@ -20,6 +20,7 @@ from PySide6.QtCore import QObject, Signal
 
 from kinematics.errors import LocatedError
 from kinematics.model import Body
+from kinematics.observations import Observations
 from ui import adapters, backend
 from ui.workers import FitWorker, TaskWorker, error_text
 from videotrack import detection_edits
@@ -168,7 +169,8 @@ class Session(QObject):
         self.pins: dict[int, dict[int, float]] = {}
         #: The user's edits of the detections, ``{(record, view): ViewEdit}``.
         self.detection_edits: dict = {}
-        self._edited = (None, None, None)  # (detections, edits, edited detections)
+        # (detections, edits, edited detections, what the fit takes of them)
+        self._edited = (None, None, None, None)
         self._means: tuple = (None, None, None)  # (body, mean posture, locked mask)
         #: Frames whose results (error, status) were computed with an earlier chain.
         self.stale: set[int] = set()
@@ -565,23 +567,53 @@ class Session(QObject):
 
     @property
     def fit_detections(self):
-        """What the fit and E use: the detections file with the user's edits, or a keypoint
-        project's :class:`~kinematics.observations.Observations` (None: nothing to fit)."""
+        """What the fit and E use: the detections file with the user's edits (as
+        :class:`~kinematics.observations.Observations` where markers are marked hidden in a
+        view), or a keypoint project's Observations (None: nothing to fit)."""
         if self.keypoints is not None:
             return self.keypoints.observations
-        det, edits, edited = self._edited
+        return self._edited_now()[1]
+
+    def _edited_now(self) -> tuple:
+        """(the detections with the user's edits, what the fit takes of them), cached."""
+        det, edits, edited, obs = self._edited
         if det is not self.detections or edits is not self.detection_edits:
-            edited = (None if self.detections is None else
-                      detection_edits.edited_detections(self.detections, self.detection_edits))
-            self._edited = (self.detections, self.detection_edits, edited)
-        return edited
+            edited = obs = None
+            if self.detections is not None:
+                edited = obs = detection_edits.edited_detections(self.detections,
+                                                                 self.detection_edits)
+                marks = self._hidden_marks()
+                if marks is not None:
+                    obs = Observations.unlabelled(edited.points, edited.offsets,
+                                                  self.view_names).with_hidden(marks)
+            self._edited = (self.detections, self.detection_edits, edited, obs)
+        return self._edited[2:]
+
+    def _hidden_marks(self) -> np.ndarray | None:
+        """(records, views, markers) of the chain's markers hidden in a view, or None."""
+        if self.detections is None or self.body is None:
+            return None
+        return detection_edits.hidden_marks(self.detection_edits, self.detections.n_records,
+                                            len(self.views), self.body.marker_names)
+
+    def hidden_in_frame(self, record: int | None = None) -> np.ndarray:
+        """(n_views, n_markers) of the drawn chain's markers hidden in each view of a record
+        (all False in a keypoint project)."""
+        record = self.frame if record is None else record
+        body = self.display_body
+        names = () if body is None else body.marker_names
+        out = np.zeros((len(self.views), len(names)), bool)
+        for v in range(len(self.views)):
+            for i, m in enumerate(names):
+                out[v, i] = detection_edits.is_hidden(self.detection_edits, record, v, m)
+        return out
 
     def frame_detections(self, record: int | None = None) -> list[np.ndarray]:
         """Detected centroids of a record, one (n, 2) array per view (none in a keypoint
         project: see :meth:`frame_keypoints`)."""
         record = self.frame if record is None else record
-        return adapters.frame_detections(None if self.keypoints is not None else
-                                         self.fit_detections, record, len(self.views))
+        edited = None if self.keypoints is not None else self._edited_now()[0]
+        return adapters.frame_detections(edited, record, len(self.views))
 
     def frame_input(self, record: int | None = None):
         """What the fitter takes for one record (:func:`ui.backend.frame_input`)."""
@@ -1248,7 +1280,8 @@ class Session(QObject):
                     for v in range(len(self.views))]
             try:
                 error, per_view = self._fitter().error(result.angles_deg, dets,
-                                                       result.root_positions)
+                                                       result.root_positions,
+                                                       self._frame_marks(edits, frame))
             except LocatedError as err:
                 self.error.emit(str(err))
                 return False
@@ -1259,6 +1292,68 @@ class Session(QObject):
         self._push(edit)
         self.status.emit(edit.label + (f": error {self.results[frame].error:.2f} px"
                                        if frame in self.results else ""))
+        return True
+
+    def _frame_marks(self, edits, frame: int) -> np.ndarray | None:
+        """(n_views, n_markers) hidden marks of one record under ``edits``, or None."""
+        marks = detection_edits.hidden_marks({k: e for k, e in edits.items() if k[0] == frame},
+                                             frame + 1, len(self.views), self.body.marker_names)
+        return None if marks is None else marks[frame]
+
+    def toggle_hidden(self, view: int, marker: int, frames: Iterable[int] | None = None
+                      ) -> bool:
+        """Mark a model marker hidden in a view (occluded, or its blob merged with another's)
+        or seen again, in the frame shown or in ``frames`` (undoable, one step): the fit and
+        E leave it out of that view at once. The frames' errors are computed again for their
+        postures (status kept)."""
+        if self.keypoint_project:
+            self.status.emit("in a keypoint project a hidden keypoint is a missing label: "
+                             "fix it in the tracker")
+            return False
+        if self.detections is None or self.body is None:
+            self.error.emit("no detections to mark: run Detect markers first")
+            return False
+        if self.busy:
+            self.status.emit("wait for the running task to finish (or cancel it) first")
+            return False
+        fitter = self._fitter_or_report()
+        if fitter is None:
+            return False
+        if fitter.matches_in_3d:
+            self.error.emit("markers are matched in 3D here (match): a marker cannot be hidden "
+                            "in one view; set match = 'views' in the fitting settings first")
+            return False
+        name = self.body.marker_names[marker]
+        frames = [self.frame] if frames is None else sorted({int(f) for f in frames})
+        frames = [f for f in frames if 0 <= f < self.detections.n_records]
+        hide = not detection_edits.is_hidden(self.detection_edits, frames[0], view, name)
+        edits = self.detection_edits
+        for f in frames:
+            if detection_edits.is_hidden(edits, f, view, name) != hide:
+                edits = detection_edits.toggle_hidden(edits, f, view, name)
+        where = f"frame {frames[0]}" if len(frames) == 1 else \
+            f"frames {frames[0]}–{frames[-1]}"
+        edit = Edit(f"{'hide' if hide else 'show'} {name} in {self.view_names[view]}, {where}",
+                    detection_edits=(self.detection_edits, edits))
+        edited = detection_edits.edited_detections(self.detections, edits)
+        for f in frames:
+            result = self.results.get(f)
+            if result is None or not np.all(np.isfinite(result.angles_deg)):
+                continue
+            dets = adapters.frame_detections(edited, f, len(self.views))
+            try:
+                error, per_view = fitter.error(result.angles_deg, dets, result.root_positions,
+                                               self._frame_marks(edits, f))
+            except LocatedError as err:
+                self.error.emit(str(err))
+                return False
+            edit.record_result(f, result, replace(result, error=error,
+                                                  error_per_view=per_view,
+                                                  marker_residuals=None))
+        self._apply(edit, 1)
+        self._push(edit)
+        self.status.emit(edit.label + (f": error {self.results[self.frame].error:.2f} px"
+                                       if self.frame in self.results else ""))
         return True
 
     # -- histograms ---------------------------------------------------------------------

@@ -133,6 +133,10 @@ COMMANDS: tuple[Command, ...] = (
             lambda w: w.nudge_marker(0, -1)),  # image rows grow downwards
     Command("marker_down", "Nudge marker down 0.5 px", ("Alt+Down",), "Correct", "",
             lambda w: w.nudge_marker(0, 1)),
+    Command("hide_marker", "&Hide / show marker in this view", ("H",), "Correct",
+            "Mark the selected model marker hidden in its view (occluded, or merged with "
+            "another blob) or seen again: the fit leaves it out there. Over the table "
+            "selection when the frame shown is in it", lambda w: w.toggle_hidden()),
     Command("refit_forward", "Re-fit &forward from here", ("F9",), "Correct",
             "Seed the following frames with this posture, one after the other, until the "
             "error exceeds the threshold or a corrected frame", lambda w: w.refit_from(1)),

@@ -53,6 +53,10 @@ def marker_style() -> dict:
             "brush": pg.mkBrush(MARKER), "pxMode": True}
 
 
+#: A model marker marked hidden in a view: a cross, not a disc (it is not matched there).
+HIDDEN_SYMBOL = "x"
+
+
 def selected_marker_style() -> dict:
     """A ring around the model marker the marker nudge keys move."""
     return {"symbol": "o", "size": MARKER_SIZE + 10, "pen": pg.mkPen("#ffffff", width=1.5),

@@ -123,6 +123,7 @@ class VideoView(pg.GraphicsLayoutWidget):
         self.plot.addItem(self.info)
         self._marker_xy = np.empty((0, 2))
         self._marker_colours: list | None = None
+        self._hidden = np.zeros(0, bool)  # model markers marked hidden in this view
         self._size: tuple[int, int] | None = None
         #: (x0, x1, y0, y1) shown first instead of the whole image (a keypoint project's
         #: keypoints: a small animal in a large frame), or None.
@@ -161,6 +162,11 @@ class VideoView(pg.GraphicsLayoutWidget):
         pens = [style.keypoint_pen(k, kp[k, 2]) for k in shown]
         self.keypoints.setData(pos=kp[shown, :2] if len(shown) else np.empty((0, 2)),
                                pen=pens, data=np.asarray(shown, int))
+
+    def set_hidden(self, hidden) -> None:
+        """Which model markers are marked hidden in this view ((n_markers,) of bool): they
+        are drawn as crosses. Takes effect with the next overlay."""
+        self._hidden = np.asarray(hidden, bool).ravel()
 
     def set_marker_colours(self, on: bool) -> None:
         """Fill each model marker with its keypoints' colour (keypoint projects)."""
@@ -209,8 +215,11 @@ class VideoView(pg.GraphicsLayoutWidget):
     def _set_markers(self, xy: np.ndarray) -> None:
         brush = ([style.marker_brush(k) for k in range(len(xy))] if self._marker_colours
                  else None)
-        self.markers.setData(pos=xy, data=np.arange(len(xy)),
-                             **({"brush": brush} if brush is not None else {}))
+        extra = {"brush": brush} if brush is not None else {}
+        if self._hidden[:len(xy)].any():
+            extra["symbol"] = [style.HIDDEN_SYMBOL if k < len(self._hidden) and self._hidden[k]
+                               else "o" for k in range(len(xy))]
+        self.markers.setData(pos=xy, data=np.arange(len(xy)), **extra)
         k = self.selected
         shown = k is not None and k < len(xy) and bool(np.all(np.isfinite(xy[k])))
         self.selection.setData(pos=xy[k:k + 1] if shown else np.empty((0, 2)))
@@ -283,13 +292,15 @@ class VideoView(pg.GraphicsLayoutWidget):
 
     # -- for tests and screenshots ------------------------------------------------------
     def drawn(self) -> dict[str, np.ndarray]:
-        """The data the items hold: ``markers``, ``lines`` (pairs), ``detections`` and
-        ``keypoints`` (x, y, marker index)."""
+        """The data the items hold: ``markers``, ``hidden`` (which markers are drawn as
+        hidden), ``lines`` (pairs), ``detections`` and ``keypoints`` (x, y, marker index)."""
         mx, my = self.markers.getData()
         lx, ly = self.lines.getData()
         dx, dy = self.detected.getData()
         kx, ky = self.keypoints.getData()
         return {"markers": np.column_stack([mx, my]),
+                "hidden": np.asarray([p.symbol() == style.HIDDEN_SYMBOL
+                                      for p in self.markers.points()], bool),
                 "lines": np.column_stack([lx, ly]) if lx is not None else np.empty((0, 2)),
                 "detections": np.column_stack([dx, dy]),
                 "keypoints": np.column_stack([kx, ky, np.asarray(

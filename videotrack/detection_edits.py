@@ -1,18 +1,23 @@
-"""Hand edits of the detections: ghost detections removed, missing ones added or moved.
+"""Hand edits of the detections: ghost detections removed, missing ones added or moved, and
+model markers marked hidden in a view.
 
 The edits are kept apart from the detections file, which stays what the filters made (a new
 detection run keeps the edits): a sidecar beside the results,
 ``<results stem>.detection-edits.json``, written atomically::
 
-    {"format": "videotrack-detection-edits", "version": 1, "views": ["side", "top"],
+    {"format": "videotrack-detection-edits", "version": 2, "views": ["side", "top"],
      "edits": [{"record": 3, "view": "side", "removed": [[x, y], ...],
-                "added": [[x, y], ...]}, ...]}
+                "added": [[x, y], ...], "hidden": ["M3"]}, ...]}
 
 A removed point takes away the detection within :data:`MATCH_PX` of it (none left: the
 edit is void, e.g. after detecting again with other filters); added points join the
 record's detections in that view. Coordinates are view image pixels, as in the detections
-file. Everything here is pure (no Qt): the GUI edits, fits and computes E with
-:func:`edited_detections`.
+file. ``hidden`` names model markers the user saw to be hidden in that view of the record
+(occluded, or merged with another's blob): the fit leaves them out of that view
+(:meth:`kinematics.observations.Observations.with_hidden`); a name the chain no longer has
+is void. Version 1 files (no ``hidden``) are read as they are. Everything here is pure (no
+Qt): the GUI edits, fits and computes E with :func:`edited_detections` and
+:func:`hidden_marks`.
 """
 
 from __future__ import annotations
@@ -29,7 +34,8 @@ from kinematics.fileio import atomic_write_text
 from videotrack.errors import VideoTrackError
 
 FORMAT = "videotrack-detection-edits"
-VERSION = 1
+VERSION = 2
+READS = (1, 2)  # versions read
 #: A removed point matches a detection this close (pixels): file coordinates round-trip
 #: exactly through JSON, so only the same detection is this close.
 MATCH_PX = 1e-3
@@ -39,12 +45,18 @@ SNAP_RADIUS = 6
 
 @dataclass(frozen=True)
 class ViewEdit:
-    """The edits of one record in one view: points removed and points added."""
+    """The edits of one record in one view: points removed and added, and the names of the
+    model markers hidden there."""
 
     removed: tuple[tuple[float, float], ...] = ()
     added: tuple[tuple[float, float], ...] = ()
+    hidden: tuple[str, ...] = ()
 
     def __bool__(self) -> bool:
+        return bool(self.removed or self.added or self.hidden)
+
+    @property
+    def moves_points(self) -> bool:
         return bool(self.removed or self.added)
 
 
@@ -78,8 +90,8 @@ def apply_edit(points, edit: ViewEdit | None) -> np.ndarray:
 def edited_detections(detections, edits: Edits):
     """A :class:`~videotrack.detections.Detections` with the edits applied (added points
     have area 0); the detections themselves when there are none."""
-    edits = {k: e for k, e in edits.items() if e and 0 <= k[0] < detections.n_records
-             and 0 <= k[1] < detections.n_views}
+    edits = {k: e for k, e in edits.items() if e.moves_points and
+             0 <= k[0] < detections.n_records and 0 <= k[1] < detections.n_views}
     if not edits:
         return detections
     nv = detections.n_views
@@ -90,7 +102,7 @@ def edited_detections(detections, edits: Edits):
         p = detections.points[cut[k]:cut[k + 1]]
         a = detections.areas[cut[k]:cut[k + 1]]
         edit = edits.get(divmod(k, nv))
-        if edit:
+        if edit is not None:
             keep = np.ones(len(p), bool)
             for xy in edit.removed:
                 keep &= ~_near(p, xy)
@@ -138,6 +150,37 @@ def remove_point(edits: Edits, record: int, view: int, xy) -> dict:
 def move_point(edits: Edits, record: int, view: int, from_xy, to_xy) -> dict:
     """Move the detection at ``from_xy`` to ``to_xy``."""
     return add_point(remove_point(edits, record, view, from_xy), record, view, to_xy)
+
+
+def toggle_hidden(edits: Edits, record: int, view: int, marker: str) -> dict:
+    """Mark the model marker ``marker`` hidden in a view of a record, or seen again."""
+    key = (int(record), int(view))
+    old = edits.get(key, ViewEdit())
+    hidden = tuple(m for m in old.hidden if m != marker)
+    if len(hidden) == len(old.hidden):
+        hidden = (*old.hidden, str(marker))
+    return _with(edits, key, replace(old, hidden=hidden))
+
+
+def is_hidden(edits: Edits, record: int, view: int, marker: str) -> bool:
+    edit = edits.get((int(record), int(view)))
+    return edit is not None and marker in edit.hidden
+
+
+def hidden_marks(edits: Edits, n_records: int, n_views: int, marker_names: Sequence[str]
+                 ) -> np.ndarray | None:
+    """The hidden marks as the fitter takes them, (n_records, n_views, n_markers) of bool
+    (:meth:`kinematics.observations.Observations.with_hidden`); None when no mark names a
+    marker of ``marker_names`` in a record and view that exist."""
+    where = {m: k for k, m in enumerate(marker_names)}
+    out = None
+    for (r, v), edit in edits.items():
+        cols = [where[m] for m in edit.hidden if m in where]
+        if cols and 0 <= r < n_records and 0 <= v < n_views:
+            if out is None:
+                out = np.zeros((n_records, n_views, len(marker_names)), bool)
+            out[r, v, cols] = True
+    return out
 
 
 def _pt(xy) -> tuple[float, float]:
@@ -197,9 +240,9 @@ def load_edits(path: str | os.PathLike, view_names: Sequence[str]) -> dict:
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise VideoTrackError(f"not a detection edits file (format {FORMAT!r} expected)",
                               file=path)
-    if doc.get("version") != VERSION:
+    if doc.get("version") not in READS:
         raise VideoTrackError(f"version {doc.get('version')!r} is not supported (expected "
-                              f"{VERSION})", file=path, field="version")
+                              f"{' or '.join(map(str, READS))})", file=path, field="version")
     names = list(view_names)
     if doc.get("views") != names:
         raise VideoTrackError(f"edits are for the views {doc.get('views')}, the project has "
@@ -209,11 +252,15 @@ def load_edits(path: str | os.PathLike, view_names: Sequence[str]) -> dict:
         where = f"edits[{k}]"
         try:
             record, view = int(item["record"]), names.index(item["view"])
+            hidden = item.get("hidden", [])
+            if not isinstance(hidden, list) or not all(isinstance(m, str) for m in hidden):
+                raise TypeError
             edit = ViewEdit(tuple(_pt(p) for p in item.get("removed", [])),
-                            tuple(_pt(p) for p in item.get("added", [])))
+                            tuple(_pt(p) for p in item.get("added", [])), tuple(hidden))
         except (KeyError, TypeError, ValueError):
-            raise VideoTrackError("each edit needs a record, one of the views and lists of "
-                                  "[x, y] points", file=path, field=where) from None
+            raise VideoTrackError("each edit needs a record, one of the views, lists of "
+                                  "[x, y] points and a list of hidden marker names",
+                                  file=path, field=where) from None
         if record < 0 or not np.isfinite(np.asarray(edit.removed + edit.added, float)).all():
             raise VideoTrackError("record must be >= 0 and points finite", file=path,
                                   field=where)
@@ -226,7 +273,7 @@ def save_edits(path: str | os.PathLike, edits: Edits, view_names: Sequence[str])
     names = list(view_names)
     doc = {"format": FORMAT, "version": VERSION, "views": names, "edits": [
         {"record": r, "view": names[v], "removed": [list(p) for p in e.removed],
-         "added": [list(p) for p in e.added]}
+         "added": [list(p) for p in e.added], "hidden": list(e.hidden)}
         for (r, v), e in sorted(edits.items()) if e]}
     path = Path(path)
     atomic_write_text(path, json.dumps(doc, indent=1) + "\n")

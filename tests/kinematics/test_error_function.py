@@ -37,7 +37,8 @@ def kernel_error(proj, detections, opts: ErrorOptions):
     pts = np.concatenate([np.reshape(d, (-1, 2)) for d in detections]).astype(float)
     per_view = np.empty(len(detections))
     nearest = np.empty(proj.shape[1], np.int64)
-    e = ak.projection_error(np.ascontiguousarray(proj), pts, off, opts.bidirectional,
+    e = ak.projection_error(np.ascontiguousarray(proj), pts, off, ak.NO_HIDDEN,
+                            opts.bidirectional,
                             float(opts.penalty_weight), opts.cap, opts.penalty_cap,
                             opts.one_to_one, per_view, nearest)
     fast = ak._paper_error(np.ascontiguousarray(proj), pts, off, opts.cap)

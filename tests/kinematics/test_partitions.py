@@ -108,15 +108,15 @@ def test_claimed_detections_are_not_shared():
     off = np.array([0, 2], np.int64)
     claimed = np.zeros(2, np.bool_)
     A = np.array([True, False])  # the claimers: A's marker
-    ak.claim_detections(proj, pts, off, A, 3.0, claimed)  # markers outside B claim
+    ak.claim_detections(proj, pts, off, ak.NO_HIDDEN, A, 3.0, claimed)  # markers outside B claim
     assert claimed.tolist() == [True, False]
     e = ak.partition_error(0, proj, np.zeros((2, 3)), pts, np.ones(2), off, np.zeros((2, 4)),
                            np.inf, 1, 2, claimed, 0.0, 3.0, False, np.empty(2, np.int64))
     assert e == pytest.approx(5.0)
-    ak.claim_detections(proj, pts, off, A, 0.5, claimed)
+    ak.claim_detections(proj, pts, off, ak.NO_HIDDEN, A, 0.5, claimed)
     assert claimed.tolist() == [True, False]
     far = np.array([[[40.0, 40.0], [11.0, 10.0]]])  # A's marker is far from every blob
-    ak.claim_detections(far, pts, off, A, 3.0, claimed)
+    ak.claim_detections(far, pts, off, ak.NO_HIDDEN, A, 3.0, claimed)
     assert claimed.tolist() == [False, False]
 
 
@@ -181,7 +181,7 @@ def test_partition_pays_for_blobs_it_leaves_unexplained():
     off = np.array([0, 4], np.int64)
     claimed = np.zeros(4, np.bool_)
     claimers = np.array([False, False, True])  # marker 2 claims (50, 0)
-    ak.claim_detections(proj, pts, off, claimers, 3.0, claimed)
+    ak.claim_detections(proj, pts, off, ak.NO_HIDDEN, claimers, 3.0, claimed)
     args = (0, proj, np.zeros((3, 3)), pts, np.ones(4), off, np.zeros((3, 4)), np.inf, 0, 2,
             claimed)
     plain = ak.partition_error(*args, 0.0, 3.0, False, np.empty(3, np.int64))

@@ -51,29 +51,32 @@ def test_sweep_finds_the_scans_nearest():
     assert ak.nearest_sorted(np.nan, 0.0, pts, 0, len(pts), ak.NO_CLAIMS) == (np.inf, -1)
 
 
+@pytest.mark.parametrize("hide", [False, True], ids=["all-seen", "hidden-marks"])
 @pytest.mark.parametrize("opts", VARIANTS, ids=["paper", "bounded", "one-to-one"])
-def test_kernels_equal_the_twin_on_many_detections(opts):
+def test_kernels_equal_the_twin_on_many_detections(opts, hide):
     rng = np.random.default_rng(9)
     for _ in range(40):
         nv, nm = 3, int(rng.integers(2, 12))
         counts = [int(rng.integers(ak.SWEEP_MIN_FAST + 1, ak.SWEEP_MIN_FAST + 80)),
                   int(rng.integers(0, 5)), int(rng.integers(ak.SWEEP_MIN + 1, ak.SWEEP_MIN + 40))]
         proj, dets, pts, off = random_views(rng, nv, nm, counts)
-        want, want_views = projection_error(proj, dets, opts)
+        hidden = rng.random((nv, nm)) < (0.3 if hide else 0.0)
+        marks = hidden.T.astype(float) if hide else ak.NO_HIDDEN  # the kernels' (nm, nv)
+        want, want_views = projection_error(proj, dets, opts, hidden)
         per_view = np.empty(nv)
         nearest = np.empty(nm, np.int64)
-        got = ak.projection_error(proj, pts, off, opts.bidirectional, opts.penalty_weight,
-                                  opts.cap, opts.penalty_cap, opts.one_to_one, per_view,
-                                  nearest)
+        got = ak.projection_error(proj, pts, off, marks, opts.bidirectional,
+                                  opts.penalty_weight, opts.cap, opts.penalty_cap,
+                                  opts.one_to_one, per_view, nearest)
         assert got == pytest.approx(want, rel=1e-12)
         np.testing.assert_allclose(per_view, want_views, rtol=1e-12)
         whole = ak.partition_error(ak.OBJ_NEAREST, proj, np.zeros((nm, 3)), pts,
-                                   np.ones(len(pts)), off, np.zeros((nm, 4)), opts.cap, 0, nm,
+                                   np.ones(len(pts)), off, marks, opts.cap, 0, nm,
                                    np.zeros(len(pts), np.bool_), opts.penalty_weight
                                    if opts.bidirectional else 0.0, opts.penalty_cap,
                                    opts.one_to_one, nearest)
         assert whole == pytest.approx(want, rel=1e-12)
-        if not (opts.bidirectional or opts.one_to_one):
+        if not (opts.bidirectional or opts.one_to_one or hide):
             assert ak._paper_error(proj, pts, off, opts.cap) == pytest.approx(want, rel=1e-12)
 
 

@@ -4,6 +4,7 @@ with the mouse in a video view, the edits sidecar, and the per-marker residual t
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from PySide6.QtCore import Qt
 
 from kinematics.fk import forward_kinematics
@@ -118,3 +119,81 @@ def test_marker_residual_table_is_the_distance_to_the_nearest_detection(window, 
     last = len(proj) - 1
     nearest = np.min(np.hypot(*(s.frame_detections()[0] - proj[last]).T))
     assert table.text(last, 0) == f"{nearest:.2f}"
+
+
+def _click_marker(qtbot, view, marker):
+    x, y = view.marker_xy(marker)
+    at = view.mapFromScene(view.scene_pos(x, y))
+    qtbot.mouseClick(view.viewport(), Qt.MouseButton.LeftButton, pos=at)
+
+
+def test_h_hides_the_clicked_marker_in_its_view(window, qtbot, wait_idle, project):
+    """H on a clicked model marker marks it hidden in that view: drawn as a cross, "hidden"
+    in the residual table, E and the fit leave it out at once, undoable, saved in the
+    sidecar and back on reopening."""
+    s = window.session
+    s.set_frame(4)
+    _fitted(window, wait_idle)
+    view = window.video_views[1]
+    _click_marker(qtbot, view, 3)
+    assert window.selected_marker == (1, 3)
+    side_before = s.results[4].error_per_view[0]
+    qtbot.keyClick(window.table, Qt.Key.Key_H)
+    assert s.hidden_in_frame()[1, 3] and s.hidden_in_frame().sum() == 1
+    assert view.drawn()["hidden"].tolist() == [False, False, False, True]
+    assert window.marker_table.text(3, 1) == "hidden"
+    assert window.marker_table.text(3, 0) != "hidden"
+    assert s.undo_label == "hide M3 in top, frame 4"
+    r = s.results[4]
+    dets = s.frame_detections(4)
+    hidden = np.zeros((2, 4), bool)
+    hidden[1, 3] = True
+    assert r.error == s._fitter().error(r.angles_deg, dets, r.root_positions, hidden)[0]
+    assert r.error_per_view[0] == pytest.approx(side_before, abs=1e-9)  # as it was
+    # M3's detection in top is now explained by no marker: the bounded term's 3 px
+    assert r.error_per_view[1] == pytest.approx(3.0, abs=0.1)
+    _fitted(window, wait_idle)  # the fit takes the mark: no residual for M3 in top
+    assert np.isnan(s.results[4].marker_residuals[1, 3])
+    assert np.isfinite(s.results[4].marker_residuals[0, 3])
+    assert s.save()
+    side = load_edits(edits_path(s.results_path), s.view_names)
+    assert side[(4, 1)].hidden == ("M3",)
+    s.close()
+    assert window.open_project(project)
+    assert window.session.hidden_in_frame(4)[1, 3]
+    s = window.session
+    s.set_frame(4)
+    window.refresh_frame()
+    _click_marker(qtbot, window.video_views[1], 3)
+    qtbot.keyClick(window.table, Qt.Key.Key_H)  # H again: seen again
+    assert not s.hidden_in_frame().any()
+    s.undo()
+    assert s.hidden_in_frame()[1, 3]
+
+
+def test_h_over_a_table_selection_hides_the_marker_in_every_selected_frame(window, qtbot):
+    s = window.session
+    table = window.table
+    s.set_frame(2)
+
+    def click(frame, modifier=Qt.KeyboardModifier.NoModifier):
+        rect = table.visualRect(table.model().index(table.row_of(frame), 0))
+        qtbot.mouseClick(table.viewport(), Qt.MouseButton.LeftButton, modifier, rect.center())
+
+    click(2)
+    click(6, Qt.KeyboardModifier.ShiftModifier)
+    assert table.selected_frames() == [2, 3, 4, 5, 6]
+    _click_marker(qtbot, window.video_views[0], 2)
+    window.act_hide_marker.trigger()
+    assert [bool(s.hidden_in_frame(f)[0, 2]) for f in range(1, 8)] == [
+        False, True, True, True, True, True, False]
+    assert s.undo_label == "hide M2 in side, frames 2–6"
+    s.undo()
+    assert not any(s.hidden_in_frame(f).any() for f in range(12))
+
+
+def test_h_without_a_clicked_marker_says_what_to_do(window):
+    notes = []
+    window.session.status.connect(notes.append)
+    window.act_hide_marker.trigger()
+    assert notes[-1].startswith("click a model marker") and not window.session.can_undo
