@@ -54,7 +54,7 @@ from kinematics.error_function import projection_error
 from kinematics.errors import KinematicsError
 from kinematics.fk import forward_kinematics, forward_kinematics_reference
 from kinematics.model import Body
-from kinematics.observations import ObservationArrays, Observations
+from kinematics.observations import ObservationArrays, Observations, sorted_by_x
 from kinematics.problem import (  # noqa: F401 (re-exported: the packing lived here)
     ErrorArgs,
     FitOutputs,
@@ -248,20 +248,12 @@ def _as_ragged(detections, view_names: Sequence[str]) -> _Ragged:
     good = np.isfinite(pts).all(axis=1)
     n_frames = (off.size - 1) // nv
     if good.all():
-        return _Ragged(_sorted_by_x(pts, off), off, np.zeros(n_frames, np.int64), nv)
+        return _Ragged(sorted_by_x(pts, off), off, np.zeros(n_frames, np.int64), nv)
     keep_before = np.concatenate([[0], np.cumsum(good)])
     new_off = keep_before[off].astype(np.int64)
     bad_per_cell = np.diff(off) - np.diff(new_off)
     dropped = bad_per_cell.reshape(n_frames, nv).sum(axis=1)
-    return _Ragged(_sorted_by_x(pts[good], new_off), new_off, dropped.astype(np.int64), nv)
-
-
-def _sorted_by_x(pts: np.ndarray, off: np.ndarray) -> np.ndarray:
-    """The points of each (frame, view) cell sorted by x (stable): the kernels search a view
-    with many detections by a sweep along x (``_anneal_kernels.nearest_sorted``). Which
-    detection is which does not matter to an unlabelled fit."""
-    cell = np.repeat(np.arange(len(off) - 1), np.diff(off))
-    return np.ascontiguousarray(pts[np.lexsort((pts[:, 0], cell))])
+    return _Ragged(sorted_by_x(pts[good], new_off), new_off, dropped.astype(np.int64), nv)
 
 
 # -- the fitter -----------------------------------------------------------------------------

@@ -98,9 +98,10 @@ class Observations:
     @classmethod
     def unlabelled(cls, points, offsets, view_names: Sequence[str], dropped=None
                    ) -> Observations:
-        """Unlabelled points from the ragged layout (finite rows only)."""
-        pts = np.ascontiguousarray(np.asarray(points, dtype=float).reshape(-1, 2))
+        """Unlabelled points from the ragged layout (finite rows only), sorted by x within
+        each view as the kernels search them (:func:`sorted_by_x`)."""
         off = np.ascontiguousarray(np.asarray(offsets, dtype=np.int64))
+        pts = sorted_by_x(np.asarray(points, dtype=float).reshape(-1, 2), off)
         nv = len(view_names)
         n = (off.size - 1) // max(nv, 1)
         drop = np.zeros(n, np.int64) if dropped is None else np.asarray(dropped, np.int64)
@@ -268,6 +269,14 @@ class Observations:
         nv = self.n_views
         return [self.points[self.offsets[frame * nv + v]: self.offsets[frame * nv + v + 1]]
                 for v in range(nv)]
+
+
+def sorted_by_x(pts: np.ndarray, off: np.ndarray) -> np.ndarray:
+    """The points of each (frame, view) cell sorted by x (stable): the kernels search a view
+    with many detections by a sweep along x (``_anneal_kernels.nearest_sorted``). Which
+    detection is which does not matter to an unlabelled fit."""
+    cell = np.repeat(np.arange(len(off) - 1), np.diff(off))
+    return np.ascontiguousarray(pts[np.lexsort((pts[:, 0], cell))])
 
 
 def _marker_index(names: Sequence[str], body_markers: Sequence[str]) -> np.ndarray:
