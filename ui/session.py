@@ -1272,26 +1272,34 @@ class Session(QObject):
             "remove" if remove is not None else "add")
         edit = Edit(f"{what} a detection in {self.view_names[view]}, frame {frame}",
                     detection_edits=(self.detection_edits, edits))
-        result = self.results.get(frame)
-        if result is not None and self.model is not None and np.all(
-                np.isfinite(result.angles_deg)):
-            dets = [detection_edits.apply_edit(self.detections.points_of(frame, v),
-                                               edits.get((frame, v)))
+        return self._commit_edits(edit, edits, [frame])
+
+    def _commit_edits(self, edit: Edit, edits, frames: list[int]) -> bool:
+        """Apply detection edits ``edits`` as the undo step ``edit``: each of ``frames`` with a
+        posture gets its E under them (status kept). The status bar shows the first frame's
+        error."""
+        for f in frames:
+            result = self.results.get(f)
+            if result is None or self.model is None or not np.all(
+                    np.isfinite(result.angles_deg)):
+                continue
+            dets = [detection_edits.apply_edit(self.detections.points_of(f, v),
+                                               edits.get((f, v)))
                     for v in range(len(self.views))]
             try:
                 error, per_view = self._fitter().error(result.angles_deg, dets,
                                                        result.root_positions,
-                                                       self._frame_marks(edits, frame))
+                                                       self._frame_marks(edits, f))
             except LocatedError as err:
                 self.error.emit(str(err))
                 return False
-            edit.record_result(frame, result, replace(result, error=error,
-                                                      error_per_view=per_view,
-                                                      marker_residuals=None))
+            edit.record_result(f, result, replace(result, error=error,
+                                                  error_per_view=per_view,
+                                                  marker_residuals=None))
         self._apply(edit, 1)
         self._push(edit)
-        self.status.emit(edit.label + (f": error {self.results[frame].error:.2f} px"
-                                       if frame in self.results else ""))
+        self.status.emit(edit.label + (f": error {self.results[frames[0]].error:.2f} px"
+                                       if frames[0] in self.results else ""))
         return True
 
     def _frame_marks(self, edits, frame: int) -> np.ndarray | None:
@@ -1326,6 +1334,9 @@ class Session(QObject):
         name = self.body.marker_names[marker]
         frames = [self.frame] if frames is None else sorted({int(f) for f in frames})
         frames = [f for f in frames if 0 <= f < self.detections.n_records]
+        if not frames:
+            self.status.emit("no detections in this frame to mark a marker hidden in")
+            return False
         hide = not detection_edits.is_hidden(self.detection_edits, frames[0], view, name)
         edits = self.detection_edits
         for f in frames:
@@ -1335,26 +1346,7 @@ class Session(QObject):
             f"frames {frames[0]}–{frames[-1]}"
         edit = Edit(f"{'hide' if hide else 'show'} {name} in {self.view_names[view]}, {where}",
                     detection_edits=(self.detection_edits, edits))
-        edited = detection_edits.edited_detections(self.detections, edits)
-        for f in frames:
-            result = self.results.get(f)
-            if result is None or not np.all(np.isfinite(result.angles_deg)):
-                continue
-            dets = adapters.frame_detections(edited, f, len(self.views))
-            try:
-                error, per_view = fitter.error(result.angles_deg, dets, result.root_positions,
-                                               self._frame_marks(edits, f))
-            except LocatedError as err:
-                self.error.emit(str(err))
-                return False
-            edit.record_result(f, result, replace(result, error=error,
-                                                  error_per_view=per_view,
-                                                  marker_residuals=None))
-        self._apply(edit, 1)
-        self._push(edit)
-        self.status.emit(edit.label + (f": error {self.results[self.frame].error:.2f} px"
-                                       if self.frame in self.results else ""))
-        return True
+        return self._commit_edits(edit, edits, frames)
 
     # -- histograms ---------------------------------------------------------------------
     def learn_histograms(self, within_threshold: bool = True) -> int:
