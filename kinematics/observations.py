@@ -133,7 +133,8 @@ class Observations:
         view's E: it costs nothing and explains no point
         (:func:`kinematics._anneal_kernels.hidden_in`). For labelled keypoints its keypoint
         there counts as missing. Not for 3D points or a cloud, which have no views to hide a
-        marker in. No mark at all gives these observations back."""
+        marker in. Marks add to those already made; no mark at all gives these observations
+        back."""
         h = np.asarray(hidden)
         if h.ndim != 3 or h.shape[:2] != (self.n_frames, self.n_views) or h.dtype != bool:
             raise KinematicsError(f"hidden marks need a boolean array of shape "
@@ -146,6 +147,11 @@ class Observations:
                                   f"{self.kind} (matching in 3D: set match = 'views')",
                                   field="hidden")
         if self.kind == "points":
+            if self.hidden is not None:
+                if self.hidden.shape != h.shape:
+                    raise KinematicsError(f"hidden marks are for {self.hidden.shape[2]} "
+                                          f"markers, these for {h.shape[2]}", field="hidden")
+                h = h | self.hidden
             return replace(self, hidden=np.ascontiguousarray(h))
         conf = self.conf.copy()
         counts = np.diff(self.offsets).reshape(self.n_frames, self.n_views)

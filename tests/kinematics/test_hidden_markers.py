@@ -159,6 +159,10 @@ def test_observations_carry_hidden_marks():
     hid = obs.with_hidden(marks)
     p3 = hid.arrays(np.array([1, 0]))[4]
     assert p3.shape == (2, 3, 2) and p3[0, 2, 0] == 1.0 and p3.sum() == 1.0
+    more = marks.copy()
+    more[0, 1, 0] = True
+    both = hid.with_hidden(more & ~marks)  # marks add up
+    assert both.hidden.sum() == 2 and both.hidden[1, 0, 2] and both.hidden[0, 1, 0]
     one = hid.take([1])
     assert one.n_frames == 1 and one.hidden[0, 0, 2] and len(one.points) == 2
     with pytest.raises(KinematicsError, match="shape") as err:
