@@ -13,11 +13,14 @@ from videotrack.detection_edits import (
     apply_edit,
     edited_detections,
     edits_path,
+    hidden_marks,
+    is_hidden,
     load_edits,
     move_point,
     remove_point,
     save_edits,
     snap_to_centroid,
+    toggle_hidden,
 )
 from videotrack.detections import build_detections
 from videotrack.errors import VideoTrackError
@@ -85,3 +88,30 @@ def test_snap_to_centroid_finds_a_bright_or_dark_blob():
     x, y = snap_to_centroid(dark, (18.0, 17.0))
     assert abs(x - 20.3) < 0.15 and abs(y - 15.7) < 0.15
     assert snap_to_centroid(np.full((10, 10), 7, np.uint8), (4.5, 3.0)) == (4.5, 3.0)
+
+
+def test_hidden_marks_toggle_round_trip_and_read_version_1(tmp_path):
+    edits = toggle_hidden(toggle_hidden({}, 2, 1, "M3"), 4, 0, "M1")
+    assert is_hidden(edits, 2, 1, "M3") and not is_hidden(edits, 2, 0, "M3")
+    assert toggle_hidden(edits, 4, 0, "M1") == {(2, 1): ViewEdit(hidden=("M3",))}
+    marks = hidden_marks(edits, 5, 2, ["M0", "M1", "M2", "M3"])
+    assert marks.shape == (5, 2, 4) and marks.sum() == 2 and marks[2, 1, 3] and marks[4, 0, 1]
+    assert hidden_marks(edits, 5, 2, ["M0", "M2"]) is None  # names the chain lost: void
+    assert hidden_marks(edits, 3, 2, ["M3"]).sum() == 1  # records beyond the video: void
+    det = _detections()
+    assert edited_detections(det, edits) is det  # hidden marks move no detection
+    path = tmp_path / "r.detection-edits.json"
+    both = add_point(edits, 2, 1, (7.0, 8.0))
+    save_edits(path, both, VIEWS)
+    assert json.loads(path.read_text())["version"] == 2
+    assert load_edits(path, VIEWS) == both
+    old = {"format": "videotrack-detection-edits", "version": 1, "views": VIEWS,
+           "edits": [{"record": 0, "view": "top", "removed": [], "added": [[1.0, 2.0]]}]}
+    path.write_text(json.dumps(old))
+    assert load_edits(path, VIEWS) == {(0, 1): ViewEdit(added=((1.0, 2.0),))}
+    for bad in ("M3", [3], None):
+        old["edits"][0]["hidden"] = bad
+        path.write_text(json.dumps(old))
+        with pytest.raises(VideoTrackError, match="hidden marker names") as err:
+            load_edits(path, VIEWS)
+        assert "\n" not in str(err.value)
