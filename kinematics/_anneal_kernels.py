@@ -757,10 +757,12 @@ def partition_error(objective, proj, mk, points, conf, view_off, obs3, cap, m0, 
                         total += w * min(d if np.isfinite(d) else missing, cap)
             continue
         ev = 0.0
+        n_seen = 0
         for i in range(m0, m1):
             if hidden_in(obs3, i, v):
                 nearest[i] = UNSEEN
                 continue
+            n_seen += 1
             best, arg = nearest_in_view(proj[v, i, 0], proj[v, i, 1], points, a, b, claimed)
             nearest[i] = arg
             d = np.sqrt(best) if best < np.inf else missing
@@ -778,8 +780,8 @@ def partition_error(objective, proj, mk, points, conf, view_off, obs3, cap, m0, 
                     dy = proj[v, i, 1] - points[c, 1]
                     seen = nearest[i] != UNSEEN
                     best = min(best, dx * dx + dy * dy) if seen else best
-                if not taken:  # as projection_error: no marker to measure from costs missing
-                    d = np.sqrt(best) if best < np.inf else missing
+                if not taken:  # every marker hidden: as projection_error, costs missing
+                    d = missing if n_seen == 0 else np.sqrt(best)
                     total += penalty * min(d, penalty_cap)
     return total
 

@@ -453,7 +453,12 @@ class Fitter:
             obs = self.observations(detections_frame if isinstance(
                 detections_frame, Observations) else [detections_frame])
             if hidden is not None:
-                obs = obs.with_hidden(np.asarray(hidden, bool)[None])
+                marks = np.asarray(hidden, bool)
+                shape = (self.n_views, len(self.body.marker_names))
+                if marks.shape != shape:
+                    raise KinematicsError(f"hidden marks need shape {shape} (views, markers), "
+                                          f"got {marks.shape}", field="hidden")
+                obs = obs.with_hidden(marks[None])
             state, pos, rot = self.state(angles_deg, root_positions)
             return self._state_error(obs.arrays(np.array([0], np.int64)), state, pos, rot,
                                      self.params)
@@ -501,7 +506,10 @@ class Fitter:
             x0 = np.ascontiguousarray(markers0[self._root_marker[k]], dtype=float)
             if labelled is None:
                 track = np.empty((len(idx), 3))
-                _ak.track_root(pts, off, x0, gate, 1e-9, self.problem.cams, track)
+                p_k, off_k = pts, off
+                if obs.hidden is not None:  # a view where the root marker is hidden: none
+                    p_k, off_k = _emptied(pts, off, obs.hidden[idx, :, self._root_marker[k]])
+                _ak.track_root(p_k, off_k, x0, gate, 1e-9, self.problem.cams, track)
             else:  # a labelled root marker needs no tracking; gaps keep the last position
                 track = _carry_forward(labelled[:, self._root_marker[k]], x0)
             out[:, k] = self._roots[k] + (track - x0)
@@ -1164,6 +1172,17 @@ def marker_images(obs: Observations, frames, n_markers: int) -> np.ndarray:
         return n_markers * (obs.points3d[frames, :, 3] > 0).any(axis=1)
     seen = n_markers if obs.hidden is None else n_markers - obs.hidden[frames].sum(axis=2)
     return (seen * (obs.view_counts(frames) > 0)).sum(axis=1)
+
+
+def _emptied(points: np.ndarray, offsets: np.ndarray, cells: np.ndarray
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """Ragged points (frame-major offsets) with the (frame, view) ``cells`` flagged True
+    emptied."""
+    counts = np.diff(offsets)
+    keep = np.repeat(~np.asarray(cells, bool).ravel(), counts)
+    new_off = np.zeros_like(offsets)
+    np.cumsum(np.where(cells.ravel(), 0, counts), out=new_off[1:])
+    return np.ascontiguousarray(points[keep]), new_off
 
 
 def _carry_forward(points: np.ndarray, first: np.ndarray) -> np.ndarray:

@@ -169,8 +169,8 @@ class Session(QObject):
         self.pins: dict[int, dict[int, float]] = {}
         #: The user's edits of the detections, ``{(record, view): ViewEdit}``.
         self.detection_edits: dict = {}
-        # (detections, edits, edited detections, what the fit takes of them)
-        self._edited = (None, None, None, None)
+        # (detections, edits, chain, edited detections, what the fit takes of them)
+        self._edited = (None, None, None, None, None)
         self._means: tuple = (None, None, None)  # (body, mean posture, locked mask)
         #: Frames whose results (error, status) were computed with an earlier chain.
         self.stale: set[int] = set()
@@ -576,8 +576,9 @@ class Session(QObject):
 
     def _edited_now(self) -> tuple:
         """(the detections with the user's edits, what the fit takes of them), cached."""
-        det, edits, edited, obs = self._edited
-        if det is not self.detections or edits is not self.detection_edits:
+        det, edits, body, edited, obs = self._edited
+        if (det is not self.detections or edits is not self.detection_edits
+                or body is not self.body):  # marks name the chain's markers
             edited = obs = None
             if self.detections is not None:
                 edited = obs = detection_edits.edited_detections(self.detections,
@@ -586,8 +587,8 @@ class Session(QObject):
                 if marks is not None:
                     obs = Observations.unlabelled(edited.points, edited.offsets,
                                                   self.view_names).with_hidden(marks)
-            self._edited = (self.detections, self.detection_edits, edited, obs)
-        return self._edited[2:]
+            self._edited = (self.detections, self.detection_edits, self.body, edited, obs)
+        return self._edited[3:]
 
     def _hidden_marks(self) -> np.ndarray | None:
         """(records, views, markers) of the chain's markers hidden in a view, or None."""
@@ -1331,13 +1332,18 @@ class Session(QObject):
             self.error.emit("markers are matched in 3D here (match): a marker cannot be hidden "
                             "in one view; set match = 'views' in the fitting settings first")
             return False
-        name = self.body.marker_names[marker]
+        shown = self.display_body.marker_names  # what was clicked: the drawn chain
+        name = shown[marker] if 0 <= marker < len(shown) else None
+        if name not in self.body.marker_names:
+            self.status.emit("that marker is not in the chain yet: apply the chain edit first")
+            return False
         frames = [self.frame] if frames is None else sorted({int(f) for f in frames})
         frames = [f for f in frames if 0 <= f < self.detections.n_records]
         if not frames:
             self.status.emit("no detections in this frame to mark a marker hidden in")
             return False
-        hide = not detection_edits.is_hidden(self.detection_edits, frames[0], view, name)
+        lead = self.frame if self.frame in frames else frames[0]  # the frame looked at
+        hide = not detection_edits.is_hidden(self.detection_edits, lead, view, name)
         edits = self.detection_edits
         for f in frames:
             if detection_edits.is_hidden(edits, f, view, name) != hide:

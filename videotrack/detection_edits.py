@@ -15,7 +15,8 @@ record's detections in that view. Coordinates are view image pixels, as in the d
 file. ``hidden`` names model markers the user saw to be hidden in that view of the record
 (occluded, or merged with another's blob): the fit leaves them out of that view
 (:meth:`kinematics.observations.Observations.with_hidden`); a name the chain no longer has
-is void. Version 1 files (no ``hidden``) are read as they are. Everything here is pure (no
+is void. Files without marks are written as version 1 (no ``hidden``), as before, and
+version 1 files are read as they are. Everything here is pure (no
 Qt): the GUI edits, fits and computes E with :func:`edited_detections` and
 :func:`hidden_marks`.
 """
@@ -271,9 +272,10 @@ def load_edits(path: str | os.PathLike, view_names: Sequence[str]) -> dict:
 def save_edits(path: str | os.PathLike, edits: Edits, view_names: Sequence[str]) -> Path:
     """Write the sidecar atomically (records in order)."""
     names = list(view_names)
-    doc = {"format": FORMAT, "version": VERSION, "views": names, "edits": [
+    marks = any(e.hidden for e in edits.values())  # without marks: version 1, as before
+    doc = {"format": FORMAT, "version": VERSION if marks else 1, "views": names, "edits": [
         {"record": r, "view": names[v], "removed": [list(p) for p in e.removed],
-         "added": [list(p) for p in e.added], "hidden": list(e.hidden)}
+         "added": [list(p) for p in e.added], **({"hidden": list(e.hidden)} if marks else {})}
         for (r, v), e in sorted(edits.items()) if e]}
     path = Path(path)
     atomic_write_text(path, json.dumps(doc, indent=1) + "\n")

@@ -10,7 +10,7 @@ import pytest
 
 from kinematics import _anneal_kernels as ak
 from kinematics import _refine_kernels as rk
-from kinematics.anneal import AnnealParams, Fitter
+from kinematics.anneal import AnnealParams, Fitter, _emptied
 from kinematics.error_function import posture_error, projection_error
 from kinematics.errors import KinematicsError
 from kinematics.observations import Observations
@@ -196,4 +196,20 @@ def test_fitter_refuses_marks_for_another_body(locust):
     wrong = fitter.observations(frames).with_hidden(np.ones((2, 2, 3), bool))
     with pytest.raises(KinematicsError, match="hidden marks are for 3 markers") as err:
         fitter.fit(wrong)
+    assert err.value.field == "hidden"
+
+
+def test_a_root_marker_hidden_in_a_view_is_not_tracked_there():
+    pts = np.arange(12.0).reshape(6, 2)
+    off = np.array([0, 2, 3, 5, 6], np.int64)  # 2 frames x 2 views
+    cells = np.array([[False, True], [True, False]])
+    p, o = _emptied(pts, off, cells)
+    assert o.tolist() == [0, 2, 2, 2, 3] and p.tolist() == [[0, 1], [2, 3], [10, 11]]
+
+
+def test_error_refuses_marks_of_the_wrong_shape(locust):
+    cams, truth, frames, _ = occluded_tip(locust, n=1)
+    fitter = Fitter(locust, cams, AnnealParams.paper())
+    with pytest.raises(KinematicsError, match=r"hidden marks need shape \(2, 4\)") as err:
+        fitter.error(truth[0], frames[0], hidden=np.zeros((2, 3), bool))
     assert err.value.field == "hidden"

@@ -197,3 +197,15 @@ def test_h_without_a_clicked_marker_says_what_to_do(window):
     window.session.status.connect(notes.append)
     window.act_hide_marker.trigger()
     assert notes[-1].startswith("click a model marker") and not window.session.can_undo
+
+
+def test_hidden_marks_follow_the_chain(window):
+    from dataclasses import replace
+
+    s = window.session
+    assert s.toggle_hidden(1, 3, [4])
+    marked = s.fit_detections
+    assert marked.hidden[4, 1, 3] and marked.hidden.sum() == 1
+    assert s.commit_body(replace(s.body, name="renamed"))
+    assert s.fit_detections is not marked  # the marks are made again for the new chain
+    assert s.fit_detections.hidden[4, 1, 3]

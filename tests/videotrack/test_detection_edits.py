@@ -109,6 +109,8 @@ def test_hidden_marks_toggle_round_trip_and_read_version_1(tmp_path):
            "edits": [{"record": 0, "view": "top", "removed": [], "added": [[1.0, 2.0]]}]}
     path.write_text(json.dumps(old))
     assert load_edits(path, VIEWS) == {(0, 1): ViewEdit(added=((1.0, 2.0),))}
+    save_edits(path, load_edits(path, VIEWS), VIEWS)  # no marks: still version 1
+    assert json.loads(path.read_text()) == old
     for bad in ("M3", [3], None):
         old["edits"][0]["hidden"] = bad
         path.write_text(json.dumps(old))
