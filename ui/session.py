@@ -341,10 +341,9 @@ class Session(QObject):
                 self.detections = det
             except LocatedError as err:
                 self.error.emit(str(err))
-        try:
-            if self.keypoints is None:  # labelled keypoints are not edited
-                self.detection_edits = detection_edits.load_edits(
-                    detection_edits.edits_path(self.results_path), self.view_names)
+        try:  # a keypoint project's edits are hidden marks only
+            self.detection_edits = detection_edits.load_edits(
+                detection_edits.edits_path(self.results_path), self.view_names)
         except LocatedError as err:
             self.error.emit(str(err))
         if self.results_path.exists() and self.body is not None:
@@ -567,39 +566,41 @@ class Session(QObject):
 
     @property
     def fit_detections(self):
-        """What the fit and E use: the detections file with the user's edits (as
-        :class:`~kinematics.observations.Observations` where markers are marked hidden in a
-        view), or a keypoint project's Observations (None: nothing to fit)."""
-        if self.keypoints is not None:
-            return self.keypoints.observations
+        """What the fit and E use: the detections file with the user's edits, or a keypoint
+        project's :class:`~kinematics.observations.Observations`; Observations with the
+        marks where markers are marked hidden in a view (None: nothing to fit)."""
         return self._edited_now()[1]
 
     def _edited_now(self) -> tuple:
         """(the detections with the user's edits, what the fit takes of them), cached."""
-        det, edits, body, edited, obs = self._edited
-        if (det is not self.detections or edits is not self.detection_edits
-                or body is not self.body):  # marks name the chain's markers
+        source = self.keypoints.observations if self.keypoints is not None else self.detections
+        key = (source, self.detection_edits, self.body)  # marks name the chain's markers
+        if any(a is not b for a, b in zip(self._edited[:3], key, strict=True)):
             edited = obs = None
-            if self.detections is not None:
-                edited = obs = detection_edits.edited_detections(self.detections,
-                                                                 self.detection_edits)
-                marks = self._hidden_marks()
+            if self.keypoints is not None:
+                obs = source
+                marks = self._hidden_marks(obs.n_frames)
+                if marks is not None and obs.kind == "keypoints":
+                    obs = obs.with_hidden(marks)
+            elif source is not None:
+                edited = obs = detection_edits.edited_detections(source, self.detection_edits)
+                marks = self._hidden_marks(source.n_records)
                 if marks is not None:
                     obs = Observations.unlabelled(edited.points, edited.offsets,
                                                   self.view_names).with_hidden(marks)
-            self._edited = (self.detections, self.detection_edits, self.body, edited, obs)
+            self._edited = (*key, edited, obs)
         return self._edited[3:]
 
-    def _hidden_marks(self) -> np.ndarray | None:
+    def _hidden_marks(self, n_records: int) -> np.ndarray | None:
         """(records, views, markers) of the chain's markers hidden in a view, or None."""
-        if self.detections is None or self.body is None:
+        if self.body is None:
             return None
-        return detection_edits.hidden_marks(self.detection_edits, self.detections.n_records,
-                                            len(self.views), self.body.marker_names)
+        return detection_edits.hidden_marks(self.detection_edits, n_records, len(self.views),
+                                            self.body.marker_names)
 
     def hidden_in_frame(self, record: int | None = None) -> np.ndarray:
         """(n_views, n_markers) of the drawn chain's markers hidden in each view of a record
-        (all False in a keypoint project)."""
+        (the GUI's H)."""
         record = self.frame if record is None else record
         body = self.display_body
         names = () if body is None else body.marker_names
@@ -1284,13 +1285,18 @@ class Session(QObject):
             if result is None or self.model is None or not np.all(
                     np.isfinite(result.angles_deg)):
                 continue
-            dets = [detection_edits.apply_edit(self.detections.points_of(f, v),
-                                               edits.get((f, v)))
-                    for v in range(len(self.views))]
+            marks = self._frame_marks(edits, f)
+            if self.keypoints is not None:  # the record's keypoints, a hidden one missing
+                frame_input = self.keypoints.observations.take([f])
+                if marks is not None:
+                    frame_input, marks = frame_input.with_hidden(marks[None]), None
+            else:
+                frame_input = [detection_edits.apply_edit(self.detections.points_of(f, v),
+                                                          edits.get((f, v)))
+                               for v in range(len(self.views))]
             try:
-                error, per_view = self._fitter().error(result.angles_deg, dets,
-                                                       result.root_positions,
-                                                       self._frame_marks(edits, f))
+                error, per_view = self._fitter().error(result.angles_deg, frame_input,
+                                                       result.root_positions, marks)
             except LocatedError as err:
                 self.error.emit(str(err))
                 return False
@@ -1314,13 +1320,16 @@ class Session(QObject):
         """Mark a model marker hidden in a view (occluded, or its blob merged with another's)
         or seen again, in the frame shown or in ``frames`` (undoable, one step): the fit and
         E leave it out of that view at once. The frames' errors are computed again for their
-        postures (status kept)."""
-        if self.keypoint_project:
-            self.status.emit("in a keypoint project a hidden keypoint is a missing label: "
-                             "fix it in the tracker")
+        postures (status kept). In a keypoint project the marker's keypoint there counts as
+        missing (a label the tracker put on the wrong spot)."""
+        observed = self.fit_detections
+        if observed is None or self.body is None:
+            self.error.emit("no detections to mark: run Detect markers first"
+                            if not self.keypoint_project else "no keypoints to mark")
             return False
-        if self.detections is None or self.body is None:
-            self.error.emit("no detections to mark: run Detect markers first")
+        if isinstance(observed, Observations) and observed.kind == "points3d":
+            self.error.emit("this project fits triangulated 3D points: a keypoint cannot be "
+                            "hidden in one view ([keypoints] route = '2d' can)")
             return False
         if self.busy:
             self.status.emit("wait for the running task to finish (or cancel it) first")
@@ -1328,7 +1337,7 @@ class Session(QObject):
         fitter = self._fitter_or_report()
         if fitter is None:
             return False
-        if fitter.matches_in_3d:
+        if not self.keypoint_project and fitter.matches_in_3d:
             self.error.emit("markers are matched in 3D here (match): a marker cannot be hidden "
                             "in one view; set match = 'views' in the fitting settings first")
             return False
@@ -1338,7 +1347,9 @@ class Session(QObject):
             self.status.emit("that marker is not in the chain yet: apply the chain edit first")
             return False
         frames = [self.frame] if frames is None else sorted({int(f) for f in frames})
-        frames = [f for f in frames if 0 <= f < self.detections.n_records]
+        n_records = (observed.n_frames if isinstance(observed, Observations)
+                     else observed.n_records)
+        frames = [f for f in frames if 0 <= f < n_records]
         if not frames:
             self.status.emit("no detections in this frame to mark a marker hidden in")
             return False

@@ -223,6 +223,43 @@ def test_keypoints_are_not_edited_as_detections(kp_window, qtbot):
     assert not s.edit_detection(0, remove=(x, y))
 
 
+def test_a_keypoint_hidden_in_a_view_counts_as_missing(made, tmp_path, wait_idle):
+    """H in a keypoint project: the marker's keypoint in that view is a missing label for E
+    and the fit (a tracker's label on the wrong spot), saved and back on reopening; the
+    triangulated route, which has no views to hide in, refuses."""
+    project, _ = copy_of(made, tmp_path)
+    s = open_session(project)
+    assert s.fit([2], "fit frame")
+    wait_idle(s)
+    knee = s.body.marker_names.index("knee")
+    s.set_frame(2)
+    assert s.toggle_hidden(0, knee)
+    obs = s.fit_detections
+    marks = np.zeros((3, len(s.body.marker_names)), bool)
+    marks[0, knee] = True
+    one = s.keypoints.observations.take([2]).with_hidden(marks[None])
+    r = s.results[2]
+    assert r.error == s._fitter().error(r.angles_deg, one, r.root_positions)[0]
+    lost = s.keypoints.observations.take([2]).conf.sum() - one.conf.sum()  # knee in cam0
+    assert lost > 0 and obs.conf.sum() == pytest.approx(
+        s.keypoints.observations.conf.sum() - lost)
+    assert s.fit([2], "fit frame")
+    wait_idle(s)
+    assert np.isnan(s.results[2].marker_residuals[0, knee])
+    assert np.isfinite(s.results[2].marker_residuals[1, knee])
+    assert s.save()
+    s.close()
+    s = open_session(project)
+    assert s.hidden_in_frame(2)[0, knee] and s.hidden_in_frame(2).sum() == 1
+    assert s.messages == []
+    s.close()
+    project3d, _ = copy_of(made, tmp_path, "3d")
+    s = open_session(project3d)
+    assert not s.toggle_hidden(0, knee)
+    assert "triangulated 3D points" in s.messages[-1] and not s.can_undo
+    s.close()
+
+
 def test_triangulated_route_fits_3d_points_and_draws_2d_keypoints(made, tmp_path, qtbot,
                                                                    wait_idle):
     from ui.main_window import MainWindow
