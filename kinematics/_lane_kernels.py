@@ -25,6 +25,8 @@ on the same random stream (splitmix64 per seed, frame and run), so the outputs a
 last bit — whatever the number of lanes or threads. What a lane cannot do cheaply (loading a
 run, its starting E, refinement, deciding on re-runs) calls the scalar kernels.
 
+A group's last runs, once no run waits, are moved into fewer lanes (:func:`_kept_lanes`).
+
 Layout (``L = LANES``): state ``cur``, ``cand``, ``best``, ``cs``, ``sn`` (n_state, L);
 ``rot`` (nj + n_chains, 9, L) row-major A'_j and the roots' seed rotations; ``pos``
 (nj + n_chains, 3, L); ``mk`` (nm, 3, L); ``proj``
@@ -417,6 +419,78 @@ def iterate_lanes(n_iter, free_idx, n_hist, step, hist, nbins, th, dof_kind, lo,
     return n
 
 
+# -- shrinking the lanes at the end of a group ----------------------------------------------
+#: Once the queue is empty and at most half the lanes are busy, the busy runs move into
+#: fewer lanes (as many as are busy, at least this many): every lane loop costs its full
+#: width whether a lane is busy or not, so a group's last runs (re-analyses) ran at a
+#: fraction of the rate. Measured (bench_lanes.py, one run each): the Table 1 row with
+#: re-analysis 1.24x -> 1.46x the scalar kernel, the defaults 2.35x -> 2.68x; shrinking
+#: from three quarters busy was no better.
+MIN_LANES = 8
+
+
+@njit(**_OPTS)
+def _take1(a, idx):
+    out = np.empty(idx.shape[0], a.dtype)
+    for k in range(idx.shape[0]):
+        out[k] = a[idx[k]]
+    return out
+
+
+@njit(**_OPTS)
+def _take2(a, idx):
+    out = np.empty((a.shape[0], idx.shape[0]), a.dtype)
+    for r in range(a.shape[0]):
+        for k in range(idx.shape[0]):
+            out[r, k] = a[r, idx[k]]
+    return out
+
+
+@njit(**_OPTS)
+def _take3(a, idx):
+    out = np.empty((a.shape[0], a.shape[1], idx.shape[0]), a.dtype)
+    for r in range(a.shape[0]):
+        for q in range(a.shape[1]):
+            for k in range(idx.shape[0]):
+                out[r, q, k] = a[r, q, idx[k]]
+    return out
+
+
+@njit(**_OPTS)
+def _take4(a, idx):
+    out = np.empty((a.shape[0], a.shape[1], a.shape[2], idx.shape[0]), a.dtype)
+    for r in range(a.shape[0]):
+        for q in range(a.shape[1]):
+            for w in range(a.shape[2]):
+                for k in range(idx.shape[0]):
+                    out[r, q, w, k] = a[r, q, w, idx[k]]
+    return out
+
+
+@njit(**_OPTS)
+def _kept_lanes(active, queue_empty):
+    """The lanes to keep when the lanes should shrink (the queue is empty and at most half
+    the lanes are busy, more than MIN_LANES of them): the busy ones, padded with idle ones
+    to MIN_LANES; an empty array when they should not."""
+    nl = active.shape[0]
+    busy = 0
+    for ln in range(nl):
+        busy += 1 if active[ln] else 0
+    if not queue_empty or nl <= MIN_LANES or busy == 0 or 2 * busy > nl:
+        return np.empty(0, np.int64)
+    keep = np.empty(max(busy, MIN_LANES), np.int64)
+    k = 0
+    for ln in range(nl):
+        if active[ln]:
+            keep[k] = ln
+            k += 1
+    for ln in range(nl):
+        if k < keep.shape[0] and not active[ln]:
+            keep[k] = ln
+            k += 1
+    return keep
+
+
 # -- the frame procedure (fit_frames' runs, re-analysis and candidates) ----------------------
 @njit(parallel=True, **_OPTS)
 def fit_frames_lanes(group_off, frame_ids, root_pos, root_rot, start, body, cams, dofs,
@@ -623,6 +697,20 @@ def _fit_group(f0, f1, frame_ids, root_pos, root_rot, start, body, cams, dofs, s
                                     s_near)
         if any_done:
             continue  # refill the freed lanes first
+        keep = _kept_lanes(active, head == tail)
+        if keep.shape[0]:  # the group's last runs: anneal them in fewer lanes
+            cur, cand, best = _take2(cur, keep), _take2(cand, keep), _take2(best, keep)
+            cs, sn, nearest = _take2(cs, keep), _take2(sn, keep), _take2(nearest, keep)
+            rot, pos, mk = _take3(rot, keep), _take3(pos, keep), _take3(mk, keep)
+            proj = _take4(proj, keep)
+            dx, dy, ndet = _take3(dx, keep), _take3(dy, keep), _take2(ndet, keep)
+            e, active, rs, it = _take1(e, keep), _take1(active, keep), _take1(rs, keep), \
+                _take1(it, keep)
+            tau, length = _take1(tau, keep), _take1(length, keep)
+            to_tau, to_l = _take1(to_tau, keep), _take1(to_l, keep)
+            e_cur, e_best = _take1(e_cur, keep), _take1(e_best, keep)
+            lane_frame, lane_run = _take1(lane_frame, keep), _take1(lane_run, keep)
+            nl = keep.shape[0]
         iterate_lanes(1 << 30, free_idx, n_hist, step, hist, nbins, th, dof_kind, lo, hi,
                       max_redraws, n_end, n_l, n_tau, c_l, c_tau, eps, active, rs, it, tau,
                       length, to_tau, to_l, e_cur, e_best, cur, cand, best, cs, sn, body,

@@ -167,3 +167,24 @@ def test_choice_over_time_does_not_depend_on_chunk_size(locust):
     small = list(fitter.iter_fit(dets, chunk_size=8))
     large = list(fitter.iter_fit(dets, chunk_size=90))
     assert_same(small, large)
+
+
+def test_the_last_runs_move_into_fewer_lanes():
+    """Once no run waits and at most half the lanes are busy, the busy lanes are kept (with
+    idle ones up to MIN_LANES); never while runs wait, never below MIN_LANES. The results of
+    the backend tests above are bit-identical with this shrinking at work (e.g. the paper
+    profile's 20 frames start in 64 lanes)."""
+    active = np.zeros(64, np.bool_)
+    active[[3, 17, 40]] = True
+    assert _lk._kept_lanes(active, False).size == 0  # runs wait: keep every lane
+    kept = _lk._kept_lanes(active, True)
+    assert kept.tolist()[:3] == [3, 17, 40] and kept.size == _lk.MIN_LANES
+    assert len(set(kept.tolist())) == kept.size
+    active[:33] = True
+    assert _lk._kept_lanes(active, True).size == 0  # more than half busy
+    active[:] = False
+    active[:20] = True
+    assert _lk._kept_lanes(active, True).tolist() == list(range(20))
+    assert _lk._kept_lanes(np.ones(_lk.MIN_LANES, np.bool_), True).size == 0
+    a = np.arange(24.0).reshape(2, 3, 4)
+    np.testing.assert_array_equal(_lk._take3(a, np.array([3, 1])), a[:, :, [3, 1]])
