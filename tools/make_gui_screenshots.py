@@ -9,7 +9,9 @@ The real MainWindow drawn by Qt's offscreen platform (``QWidget.grab()``; the 3D
 * ``gui_shortcuts.png`` — the shortcut sheet (``?``);
 * ``gui_keypoints.png`` — a keypoint project (DeepLabCut files of three cameras, no video);
 * ``gui_correction_panel.png`` — the posture, the correction panel with an axis typed in
-  (pinned: bold) and the rest re-fitted, and the marker residual table.
+  (pinned: bold) and the rest re-fitted, and the marker residual table;
+* ``gui_hidden.png`` — a frame where a marker is occluded in one view, the marker marked
+  hidden there (H: a cross, "hidden" in the residual table) and the frame fitted again.
 
 Usage::
 
@@ -31,6 +33,7 @@ sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "bench"))
 sys.path.insert(0, str(REPO / "tools"))
 
+import numpy as np  # noqa: E402
 from gui_screenshots import settle  # noqa: E402
 
 import ui  # noqa: F401,E402  (guards PySide6's reference counts before any Qt call)
@@ -107,7 +110,7 @@ def main() -> int:
         save(window, args.out / "gui_correcting.png")
 
         sheet = window.show_shortcuts()  # what the ? key runs
-        sheet.resize(600, 1180)  # every row
+        sheet.resize(600, 1340)  # every row
         settle(app, seconds=0.3)
         save(sheet, args.out / "gui_shortcuts.png")
         sheet.close()
@@ -118,6 +121,21 @@ def main() -> int:
         right.setSizes([230, 330, 190])
         settle(app, s, 0.5)
         save(right, args.out / "gui_correction_panel.png")
+
+        # a marker occluded in one view (the truth says where), marked hidden there with H
+        # and the frame fitted again (F6)
+        right.setSizes([230, 230, 290])
+        f, v, m = min((int(f), v, m) for (v, m), seen in user.seen.items()
+                      for f in np.flatnonzero(seen[:, 2] == 0) if f != frame)
+        s.set_frame(f)
+        window.table.follow(f)
+        settle(app, s, 0.3)
+        window.select_marker(v, m)
+        window.toggle_hidden()
+        window.act_fit_current.trigger()
+        settle(app, s, 0.5)
+        print(f"frame {f}: {s.body.marker_names[m]} hidden in {s.view_names[v]}")
+        save(window, args.out / "gui_hidden.png")
         window.close()
         s.close()
 
