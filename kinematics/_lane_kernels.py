@@ -469,9 +469,9 @@ def _take4(a, idx):
 
 @njit(**_OPTS)
 def _kept_lanes(active, queue_empty):
-    """The lanes to keep when the lanes should shrink (the queue is empty and at most half
-    the lanes are busy, more than MIN_LANES of them): the busy ones, padded with idle ones
-    to MIN_LANES; an empty array when they should not."""
+    """The lanes to keep when the lanes should shrink (the queue is empty, there are more
+    than MIN_LANES lanes and at most half of them are busy): the busy ones, padded with idle
+    ones to MIN_LANES; an empty array when they should not."""
     nl = active.shape[0]
     busy = 0
     for ln in range(nl):

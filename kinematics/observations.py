@@ -162,7 +162,17 @@ class Observations:
             elif counts[f, v]:
                 raise KinematicsError(f"hidden marks are for {h.shape[2]} markers, the "
                                       f"keypoints for {counts[f, v]}", field="hidden")
-        return replace(self, conf=conf)
+        # a view left without any keypoint holds no rows, as one that never had any
+        cell = np.repeat(np.arange(counts.size), counts.ravel())
+        alive = np.zeros(counts.size, bool)
+        np.logical_or.at(alive, cell, conf > 0)
+        keep = alive[cell]
+        if keep.all():
+            return replace(self, conf=conf)
+        off = np.zeros(counts.size + 1, np.int64)
+        np.cumsum(np.where(alive, counts.ravel(), 0), out=off[1:])
+        return replace(self, points=np.ascontiguousarray(self.points[keep]),
+                       conf=np.ascontiguousarray(conf[keep]), offsets=off)
 
     @classmethod
     def keypoints(cls, keypoints, view_names: Sequence[str], marker_names: Sequence[str],

@@ -605,6 +605,9 @@ class Session(QObject):
         body = self.display_body
         names = () if body is None else body.marker_names
         out = np.zeros((len(self.views), len(names)), bool)
+        observed = self.keypoints.observations if self.keypoints is not None else None
+        if observed is not None and observed.kind == "points3d":
+            return out  # fitted to 3D points: a mark in a view means nothing there
         for v in range(len(self.views)):
             for i, m in enumerate(names):
                 out[v, i] = detection_edits.is_hidden(self.detection_edits, record, v, m)

@@ -184,6 +184,11 @@ def test_a_hidden_keypoint_counts_as_missing():
     conf = hid.conf.reshape(2, 2, 3)
     assert conf[1, 1, 0] == 0.0 and (np.delete(conf.ravel(), 9) > 0).all()
     assert hid.hidden is None  # the weight carries it
+    marks[0, 0] = True  # every keypoint of view a in frame 0: the view holds no rows
+    gone = obs.with_hidden(marks)
+    assert gone.view_counts(np.array([0, 1])).tolist() == [[0, 3], [3, 3]]
+    assert len(gone.conf) == 9 and gone.frame_views(0)[0].shape == (0, 2)
+    np.testing.assert_array_equal(gone.frame_views(0)[1], obs.frame_views(0)[1])
     cloud = Observations.unlabelled(np.zeros((2, 2)), [0, 1, 1, 2, 2], ["a", "b"]).with_cloud(
         np.ones((2, 1, 4)))
     with pytest.raises(KinematicsError, match="not of cloud"):
