@@ -31,6 +31,10 @@ from videotrack.markerless import DEFAULT_FPS
 #: Video frames kept decoded for scrubbing back and forth.
 FRAME_CACHE = 48
 
+#: A fit of some frames also fits this many frames before and after each (not kept), so that
+#: the path through time chooses with the movement around them (Session._with_context).
+FIT_CONTEXT = 4
+
 #: Re-fitting forward/backward stops where a frame's error exceeds JUMP_FACTOR times the
 #: median error of the frames carried so far plus JUMP_PX: the carried posture no longer
 #: fits there (a loose bar alone let it overwrite right frames with wrong ones).
@@ -945,15 +949,29 @@ class Session(QObject):
         fitter = self._fitter_or_report()
         if fitter is None:
             return False
-        self._edit = Edit(f"{label} ({len(frames)} frames)")
+        wanted = set(frames)
+        if len(frames) < self.n_frames and self.params.candidates > 1:
+            frames = self._with_context(frames)
+        self._edit = Edit(f"{label} ({len(wanted)} frames)")
         worker = FitWorker(fitter, self.fit_detections, frames, backend.fit_chunk_size())
-        # a fit let go at a cancel (_let_go) reports nothing more
-        worker.resultsReady.connect(lambda b: None if worker.released else self._fit_results(b))
+        # a fit let go at a cancel (_let_go) reports nothing more; context frames are not kept
+        worker.resultsReady.connect(lambda b: None if worker.released else self._fit_results(
+            [r for r in b if r.frame in wanted]))
         worker.progressed.connect(lambda *a: None if worker.released else self.progress.emit(*a))
         worker.failed.connect(lambda m: None if worker.released else self._failed(m))
         worker.finished.connect(lambda: None if worker.released else self._fit_done(worker))
         self._start(worker, f"fitting {len(frames)} frames …")
         return True
+
+    def _with_context(self, frames: list[int]) -> list[int]:
+        """The frames to fit for a fit of some frames: with up to :data:`FIT_CONTEXT` frames
+        before and after each stretch, fitted but not kept, so that the path through time
+        sees the movement around it (after a marker is hidden in a view, a few frames alone
+        cannot tell a posture from its mirror; with their neighbours they can)."""
+        out = set(frames)
+        for f in frames:
+            out.update(range(max(0, f - FIT_CONTEXT), min(self.n_frames, f + FIT_CONTEXT + 1)))
+        return sorted(out)
 
     def _fit_results(self, batch: list) -> None:
         """Store results as they arrive (part of the running task's undo step). An item is a

@@ -15,7 +15,7 @@ from PySide6.QtCore import Qt
 from kinematics.error_function import labelled_error
 from kinematics.fk import forward_kinematics
 from ui import adapters, backend
-from ui.session import Session
+from ui.session import FIT_CONTEXT, Session
 from videotrack.cli import main
 from videotrack.config import load_config
 from videotrack.pipeline import plan_project
@@ -146,11 +146,14 @@ def test_fit_a_frame_and_the_corrections(made, tmp_path, qtbot, wait_idle):
     s = open_session(project)
     fitter = s._fitter()
     obs = s.keypoints.observations
-    # F6: one frame, as the fitter fits it alone
+    # F6: one frame, as the fitter fits it with FIT_CONTEXT frames on either side (the
+    # path through time's context), only that frame kept
     assert s.fit([2], "fit frame")
     wait_idle(s)
-    alone = fitter.fit(obs, [2])[0]
-    assert s.results[2].error == alone.error and s.results[2].status == alone.status
+    with_context = fitter.fit(obs, list(range(0, 2 + FIT_CONTEXT + 1)))[2]
+    assert with_context.frame == 2 and sorted(s.results) == [2]
+    assert s.results[2].error == with_context.error
+    assert s.results[2].status == with_context.status
     assert s.fit()
     wait_idle(s)
     # a pinned axis is held while the rest is re-fitted
