@@ -32,8 +32,10 @@ from videotrack.markerless import DEFAULT_FPS
 FRAME_CACHE = 48
 
 #: A fit of some frames also fits this many frames before and after each (not kept), so that
-#: the path through time chooses with the movement around them (Session._with_context).
-FIT_CONTEXT = 4
+#: the path through time chooses with the movement around them (Session._with_context). One
+#: was enough where three frames alone chose a mirror posture (docs/gui.md, "A scripted
+#: correction session"); two keep F6 at 5 frames' cost.
+FIT_CONTEXT = 2
 
 #: Re-fitting forward/backward stops where a frame's error exceeds JUMP_FACTOR times the
 #: median error of the frames carried so far plus JUMP_PX: the carried posture no longer
