@@ -39,6 +39,11 @@ sorted by error, at the top of the fit's own ``ok`` rows. Frames that are wrong 
 flagged are reported apart: no user looking only at flagged frames visits them (the flag's
 misses).
 
+With ``--hide`` the user also uses H: on a visited frame where the video shows a marker
+missing in a view (occluded in the truth) that is not marked yet, they select the
+occlusion's rows (click, Shift+click: two actions), click the model marker, press H and F7
+(five actions per marker and stretch), then go on as above.
+
 Everything goes through the window: its actions (``ui/shortcuts.py``), the video view's
 marker drag signal and the correction panel's number boxes; the session only reports.
 """
@@ -70,7 +75,7 @@ MAX_DRAGS = 2
 class User:
     """The scripted user: presses the window's keys and counts them."""
 
-    def __init__(self, app, window, truth_path: Path, log: bool) -> None:
+    def __init__(self, app, window, truth_path: Path, log: bool, hide: bool = False) -> None:
         from ui import adapters
         from videotrack.tables import read_table
 
@@ -89,6 +94,7 @@ class User:
             for m, name in enumerate(body.marker_names):
                 cols = [columns.index(f"{view}.{name}.{c}") for c in ("u", "v", "visible")]
                 self.seen[v, m] = table[: self.s.n_frames][:, cols]
+        self.hide = hide  # the user marks occluded markers hidden (H) where they see them
         self.actions = self.navigation = self.failed = 0
         self.by_kind: dict[str, int] = {}
         self.carried: set[int] = set()  # frames F9 already ran from
@@ -156,6 +162,36 @@ class User:
         self.count("typed value")
         box.setValue(float(self.truth[frame, k]))  # Enter in the box commits this value
         self.settle()
+
+    def hide_occluded(self, f: int) -> bool:
+        """With ``hide``: for each marker the user sees missing in a view of frame ``f``
+        (occluded there in the truth) and not marked yet, mark it hidden over the occlusion
+        from ``f`` on: click row ``f`` and Shift+click the occlusion's last row (the user
+        steps there to see where it ends: counted as those two clicks), click the model
+        marker, H, F7. Returns whether it marked anything."""
+        from PySide6.QtCore import QItemSelectionModel
+
+        s, table, done = self.s, self.window.table, False
+        flags = QItemSelectionModel.SelectionFlag
+        for (v, m), seen in self.seen.items():
+            if seen[f, 2] != 0 or s.hidden_in_frame(f)[v, m]:
+                continue
+            end = f
+            while end + 1 < s.n_frames and self.seen[v, m][end + 1, 2] == 0:
+                end += 1
+            table.selectionModel().clearSelection()
+            for g in range(f, end + 1):
+                index = table.proxy.index(table.row_of(g), 0)
+                table.selectionModel().select(index, flags.Select | flags.Rows)
+            self.count("select rows")
+            if end > f:
+                self.count("select rows")
+            self.count("click marker")
+            self.window.select_marker(v, m)
+            self.press("hide_marker", "hide marker (H)")
+            self.press("fit_selected", "fit selected (F7)")
+            done = True
+        return done
 
     # -- one frame --------------------------------------------------------------------------
     def fix(self, f: int) -> str:
@@ -247,6 +283,8 @@ class User:
             f = s.frame
             if f in how:  # visited again: nothing more to do
                 break
+            if self.hide:
+                self.hide_occluded(f)
             if self.right(f):
                 how[f] = "accept"
                 self.press("accept_next", "accept and next", navigation=True)
@@ -261,7 +299,7 @@ class User:
         return how
 
 
-def measure(project: Path, log: bool) -> list[tuple]:
+def measure(project: Path, log: bool, hide: bool = False) -> list[tuple]:
     from PySide6.QtWidgets import QApplication, QMessageBox
 
     from ui.main_window import MainWindow
@@ -283,7 +321,7 @@ def measure(project: Path, log: bool) -> list[tuple]:
     if len(s.results) != s.n_frames:  # no figures from a fit that failed
         raise SystemExit(f"Fit all fitted {len(s.results)} of {s.n_frames} frames: "
                          f"{window.errors}")
-    user = User(app, window, project.parent / "truth.csv", log)
+    user = User(app, window, project.parent / "truth.csv", log, hide)
     wrong0 = set(user.wrong_frames())
     flagged_project = set(user.flagged())
     user.set_bar()
@@ -334,15 +372,18 @@ def main(argv=None) -> int:
                         "e.g. \"--sequences 5 --flicker-ghosts 2\"")
     parser.add_argument("--out", type=Path, help="keep the project here")
     parser.add_argument("--log", action="store_true", help="print every visited frame")
+    parser.add_argument("--hide", action="store_true", help="the user also marks markers "
+                        "they see occluded hidden (H) over the occlusion, then F7")
     args = parser.parse_args(argv)
 
     def run(folder: Path, _keep: bool) -> int:
         project = make_project(folder, args.frames, ["--ghosts", str(args.ghosts),
                                                      "--occlusions", str(args.occlusions),
                                                      *args.synth.split()])
-        rows = measure(project, args.log)
+        rows = measure(project, args.log, args.hide)
         print(f"\nsynth: --frames {args.frames} --ghosts {args.ghosts} --occlusions "
-              f"{args.occlusions} {args.synth}".rstrip())
+              f"{args.occlusions} {args.synth}".rstrip() + (" ; user marks occlusions (H)"
+                                                            if args.hide else ""))
         print(f"machine: {machine()}; QT_QPA_PLATFORM={os.environ['QT_QPA_PLATFORM']}")
         print_table(rows)
         return 0
