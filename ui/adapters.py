@@ -102,22 +102,33 @@ def view_overlays(body: Body, cameras: Sequence, angles_deg, roots=None) -> list
     return project_geometry(posture_geometry(body, angles_deg, roots), cameras)
 
 
-def marker_residuals(overlays: Sequence[ViewOverlay], detections: Sequence,
-                     hidden=None) -> np.ndarray:
-    """(n_views, n_markers) distance in pixels from each drawn model marker to its nearest
-    detection in each view (Eq. 5's term; NaN where the view has no detection or the marker
-    is ``hidden`` there, (n_views, n_markers) of bool): which marker is off, for the posture
-    shown (a preview or a correction included)."""
+def matched_points(overlays: Sequence[ViewOverlay], detections: Sequence,
+                   hidden=None) -> np.ndarray:
+    """(n_views, n_markers, 2) the detection each drawn model marker is measured to in each
+    view: its nearest (Eq. 5's term); NaN where the view has no detection or the marker is
+    ``hidden`` there ((n_views, n_markers) of bool)."""
     n_markers = max((len(o.markers) for o in overlays), default=0)
-    out = np.full((len(overlays), n_markers), np.nan)
+    out = np.full((len(overlays), n_markers, 2), np.nan)
     for v, (overlay, pts) in enumerate(zip(overlays, detections, strict=False)):
         pts = np.asarray(pts, float).reshape(-1, 2)
         if len(pts) and len(overlay.markers):
             d = np.asarray(overlay.markers, float)[:, None] - pts[None]
-            out[v, :len(overlay.markers)] = np.hypot(d[..., 0], d[..., 1]).min(axis=1)
+            out[v, :len(overlay.markers)] = pts[np.argmin(np.hypot(d[..., 0], d[..., 1]),
+                                                          axis=1)]
     if hidden is not None:
-        h = np.asarray(hidden, bool)
-        out[:h.shape[0], :h.shape[1]][h[:out.shape[0], :out.shape[1]]] = np.nan
+        h = np.asarray(hidden, bool)[:out.shape[0], :out.shape[1]]
+        out[:h.shape[0], :h.shape[1]][h] = np.nan
+    return out
+
+
+def residuals_of(overlays: Sequence[ViewOverlay], matched: np.ndarray) -> np.ndarray:
+    """(n_views, n_markers) distance of each drawn model marker to its ``matched`` point
+    (:func:`matched_points`, :func:`own_keypoints`; NaN rows give NaN)."""
+    out = np.full(matched.shape[:2], np.nan)
+    for v, overlay in enumerate(overlays[:matched.shape[0]]):
+        m = min(len(overlay.markers), matched.shape[1])
+        d = np.asarray(overlay.markers, float)[:m] - matched[v, :m]
+        out[v, :m] = np.hypot(d[:, 0], d[:, 1])
     return out
 
 
@@ -159,16 +170,14 @@ def frame_keypoints(mapped, record: int, marker_names: Sequence[str]) -> list[np
     return out
 
 
-def keypoint_residuals(overlays: Sequence[ViewOverlay], keypoints: Sequence) -> np.ndarray:
-    """(n_views, n_markers) distance in pixels from each drawn model marker to its own
-    keypoint in each view (the labelled objective's term; NaN where the keypoint is
-    missing): :func:`marker_residuals` for labelled keypoints."""
+def own_keypoints(overlays: Sequence[ViewOverlay], keypoints: Sequence) -> np.ndarray:
+    """(n_views, n_markers, 2) each drawn model marker's own keypoint in each view (NaN where
+    missing): :func:`matched_points` for labelled keypoints."""
     n_markers = max((len(o.markers) for o in overlays), default=0)
-    out = np.full((len(overlays), n_markers), np.nan)
+    out = np.full((len(overlays), n_markers, 2), np.nan)
     for v, (overlay, kp) in enumerate(zip(overlays, keypoints, strict=False)):
         m = min(len(overlay.markers), len(kp))
-        d = np.asarray(overlay.markers, float)[:m] - np.asarray(kp, float)[:m, :2]
-        out[v, :m] = np.hypot(d[:, 0], d[:, 1])
+        out[v, :m] = np.asarray(kp, float)[:m, :2]
     return out
 
 

@@ -404,9 +404,15 @@ class MainWindow(QMainWindow):
                 lines.append("(no video)")
             view.set_info("  ".join(lines))
         self.posture_view.set_geometry(s.geometry())
-        residuals = (adapters.marker_residuals(overlays, detections, hidden)
-                     if keypoints is None else adapters.keypoint_residuals(overlays, keypoints))
-        self.marker_table.set_residuals(residuals, names, s.view_names, hidden)
+        matched = (adapters.matched_points(overlays, detections, hidden) if keypoints is None
+                   else adapters.own_keypoints(overlays, keypoints))
+        if hidden.size and matched.size:  # no residual where a marker is hidden
+            h = hidden[:matched.shape[0], :matched.shape[1]]
+            matched[:h.shape[0], :h.shape[1]][h] = np.nan
+        for k, view in enumerate(self.video_views):
+            view.set_residuals(matched[k] if k < len(matched) else None)
+        self.marker_table.set_residuals(adapters.residuals_of(overlays, matched), names,
+                                        s.view_names, hidden)
 
     def _results_changed(self, frames) -> None:
         if self.session.frame in frames:

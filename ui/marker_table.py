@@ -1,5 +1,5 @@
 """Per-marker residuals of the posture shown: one row per model marker, one column per view,
-the distance in pixels to the nearest detection (:func:`ui.adapters.marker_residuals`). The
+the distance in pixels to the nearest detection (:func:`ui.adapters.residuals_of`). The
 largest cell of the frame is shaded: the marker to look at first."""
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ class MarkerTable(QTableWidget):
         self.residuals = np.empty((0, 0))
 
     def set_residuals(self, residuals: np.ndarray, markers, views, hidden=None) -> None:
-        """Show an (n_views, n_markers) array of :func:`ui.adapters.marker_residuals`; a
+        """Show an (n_views, n_markers) array of :func:`ui.adapters.residuals_of`; a
         marker ``hidden`` in a view ((n_views, n_markers) of bool) reads "hidden" there."""
         self.residuals = np.asarray(residuals, float)
         hidden = np.zeros(self.residuals.shape, bool) if hidden is None else np.asarray(

@@ -14,6 +14,7 @@ DETECTION = "#39ff14"
 MARKER = "#ff7f0e"
 MARKER_RIM = "#1a1a1a"
 SKELETON = "#00d5ff"
+RESIDUAL = "#ff3030"  # marker → the point it is measured to
 PINNED = "#ff3df2"
 CURRENT_FRAME = "#ffd400"
 ERROR_CURVE = "#e8e8e8"
@@ -82,6 +83,11 @@ def keypoint_pen(marker: int, score: float):
 def marker_brush(marker: int):
     """A model marker filled with its keypoints' colour."""
     return pg.mkBrush(colour(marker))
+
+
+def residual_pen():
+    """The line from a model marker to the point it is measured to (its residual)."""
+    return pg.mkPen(RESIDUAL, width=1.2)
 
 
 def skeleton_pen():

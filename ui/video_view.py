@@ -102,6 +102,7 @@ class VideoView(pg.GraphicsLayoutWidget):
         self.detected.moving.connect(self._detection_moving)
         self._detected_xy = np.empty((0, 2))
         self.lines = pg.PlotCurveItem(pen=style.skeleton_pen(), connect="pairs")
+        self.residual_lines = pg.PlotCurveItem(pen=style.residual_pen(), connect="pairs")
         self.markers = DraggableScatter(**style.marker_style())
         self.markers.setZValue(10)
         self.markers.dragged.connect(self._dropped)
@@ -115,7 +116,8 @@ class VideoView(pg.GraphicsLayoutWidget):
         # labelled keypoints: one colour per marker (the model marker's), faded by score
         self.keypoints = pg.ScatterPlotItem(**style.keypoint_style())
         self._keypoints = np.empty((0, 3))
-        for item in (self.detected, self.keypoints, self.lines, self.markers, self.selection):
+        for item in (self.detected, self.keypoints, self.lines, self.residual_lines,
+                     self.markers, self.selection):
             self.plot.addItem(item)
         self.labels: list[pg.TextItem] = []
         self.info = pg.TextItem(anchor=(0, 0), color="#ffffff", fill=pg.mkBrush(0, 0, 0, 140))
@@ -194,6 +196,16 @@ class VideoView(pg.GraphicsLayoutWidget):
         lines = np.asarray(overlay.lines, float).reshape(-1, 2)
         self.lines.setData(lines[:, 0], lines[:, 1])
         self._set_labels(names, self._marker_xy)
+
+    def set_residuals(self, matched) -> None:
+        """Draw each model marker's residual: a line from the marker to the point it is
+        measured to, ``matched`` (n_markers, 2) in the overlay's marker order (NaN rows: none,
+        e.g. hidden); None clears."""
+        xy = self._marker_xy
+        m = np.empty((0, 2)) if matched is None else np.asarray(matched, float)[:len(xy)]
+        ok = np.isfinite(m).all(axis=1) & np.isfinite(xy[:len(m)]).all(axis=1)
+        pairs = np.stack([xy[:len(m)][ok], m[ok]], axis=1).reshape(-1, 2)
+        self.residual_lines.setData(pairs[:, 0], pairs[:, 1])
 
     def set_info(self, text: str) -> None:
         self.info.setText(text)
@@ -293,15 +305,19 @@ class VideoView(pg.GraphicsLayoutWidget):
     # -- for tests and screenshots ------------------------------------------------------
     def drawn(self) -> dict[str, np.ndarray]:
         """The data the items hold: ``markers``, ``hidden`` (which markers are drawn as
-        hidden), ``lines`` (pairs), ``detections`` and ``keypoints`` (x, y, marker index)."""
+        hidden), ``lines`` and ``residuals`` (pairs: marker, the point it is measured to),
+        ``detections`` and ``keypoints`` (x, y, marker index)."""
         mx, my = self.markers.getData()
         lx, ly = self.lines.getData()
+        rx, ry = self.residual_lines.getData()
         dx, dy = self.detected.getData()
         kx, ky = self.keypoints.getData()
         return {"markers": np.column_stack([mx, my]),
                 "hidden": np.asarray([p.symbol() == style.HIDDEN_SYMBOL
                                       for p in self.markers.points()], bool),
                 "lines": np.column_stack([lx, ly]) if lx is not None else np.empty((0, 2)),
+                "residuals": (np.column_stack([rx, ry]) if rx is not None
+                              else np.empty((0, 2))),
                 "detections": np.column_stack([dx, dy]),
                 "keypoints": np.column_stack([kx, ky, np.asarray(
                     self.keypoints.data["data"], float)])}

@@ -209,3 +209,26 @@ def test_hidden_marks_follow_the_chain(window):
     assert s.commit_body(replace(s.body, name="renamed"))
     assert s.fit_detections is not marked  # the marks are made again for the new chain
     assert s.fit_detections.hidden[4, 1, 3]
+
+
+def test_each_marker_draws_its_residual_to_the_point_it_is_measured_to(window, wait_idle,
+                                                                      qtbot):
+    """XMALab-style residual lines: from each model marker to its nearest detection in the
+    view, as long as the table's residual; none for a marker hidden there."""
+    s = window.session
+    s.set_frame(3)
+    _fitted(window, wait_idle)
+    for v, view in enumerate(window.video_views):
+        drawn = view.drawn()
+        pairs = drawn["residuals"].reshape(-1, 2, 2)
+        assert len(pairs) == len(s.body.marker_names)
+        np.testing.assert_allclose(pairs[:, 0], drawn["markers"])
+        dets = s.frame_detections()[v]
+        for m, (a, b) in enumerate(pairs):
+            assert np.any(np.all(dets == b, axis=1))  # a detection ...
+            length = np.hypot(*(b - a))
+            assert window.marker_table.text(m, v) == f"{length:.2f}"  # ... the table's
+    _click_marker(qtbot, window.video_views[1], 3)
+    qtbot.keyClick(window.table, Qt.Key.Key_H)
+    assert len(window.video_views[1].drawn()["residuals"]) == 2 * 3  # M3's is gone there
+    assert len(window.video_views[0].drawn()["residuals"]) == 2 * 4
