@@ -102,11 +102,9 @@ def view_overlays(body: Body, cameras: Sequence, angles_deg, roots=None) -> list
     return project_geometry(posture_geometry(body, angles_deg, roots), cameras)
 
 
-def matched_points(overlays: Sequence[ViewOverlay], detections: Sequence,
-                   hidden=None) -> np.ndarray:
+def matched_points(overlays: Sequence[ViewOverlay], detections: Sequence) -> np.ndarray:
     """(n_views, n_markers, 2) the detection each drawn model marker is measured to in each
-    view: its nearest (Eq. 5's term); NaN where the view has no detection or the marker is
-    ``hidden`` there ((n_views, n_markers) of bool)."""
+    view: its nearest (Eq. 5's term); NaN where the view has no detection."""
     n_markers = max((len(o.markers) for o in overlays), default=0)
     out = np.full((len(overlays), n_markers, 2), np.nan)
     for v, (overlay, pts) in enumerate(zip(overlays, detections, strict=False)):
@@ -115,9 +113,6 @@ def matched_points(overlays: Sequence[ViewOverlay], detections: Sequence,
             d = np.asarray(overlay.markers, float)[:, None] - pts[None]
             out[v, :len(overlay.markers)] = pts[np.argmin(np.hypot(d[..., 0], d[..., 1]),
                                                           axis=1)]
-    if hidden is not None:
-        h = np.asarray(hidden, bool)[:out.shape[0], :out.shape[1]]
-        out[:h.shape[0], :h.shape[1]][h] = np.nan
     return out
 
 

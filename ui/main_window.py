@@ -404,7 +404,7 @@ class MainWindow(QMainWindow):
                 lines.append("(no video)")
             view.set_info("  ".join(lines))
         self.posture_view.set_geometry(s.geometry())
-        matched = (adapters.matched_points(overlays, detections, hidden) if keypoints is None
+        matched = (adapters.matched_points(overlays, detections) if keypoints is None
                    else adapters.own_keypoints(overlays, keypoints))
         if hidden.size and matched.size:  # no residual where a marker is hidden
             h = hidden[:matched.shape[0], :matched.shape[1]]

@@ -614,10 +614,8 @@ class Session(QObject):
         observed = self.keypoints.observations if self.keypoints is not None else None
         if observed is not None and observed.kind == "points3d":
             return out  # fitted to 3D points: a mark in a view means nothing there
-        for v in range(len(self.views)):
-            for i, m in enumerate(names):
-                out[v, i] = detection_edits.is_hidden(self.detection_edits, record, v, m)
-        return out
+        marks = self._marks_of(self.detection_edits, record, names)
+        return out if marks is None else marks
 
     def frame_detections(self, record: int | None = None) -> list[np.ndarray]:
         """Detected centroids of a record, one (n, 2) array per view (none in a keypoint
@@ -940,6 +938,7 @@ class Session(QObject):
         if missing:
             self.error.emit(missing)
             return False
+        some = frames is not None  # not Fit all: these frames get neighbours as context
         if frames is None:
             frames = [f for f in range(self.n_frames)
                       if self.results.get(f) is None or self.results[f].status
@@ -952,7 +951,7 @@ class Session(QObject):
         if fitter is None:
             return False
         wanted = set(frames)
-        if len(frames) < self.n_frames and self.params.candidates > 1:
+        if some and self.params.candidates > 1:
             frames = self._with_context(frames)
         self._edit = Edit(f"{label} ({len(wanted)} frames)")
         worker = FitWorker(fitter, self.fit_detections, frames, backend.fit_chunk_size())
@@ -1308,18 +1307,16 @@ class Session(QObject):
             if result is None or self.model is None or not np.all(
                     np.isfinite(result.angles_deg)):
                 continue
-            marks = self._frame_marks(edits, f)
-            if self.keypoints is not None:  # the record's keypoints, a hidden one missing
+            if self.keypoints is not None:  # the record's keypoints
                 frame_input = self.keypoints.observations.take([f])
-                if marks is not None:
-                    frame_input, marks = frame_input.with_hidden(marks[None]), None
             else:
                 frame_input = [detection_edits.apply_edit(self.detections.points_of(f, v),
                                                           edits.get((f, v)))
                                for v in range(len(self.views))]
             try:
-                error, per_view = self._fitter().error(result.angles_deg, frame_input,
-                                                       result.root_positions, marks)
+                error, per_view = self._fitter().error(
+                    result.angles_deg, frame_input, result.root_positions,
+                    self._marks_of(edits, f, self.body.marker_names))
             except LocatedError as err:
                 self.error.emit(str(err))
                 return False
@@ -1332,10 +1329,11 @@ class Session(QObject):
                                        if frames[0] in self.results else ""))
         return True
 
-    def _frame_marks(self, edits, frame: int) -> np.ndarray | None:
-        """(n_views, n_markers) hidden marks of one record under ``edits``, or None."""
+    def _marks_of(self, edits, frame: int, names) -> np.ndarray | None:
+        """(n_views, len(names)) the markers ``names`` hidden in each view of one record under
+        ``edits``, or None when none is."""
         marks = detection_edits.hidden_marks({k: e for k, e in edits.items() if k[0] == frame},
-                                             frame + 1, len(self.views), self.body.marker_names)
+                                             frame + 1, len(self.views), names)
         return None if marks is None else marks[frame]
 
     def toggle_hidden(self, view: int, marker: int, frames: Iterable[int] | None = None
