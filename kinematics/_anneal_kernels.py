@@ -333,8 +333,11 @@ def nearest_sorted(px, py, points, a, b, claimed):
     best = np.inf
     arg = -1
     nc = claimed.shape[0]
-    c = lo  # rightward from the insertion point, then leftward (two loops: a merged one
-    gap = 0.0  # with a step was 1.3x slower per query at 1000 detections)
+    # Rightward from the insertion point, then leftward, in two written-out loops: a merged
+    # loop with a step was 1.3x slower per query at 1000 detections, and the shared body as
+    # an inline helper returning (best, row) 3x slower (156-169 -> 495-507 ns per query).
+    c = lo
+    gap = 0.0
     while c < b and gap <= best:
         dx = points[c, 0] - px
         gap = dx * dx
