@@ -256,6 +256,36 @@ def _as_ragged(detections, view_names: Sequence[str]) -> _Ragged:
     return _Ragged(sorted_by_x(pts[good], new_off), new_off, dropped.astype(np.int64), nv)
 
 
+def _unseen_markers(view_markers, view_names: Sequence[str], marker_names: Sequence[str]
+                    ) -> np.ndarray | None:
+    """(n_views, n_markers) bool: markers a view cannot show, from ``view_markers`` (view
+    name -> the marker names it shows; views not named show all); None when every view
+    shows every marker."""
+    if not view_markers:
+        return None
+    if not isinstance(view_markers, Mapping):
+        raise KinematicsError("view_markers must map view names to marker names",
+                              field="view_markers")
+    index = {m: k for k, m in enumerate(marker_names)}
+    unseen = np.zeros((len(view_names), len(marker_names)), bool)
+    for view, shown in view_markers.items():
+        if view not in view_names:
+            raise KinematicsError(f"no view named {view!r} (views: {', '.join(view_names)})",
+                                  field="view_markers")
+        if isinstance(shown, str):
+            raise KinematicsError(f"view {view!r}: give a list of marker names, not one "
+                                  f"string", field="view_markers")
+        unknown = [m for m in shown if m not in index]
+        if unknown:
+            raise KinematicsError(f"view {view!r}: {unknown[0]!r} is not a marker of the "
+                                  f"body (markers: {', '.join(marker_names)})",
+                                  field="view_markers")
+        v = view_names.index(view)
+        unseen[v] = True
+        unseen[v, [index[m] for m in shown]] = False
+    return unseen if unseen.any() else None
+
+
 # -- the fitter -----------------------------------------------------------------------------
 class Fitter:
     """Fits a body's posture to marker detections, frame by frame.
@@ -269,6 +299,13 @@ class Fitter:
         cameras' names as view names.
     params : AnnealParams, optional
         Table 1 defaults.
+    view_markers : mapping view name -> sequence of marker names, optional
+        The model markers a view can show; a view not named shows all. Markers left out
+        are hidden in that view in every frame (:meth:`Observations.with_hidden`): a view
+        that keeps only one colour of marker (``hsv_lower``/``hsv_upper`` of a project's
+        ``[[views]]``) matches its detections to the markers of that colour only, so legs
+        marked in different colours cannot take each other's markers; a camera that never
+        sees the far side of the body leaves those markers out.
 
     Attributes
     ----------
@@ -281,7 +318,8 @@ class Fitter:
         The body is invalid, has no markers or no free axis, or there are no cameras.
     """
 
-    def __init__(self, body: Body, cameras, params: AnnealParams | None = None) -> None:
+    def __init__(self, body: Body, cameras, params: AnnealParams | None = None,
+                 view_markers: Mapping[str, Sequence[str]] | None = None) -> None:
         self.params = params if params is not None else AnnealParams()
         if not isinstance(self.params, AnnealParams):
             raise KinematicsError("params must be an AnnealParams", field="params")
@@ -289,6 +327,7 @@ class Fitter:
         self.body = body
         self.cameras = list(self.problem.cameras)
         self.view_names = list(self.problem.view_names)
+        self.unseen = _unseen_markers(view_markers, self.view_names, body.marker_names)
         self._locked = body.locked_mask()
         self._mean_deg = self.problem.mean_deg
         self._ranges_deg = body.ranges_deg()
@@ -343,6 +382,14 @@ class Fitter:
         return self.problem.state(self._posture_deg(angles_deg),
                                   self._root_array(root_positions))
 
+    @property
+    def unseen_marks(self) -> np.ndarray:
+        """A frame's ``obs3`` slot for detections given per view: the markers no view shows
+        (``view_markers``) as the kernels read hidden marks, or no mark."""
+        if self.unseen is None:
+            return _ak.NO_HIDDEN
+        return np.ascontiguousarray(self.unseen.T, dtype=float)
+
     def _frame_ragged(self, detections_frame) -> _Ragged:
         return _as_ragged([detections_frame], self.view_names)
 
@@ -353,7 +400,7 @@ class Fitter:
         p = self.params
         if p.match != "auto":
             return p.match == "3d"
-        return self.n_views >= 3 and self._limbs(p)
+        return self.n_views >= 3 and self.unseen is None and self._limbs(p)
 
     def _limbs(self, p: AnnealParams) -> bool:
         """Whether the body is annealed in several partitions (many limbs)."""
@@ -397,6 +444,12 @@ class Fitter:
         if obs.hidden is not None and obs.hidden.shape[2] != nm:
             raise KinematicsError(f"hidden marks are for {obs.hidden.shape[2]} markers, the "
                                   f"body has {nm}", field="hidden")
+        if self.unseen is not None and obs.kind in ("points", "keypoints"):
+            if self.params.match == "3d" and obs.kind == "points":
+                raise KinematicsError("views that show only some markers (view_markers) are "
+                                      "matched per view: set match = 'views'", field="match")
+            obs = obs.with_hidden(np.broadcast_to(self.unseen, (obs.n_frames,
+                                                                *self.unseen.shape)))
         if obs.kind == "points" and self.matches_in_3d:
             if self.n_views < 3:
                 raise KinematicsError(f"match '3d' triangulates markers seen in 3 or more "
@@ -449,7 +502,7 @@ class Fitter:
         error_per_view : ndarray, shape (n_views,) (zeros for 3D points)
         """
         if isinstance(detections_frame, Observations) or self.matches_in_3d or (
-                hidden is not None):
+                hidden is not None or self.unseen is not None):
             obs = self.observations(detections_frame if isinstance(
                 detections_frame, Observations) else [detections_frame])
             if hidden is not None:

@@ -90,7 +90,6 @@ def refine(fitter: Fitter, angles_deg, detections_frame, root_positions=None, *,
     steps, gate = _gate_steps(fitter, steps, gate_px)
     pr = fitter.problem
     rag = fitter._frame_ragged(detections_frame)
-    nm = pr.folded.marker_joint.size
 
     def run(n_steps: int, start_deg, start_roots):
         state, pos, rot = fitter.state(start_deg, start_roots)
@@ -98,7 +97,7 @@ def refine(fitter: Fitter, angles_deg, detections_frame, root_positions=None, *,
                                           n_steps, gate, pos, rot, *pr.folded, *pr.cams,
                                           _ak.OBJ_NEAREST, rag.points,
                                           np.ones(len(rag.points)), rag.offsets,
-                                          np.zeros((nm, 4)))
+                                          fitter.unseen_marks)
         angles, roots = pr.posture(state, pos, rot)
         out = fitter._to_range_deg(angles)
         error, per_view = fitter.error(out, detections_frame, roots)
@@ -147,9 +146,10 @@ def refine_many(fitter: Fitter, angles_deg, detections, root_positions=None, *,
         state[k], pos[k], rot[k] = fitter.state(start[k], roots[k])
     sse = np.empty(n)
     pairs = np.empty(n, np.int64)
-    nm = pr.folded.marker_joint.size
+    marks = fitter.unseen_marks
     obs = ObservationArrays(_ak.OBJ_NEAREST, rag.points, np.ones(len(rag.points)),
-                            rag.offsets, np.zeros((n, nm, 4)))
+                            rag.offsets, np.ascontiguousarray(np.broadcast_to(
+                                marks, (n, *marks.shape))))
     _rk.refine_frames(state, pos, rot, pr.folded, pr.cams, pr.dofs, steps, gate, obs, sse,
                       pairs)
     out = []
@@ -184,7 +184,7 @@ def refine_reference(fitter: Fitter, angles_deg, detections_frame, root_position
     proj0 = fitter.project(np.rad2deg(angles), roots)
     pair = np.empty(nv * nm, np.int64)
     n_pairs = _rk.assign_pairs(_ak.OBJ_NEAREST, proj0, np.zeros((nm, 3)), rag.points,
-                               np.ones(len(rag.points)), rag.offsets, np.zeros((nm, 4)), gate,
+                               np.ones(len(rag.points)), rag.offsets, fitter.unseen_marks, gate,
                                pair)
     free = _free_angles(fitter)
     ranges = np.deg2rad(fitter.body.ranges_deg())

@@ -87,10 +87,12 @@ __all__ = [
 CORRECTED = "corrected"
 
 
-def make_fitter(body: Body, cameras: Mapping, params: AnnealParams) -> Fitter:
+def make_fitter(body: Body, cameras: Mapping, params: AnnealParams,
+                view_markers: Mapping | None = None) -> Fitter:
     """A :class:`~kinematics.anneal.Fitter` for a body, the cameras of the views (name ->
-    camera, in view order) and parameters."""
-    return Fitter(body, cameras, params)
+    camera, in view order), parameters and the markers each view shows (``[[views]]
+    model_markers``)."""
+    return Fitter(body, cameras, params, view_markers=view_markers)
 
 
 def detect_markers(config, progress: Callable[[int, int], object],

@@ -649,6 +649,14 @@ def _roi_rule(roi: list) -> str | None:
     return None
 
 
+def _view_hsv_rule(hsv: list) -> str | None:
+    if not hsv:
+        return None
+    if len(hsv) != 3:
+        return f"must be [hue, saturation, value], got {len(hsv)} entries"
+    return _hsv_rule(hsv)
+
+
 def _hsv_rule(hsv: list) -> str | None:
     if hsv[0] > 179:
         return f"OpenCV hue runs 0..179, got {hsv[0]}"
@@ -694,6 +702,16 @@ VIEWS = register_section(Section("views", (
     Key("camera", "str", "", "Camera of this view in the camera file; empty: the view's name."),
     Key("video", "int", 0, "Index of the view's video in video.path (synchronised cameras).",
         min=0),
+    Key("model_markers", "list[str]", [], "The chain's markers this view shows (names, or "
+        "patterns such as 'LF_*'); the fit matches the view's detections to these only. "
+        "Empty: all. For markers of several colours: one view per colour on the same "
+        "camera, each with its colour's markers and hsv_lower/hsv_upper."),
+    Key("hsv_lower", "list[int]", [], "This view keeps only markers of this colour: lowest "
+        "[hue, saturation, value], in place of the filter chain's hsv_range step (which the "
+        "chain must have). Empty: the chain's own range.", min=0, max=255,
+        check=_view_hsv_rule),
+    Key("hsv_upper", "list[int]", [], "Highest [hue, saturation, value] of this view's "
+        "colour (with hsv_lower).", min=0, max=255, check=_view_hsv_rule),
 ), doc="One entry per view: a rectangle of a video frame seen by one camera.", array=True))
 
 _MORPH_KEYS = (

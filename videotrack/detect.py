@@ -67,16 +67,35 @@ def settings_from_config(config) -> DetectSettings:
     """Detection settings of a loaded project file (views, filters, markers, fields)."""
     video = config["video"]
     deinterlace = Deinterlace(video["deinterlace"], video["field_order"], video["line_doubling"])
+    filters = FilterChain.from_config(config)
     views = [
         View(v["name"], tuple(v["roi"]) or None, v["flip_x"], v["flip_y"], v["camera"] or None,
-             v["video"])
-        for v in config["views"]
+             v["video"], _view_hsv(v, i, filters, config.path))
+        for i, v in enumerate(config["views"])
     ]
     if not views:  # one whole-frame view per video
         n = len(video_paths(config))
         views = [View("view" if n == 1 else f"view{i}", video=i) for i in range(n)]
-    return DetectSettings(tuple(views), FilterChain.from_config(config),
-                          MarkerSettings.from_config(config), deinterlace)
+    return DetectSettings(tuple(views), filters, MarkerSettings.from_config(config),
+                          deinterlace)
+
+
+def _view_hsv(view, i: int, filters: FilterChain, file):
+    """The colour range of ``[[views]]`` entry ``i`` (None: the chain's own), checked: both
+    bounds or neither, and a chain with one hsv_range step for it to replace."""
+    lower, upper = view["hsv_lower"], view["hsv_upper"]
+    if not lower and not upper:
+        return None
+    if not lower or not upper:
+        missing = "hsv_upper" if lower else "hsv_lower"
+        raise VideoTrackError(f"a view's colour needs both hsv_lower and hsv_upper; "
+                              f"{missing} is missing", file=file, field=f"views[{i}].{missing}")
+    ranges = [s for s in filters.steps if s["type"] == "hsv_range"]
+    if len(ranges) != 1:
+        raise VideoTrackError(f"a view's colour replaces the filter chain's hsv_range step; "
+                              f"the chain has {len(ranges)}: give it exactly one",
+                              file=file, field=f"views[{i}].hsv_lower")
+    return tuple(lower), tuple(upper)
 
 
 def video_paths(config) -> list[Path]:

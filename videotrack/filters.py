@@ -154,6 +154,9 @@ class FilterChain:
                 if step["view"] and step["view"] != plane.view.name:
                     continue
                 ops.append(_mask_op(self._mask_image(step, i, plane)))
+            elif t == "hsv_range" and getattr(plane.view, "hsv", None) is not None:
+                lower, upper = plane.view.hsv  # the view keeps its own colour of markers
+                ops.append(_simple_op({**step, "lower": list(lower), "upper": list(upper)}))
             else:
                 ops.append(_simple_op(step))
             if i == self.weights_at:

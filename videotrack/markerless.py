@@ -210,7 +210,7 @@ def fitting_model(model, data: KeypointInput):
     """The model ``data`` is fitted with: ``model``, less its cameras for 3D points (they
     were triangulated with them; the fit itself has no views)."""
     if data.observations.kind == "points3d":
-        return dataclasses.replace(model, cameras={})
+        return dataclasses.replace(model, cameras={}, view_markers={})
     return model
 
 

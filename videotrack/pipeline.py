@@ -83,9 +83,10 @@ BAD_SHARE_WARNING = 0.1
 #: Sidecar keys that decide whether results are up to date (inputs by content hash, and
 #: every parameter), in the order ``changed: ...`` lists them; paths are not among them.
 IDENTITY_KEYS = ("chain_sha256", "cameras_sha256", "histograms_sha256", "views",
-                 "view_cameras", "axes", "markers", "seed", "anneal", "detections_sha256",
-                 "keypoints_sha256", "keypoints_options")
-_KEY_NAMES = {"view_cameras": "view cameras", "keypoints_options": "keypoint settings"}
+                 "view_cameras", "view_markers", "axes", "markers", "seed", "anneal",
+                 "detections_sha256", "keypoints_sha256", "keypoints_options")
+_KEY_NAMES = {"view_cameras": "view cameras", "view_markers": "the markers views show",
+              "keypoints_options": "keypoint settings"}
 
 
 @dataclass(frozen=True)
@@ -98,13 +99,19 @@ class ProjectModel:
     chain_path: Path
     cameras_path: Path
     histograms_path: Path | None
+    #: view name -> the chain's markers it shows (``[[views]] model_markers``); views not
+    #: named show all
+    view_markers: dict = field(default_factory=dict)
 
     @property
     def view_names(self) -> list[str]:
         return list(self.cameras)
 
-    def fitter(self) -> Fitter:
-        return Fitter(self.body, self.cameras, self.params)
+    def fitter(self, body: Body | None = None) -> Fitter:
+        """The fitter of this project (optionally of an edited ``body`` with the same
+        markers)."""
+        return Fitter(body or self.body, self.cameras, self.params,
+                      view_markers=self.view_markers)
 
     def signature(self, base: str | os.PathLike | None = None) -> dict:
         """What a results file depends on, for its sidecar (replay and staleness): the
@@ -122,6 +129,7 @@ class ProjectModel:
             "view_cameras": {view: cam.name for view, cam in self.cameras.items()},
             "axes": self.body.axis_labels,
             "markers": len(self.body.marker_names), "seed": self.params.seed,
+            **({"view_markers": self.view_markers} if self.view_markers else {}),
             "anneal": _jsonable(self.params.to_dict()),
         }
         if self.histograms_path is not None:
@@ -196,7 +204,7 @@ def load_model(config, **overrides) -> ProjectModel:
     views = config["views"]
     if not views and is_markerless(config):  # keypoint files: one per camera, in file order
         views = [{"name": name, "camera": name} for name in all_cameras]
-    cameras = {}
+    cameras, shown = {}, {}
     for i, view in enumerate(views):
         name = view["camera"] or view["name"]
         if name not in all_cameras:
@@ -204,10 +212,31 @@ def load_model(config, **overrides) -> ProjectModel:
                                   f"{', '.join(all_cameras)})", file=config.path,
                                   field=f"views[{i}].camera")
         cameras[view["name"]] = all_cameras[name]
+        patterns = view.get("model_markers") or []
+        if patterns:
+            shown[view["name"]] = markers_matching(patterns, body.marker_names, config.path,
+                                                   f"views[{i}].model_markers")
     if not cameras:
         raise VideoTrackError("no views: add [[views]] tables", file=config.path, field="views")
     return ProjectModel(body, cameras, anneal_params(config, **overrides), Path(chain_path),
-                        Path(cameras_path), Path(hist_path) if hist_path else None)
+                        Path(cameras_path), Path(hist_path) if hist_path else None, shown)
+
+
+def markers_matching(patterns: Sequence[str], marker_names: Sequence[str], file=None,
+                     where: str = "model_markers") -> list[str]:
+    """The markers (in the chain's order) that names or shell patterns (``LF_*``) pick;
+    a pattern that picks none is an error naming it."""
+    from fnmatch import fnmatchcase
+
+    picked = set()
+    for j, pattern in enumerate(patterns):
+        hits = {m for m in marker_names if fnmatchcase(m, pattern)}
+        if not hits:
+            raise VideoTrackError(f"{pattern!r} names no marker of the chain (markers: "
+                                  f"{', '.join(marker_names)})", file=file,
+                                  field=f"{where}[{j}]")
+        picked |= hits
+    return [m for m in marker_names if m in picked]
 
 
 def default_results_path(config, detections_path: Path) -> Path:

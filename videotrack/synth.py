@@ -28,6 +28,7 @@ from kinematics.fk import forward_kinematics
 from kinematics.model import Body
 from kinematics.packing import pack_body
 from videotrack.errors import VideoTrackError
+from videotrack.marker_colours import bgr, check_colours, colour_of_markers, hsv_range
 from videotrack.render import render_markers
 
 LAYOUTS = ("side-by-side", "stacked", "separate")
@@ -49,6 +50,10 @@ class SynthOptions:
         postures, as PAL video; ``top_field_first`` says which field comes first in time.
     layout : views side by side or stacked in one video, or one video per camera.
     seed : seeds noise, ghosts and occlusions (the trajectory has its own seed).
+    colours : ((colour, marker patterns), ...): draw a colour video, each marker in its
+        colour (:data:`videotrack.marker_colours.PALETTE`), ghosts in the colours in turn,
+        and write one view per camera and colour (:mod:`videotrack.marker_colours`); empty:
+        grey markers.
     """
 
     marker_diameter: float = 4.0
@@ -64,6 +69,7 @@ class SynthOptions:
     top_field_first: bool = True
     layout: str = "side-by-side"
     seed: int = 0
+    colours: tuple[tuple[str, tuple[str, ...]], ...] = ()
 
     def validate(self) -> None:
         checks = [
@@ -82,6 +88,7 @@ class SynthOptions:
             if not ok:
                 raise VideoTrackError(f"must be {what}, got {getattr(self, name)!r}",
                                       field=name)
+        check_colours(self.colours)
 
 
 @dataclass(frozen=True)
@@ -95,6 +102,7 @@ class SynthScene:
     visible : (n_images, n_views, n_markers) bool, False where occluded.
     ghosts : (n_images, n_views, n_ghosts, 2), NaN where a flickering ghost is off.
     view_names : camera (view) names, in order.
+    marker_colour : (n_markers,) index into ``SynthOptions.colours``, or None (grey).
 
     A scene of given 3D points (:func:`simulate_points`) has no posture, root or joints
     (zero columns); its ``visible`` is also False where a point is absent (NaN) or behind a
@@ -109,6 +117,7 @@ class SynthScene:
     visible: np.ndarray
     ghosts: np.ndarray
     view_names: tuple[str, ...]
+    marker_colour: np.ndarray | None = None
 
 
 def camera_sizes(cameras: Mapping) -> list[tuple[int, int]]:
@@ -148,14 +157,25 @@ def simulate(
     rng = np.random.default_rng(options.seed)
     visible = _occlusions(rng, proj.shape[:3], options)
     ghosts = _ghosts(rng, n, camera_sizes(cameras), options)
-    return SynthScene(angles, roots, pose.markers, pose.joints, proj, visible, ghosts, names)
+    return SynthScene(angles, roots, pose.markers, pose.joints, proj, visible, ghosts, names,
+                      _colours(options, body.marker_names))
 
 
-def simulate_points(points: np.ndarray, cameras: Mapping, options: SynthOptions) -> SynthScene:
+def _colours(options: SynthOptions, names: Sequence[str] | None) -> np.ndarray | None:
+    if not options.colours:
+        return None
+    if names is None:
+        raise VideoTrackError("coloured markers need the markers' names", field="colours")
+    return colour_of_markers(options.colours, names)
+
+
+def simulate_points(points: np.ndarray, cameras: Mapping, options: SynthOptions,
+                    names: Sequence[str] | None = None) -> SynthScene:
     """Project given 3D marker trajectories and decide occlusions and ghosts for every image.
 
     ``points`` (n_images, n_markers, 3) are in the cameras' world units; a NaN point is a
     marker absent in that image: it is not drawn and not visible (as one behind a camera).
+    ``names`` (the markers' names) are needed for coloured markers.
     """
     options.validate()
     pts = np.asarray(points, dtype=float)
@@ -166,13 +186,13 @@ def simulate_points(points: np.ndarray, cameras: Mapping, options: SynthOptions)
     if options.interlaced and n % 2:
         raise VideoTrackError("an interlaced video needs an even number of images (two "
                               "fields per frame)", field="points")
-    names = tuple(cameras)
+    views = tuple(cameras)
     proj = np.stack([cam.project(pts) for cam in cameras.values()], axis=1)
     rng = np.random.default_rng(options.seed)
     visible = _occlusions(rng, proj.shape[:3], options) & np.isfinite(proj).all(axis=-1)
     ghosts = _ghosts(rng, n, camera_sizes(cameras), options)
     return SynthScene(np.empty((n, 0)), np.empty((n, 0, 3)), pts, np.empty((n, 0, 3)), proj,
-                      visible, ghosts, names)
+                      visible, ghosts, views, _colours(options, names))
 
 
 def read_points(path: str | os.PathLike) -> tuple[list[str], np.ndarray]:
@@ -285,13 +305,22 @@ def view_rois(sizes: Sequence[tuple[int, int]], layout: str) -> list[tuple[int, 
 
 def render_view_images(scene: SynthScene, sizes, options: SynthOptions, image: int,
                        rng: np.random.Generator) -> list[np.ndarray]:
-    """The grey image of each view for one posture (markers, ghosts, noise)."""
+    """The image of each view for one posture (markers, ghosts, noise): grey, or colour
+    with coloured markers."""
     out = []
     for v, (w, h) in enumerate(sizes):
-        pts = scene.projections[image, v][scene.visible[image, v]]
+        seen = scene.visible[image, v]
+        pts = scene.projections[image, v][seen]
         ghosts = scene.ghosts[image, v]
-        pts = np.concatenate([pts, ghosts[np.isfinite(ghosts[:, 0])]])
-        out.append(render_markers((h, w), pts, options.marker_diameter, options.intensity,
+        on = np.isfinite(ghosts[:, 0])
+        pts = np.concatenate([pts, ghosts[on]])
+        shape, gain = (h, w), options.intensity
+        if scene.marker_colour is not None:  # ghosts take the colours in turn
+            palette = np.array([bgr(c, options.intensity) for c, _ in options.colours])
+            which = np.concatenate([scene.marker_colour[seen],
+                                    np.flatnonzero(on) % len(palette)])
+            shape, gain = (h, w, 3), palette[which].reshape(-1, 3)
+        out.append(render_markers(shape, pts, options.marker_diameter, gain,
                                   options.background, options.noise_sigma, rng))
     return out
 
@@ -313,7 +342,8 @@ def iter_frames(scene: SynthScene, sizes, options: SynthOptions) -> Iterable[lis
             continue
         width = max(x + w for x, _, w, _ in rois)
         height = max(y + h for _, y, _, h in rois)
-        frame = np.full((height, width), round(options.background), np.uint8)
+        frame = np.full((height, width, *views[0].shape[2:]), round(options.background),
+                        np.uint8)
         for (x, y, w, h), img in zip(rois, views, strict=True):
             frame[y:y + h, x:x + w] = img
         yield [frame]
@@ -463,18 +493,33 @@ def detection_config_text(cameras: Mapping, options: SynthOptions, n_videos: int
     """The ``[[views]]``, ``[[filters.steps]]`` and ``[markers]`` tables that find the
     markers of a synthetic video (TOML text)."""
     rois = view_rois(camera_sizes(cameras), options.layout)
+    threshold = int(options.background + options.intensity / 3)
+    colours = options.colours or ((None, ()),)
     lines = []
     for k, (name, (x, y, w, h)) in enumerate(zip(cameras, rois, strict=True)):
-        lines += ["[[views]]", f'name = "{name}"', f"roi = [{x}, {y}, {w}, {h}]",
-                  f'camera = "{name}"']
-        if n_videos > 1:
-            lines.append(f"video = {k}")
-        lines.append("")
-    threshold = int(options.background + options.intensity / 3)
+        for colour, patterns in colours:
+            lines += ["[[views]]", f'name = "{name}_{colour}"' if colour else f'name = "{name}"',
+                      f"roi = [{x}, {y}, {w}, {h}]", f'camera = "{name}"']
+            if n_videos > 1:
+                lines.append(f"video = {k}")
+            if colour:
+                lower, upper = hsv_range(colour, threshold)
+                lines += [f"model_markers = [{', '.join(_quoted(p) for p in patterns)}]",
+                          f"hsv_lower = {lower}", f"hsv_upper = {upper}"]
+            lines.append("")
     min_area = max(1, int(0.25 * np.pi * (options.marker_diameter / 2) ** 2))
-    lines += ["[[filters.steps]]", 'type = "threshold"', f"value = {threshold}", "",
-              "[markers]", f"min_area = {min_area}", ""]
+    if options.colours:
+        lower, upper = hsv_range(options.colours[0][0], threshold)
+        lines += ["# each view keeps its own colour in place of this range", "[[filters.steps]]",
+                  'type = "hsv_range"', f"lower = {lower}", f"upper = {upper}", ""]
+    else:
+        lines += ["[[filters.steps]]", 'type = "threshold"', f"value = {threshold}", ""]
+    lines += ["[markers]", f"min_area = {min_area}", ""]
     return "\n".join(lines)
+
+
+def _quoted(text: str) -> str:
+    return '"' + text.replace("\\", "\\\\").replace('"', '\\"') + '"'
 
 
 def write_synthetic_project(
@@ -520,7 +565,7 @@ def write_points_project(
     cameras and a project config for ``videotrack detect`` (no chain), atomically."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    scene = simulate_points(points, cameras, options)
+    scene = simulate_points(points, cameras, options, names)
     if len(names) != scene.markers.shape[1]:
         raise VideoTrackError(f"{len(names)} names for {scene.markers.shape[1]} markers",
                               field="names")

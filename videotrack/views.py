@@ -45,6 +45,9 @@ class View:
         Camera name in the camera file; defaults to ``name``.
     video : int
         Index of the video (in a :class:`~videotrack.video.VideoSet`) the view is cut from.
+    hsv : ((h, s, v), (h, s, v)), optional
+        The colour range this view keeps, in place of the filter chain's ``hsv_range`` step
+        (one view per marker colour on the same camera); None keeps the chain's.
     """
 
     name: str
@@ -53,6 +56,7 @@ class View:
     flip_y: bool = False
     camera: str | None = None
     video: int = 0
+    hsv: tuple[tuple[int, int, int], tuple[int, int, int]] | None = None
 
     def __post_init__(self) -> None:
         if self.roi is not None:
@@ -63,6 +67,12 @@ class View:
             object.__setattr__(self, "roi", roi)
         if not self.camera:
             object.__setattr__(self, "camera", self.name)
+        if self.hsv is not None:
+            lower, upper = (tuple(int(c) for c in bound) for bound in self.hsv)
+            if len(lower) != 3 or len(upper) != 3:
+                raise VideoTrackError(f"view {self.name!r}: hsv needs a lower and an upper "
+                                      "(hue, saturation, value)", field="hsv")
+            object.__setattr__(self, "hsv", (lower, upper))
 
     # -- geometry -------------------------------------------------------------------------
 
@@ -134,9 +144,12 @@ class View:
         return self.roi_to_view(np.asarray(xy, dtype=float).reshape(-1, 2) - self.roi[:2])
 
     def to_dict(self) -> dict:
-        return {"name": self.name, "roi": list(self.roi) if self.roi else [],
-                "flip_x": self.flip_x, "flip_y": self.flip_y, "camera": self.camera,
-                "video": self.video}
+        out = {"name": self.name, "roi": list(self.roi) if self.roi else [],
+               "flip_x": self.flip_x, "flip_y": self.flip_y, "camera": self.camera,
+               "video": self.video}
+        if self.hsv is not None:  # only then: detections of views without it stay fresh
+            out["hsv"] = [list(self.hsv[0]), list(self.hsv[1])]
+        return out
 
     @classmethod
     def from_dict(cls, d: Mapping) -> View:

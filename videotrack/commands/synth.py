@@ -94,6 +94,12 @@ def add_parser(subparsers) -> None:
                       help="lossless FFV1 AVI or a PNG folder")
     look.add_argument("--fps", type=float, default=50.0, help="frame rate written (50)")
     look.add_argument("--seed", type=int, default=0, help="seed of noise, ghosts, occlusions")
+    look.add_argument("--colour", action="append", default=[], metavar="COLOUR=MARKERS",
+                      help="draw these markers (names or patterns, comma-separated) in a "
+                           "colour (red, yellow, green, cyan, blue, magenta); repeat for each "
+                           "colour, every marker needs one. The project gets one view per "
+                           "camera and colour, matched to that colour's markers only. "
+                           "E.g. --colour red=L* --colour green=R*")
     p.add_argument("--force", action="store_true",
                    help="replace existing files of another kind at the output paths (never "
                         "an input)")
@@ -171,6 +177,7 @@ def _write_batch_project(args, body, chain_text, cameras, trajectory, options) -
 
 
 def _options(args):
+    from videotrack.marker_colours import parse_colour
     from videotrack.synth import SynthOptions
 
     return SynthOptions(
@@ -179,6 +186,7 @@ def _options(args):
         occlusion_fraction=args.occlusions, occlusion_length=args.occlusion_length,
         interlaced=args.interlaced, top_field_first=not args.bottom_field_first,
         layout=args.layout, seed=args.seed,
+        colours=tuple(parse_colour(text) for text in args.colour),
     )
 
 

@@ -1,0 +1,117 @@
+"""Views that show only some model markers (``Fitter(view_markers=...)``): a camera's image
+split by marker colour into one view per colour, each matched to its own markers only."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from kinematics.anneal import AnnealParams, Fitter
+from kinematics.error_function import posture_error
+from kinematics.errors import KinematicsError
+from kinematics.fk import forward_kinematics
+from kinematics.refine import refine, refine_many
+from videotrack.motion import smooth_random_motion
+from videotrack.paper_setup import locust_cameras
+
+RED, GREEN = ("M0", "M1", "M2"), ("M3",)
+
+
+def colour_views(cams):
+    """Each camera twice: one view keeps the red markers, one the green."""
+    out, shows = {}, {}
+    for name, cam in cams.items():
+        for colour, markers in (("red", RED), ("green", GREEN)):
+            out[f"{name}_{colour}"] = cam
+            shows[f"{name}_{colour}"] = markers
+    return out, shows
+
+
+def coloured_frames(body, cams, truth, seed=0, decoy_px=6.0):
+    """Per frame and camera of ``cams``, its two colour views: that colour's markers (0.2 px
+    noise) and, 6 px from the tibia tip, a red blob (the next leg's marker): an unlabelled
+    fit takes it for the tip."""
+    rng = np.random.default_rng(seed)
+    names = body.marker_names
+    frames = []
+    for a in truth:
+        markers = forward_kinematics(body, a).markers
+        views = []
+        for cam in cams.values():
+            p = cam.project(markers) + rng.normal(0, 0.2, (len(markers), 2))
+            tip = p[names.index("M3")]
+            decoy = tip + decoy_px * np.array([0.6, 0.8])
+            views.append(np.concatenate([p[[names.index(m) for m in RED]], decoy[None]]))
+            views.append(p[[names.index(m) for m in GREEN]])
+        frames.append(views)
+    return frames
+
+
+def test_a_view_matches_only_the_markers_it_shows(locust):
+    """E equals the twin's with the markers a view does not show hidden there; the red
+    decoy near the tip costs the green tip nothing; refine honours the split."""
+    cams, shows = colour_views(locust_cameras())
+    truth = smooth_random_motion(locust, 4, 4, seed=2)
+    frames = coloured_frames(locust, locust_cameras(), truth)
+    fitter = Fitter(locust, cams, AnnealParams(), view_markers=shows)
+    names = locust.marker_names
+    hidden = np.array([[m not in shows[v] for m in names] for v in cams])
+    np.testing.assert_array_equal(fitter.unseen, hidden)
+    opts = fitter.params.error
+    for k in range(len(truth)):
+        e, per_view = fitter.error(truth[k], frames[k])
+        want, want_views = posture_error(locust, cams, truth[k], frames[k], None, opts, hidden)
+        assert e == pytest.approx(want, rel=1e-9)
+        np.testing.assert_allclose(per_view, want_views, rtol=1e-9)
+    plain = Fitter(locust, cams, AnnealParams())
+    # without the split the tip's nearest in a red view is the decoy (6 px), not nothing
+    assert plain.error(truth[0], frames[0])[0] > fitter.error(truth[0], frames[0])[0] + 5
+    one = refine(fitter, truth[0] + 3.0, frames[0])
+    assert one.error == pytest.approx(fitter.error(one.angles_deg, frames[0])[0], rel=1e-9)
+    many = refine_many(fitter, truth + 3.0, frames)
+    for k, r in enumerate(many):
+        assert r.error == pytest.approx(fitter.error(r.angles_deg, frames[k])[0], rel=1e-9)
+        assert r.error <= fitter.error(truth[k] + 3.0, frames[k])[0]
+
+
+def test_colour_views_keep_the_tip_off_another_legs_marker(locust):
+    """With the red decoy 6 px from the tip in both cameras, the split fit finds every
+    axis within 2 degrees; the fit that cannot tell colours apart is pulled off."""
+    cams, shows = colour_views(locust_cameras())
+    truth = smooth_random_motion(locust, 12, 12, seed=5)
+    frames = coloured_frames(locust, locust_cameras(), truth, seed=5)
+    params = replace(AnnealParams(), seed=1)
+    split = Fitter(locust, cams, params, view_markers=shows).fit(frames)
+    free = ~locust.locked_mask()
+    err = np.abs(np.array([r.angles_deg for r in split]) - truth)[:, free]
+    assert err.max() < 2.0
+    tip = locust.marker_names.index("M3")
+    for r in split:  # the tip has no residual in the red views
+        assert np.isnan(r.marker_residuals[0, tip]) and np.isfinite(r.marker_residuals[1, tip])
+        assert r.unexplained == 2  # the decoy in each red view: no red marker near it
+    merged = [[np.concatenate(f[2 * c: 2 * c + 2]) for c in range(2)] for f in frames]
+    plain = Fitter(locust, locust_cameras(), params).fit(merged)
+    plain_err = np.abs(np.array([r.angles_deg for r in plain]) - truth)[:, free]
+    assert plain_err.max() > 2 * err.max()
+
+
+def test_view_markers_refuse_what_they_cannot_mean(locust):
+    cams, shows = colour_views(locust_cameras())
+    with pytest.raises(KinematicsError, match="no view named 'front'") as err:
+        Fitter(locust, cams, view_markers={"front": ["M0"]})
+    assert err.value.field == "view_markers"
+    with pytest.raises(KinematicsError, match="'M9' is not a marker"):
+        Fitter(locust, cams, view_markers={"side_red": ["M9"]})
+    with pytest.raises(KinematicsError, match="list of marker names"):
+        Fitter(locust, cams, view_markers={"side_red": "M0"})
+    assert Fitter(locust, cams, view_markers={}).unseen is None
+    assert Fitter(locust, cams, view_markers={"side_red": list(locust.marker_names)}
+                  ).unseen is None
+    fitter = Fitter(locust, cams, replace(AnnealParams(), match="3d"), view_markers=shows)
+    frames = coloured_frames(locust, locust_cameras(), smooth_random_motion(locust, 2, 2, seed=0))
+    with pytest.raises(KinematicsError, match="matched per view") as err:
+        fitter.fit(frames)
+    assert err.value.field == "match"
+    assert not Fitter(locust, cams, view_markers=shows).matches_in_3d
