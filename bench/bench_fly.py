@@ -115,6 +115,41 @@ def marker_names() -> list[str]:
     return [f"{leg}_{k}_mk" for leg in LEGS for k in KEYPOINTS]
 
 
+#: ``--colours``: which legs' markers share a colour
+COLOUR_SCHEMES = {
+    "none": (),
+    "tripods": (("red", ("LF", "RM", "LH")), ("green", ("RF", "LM", "RH"))),
+    "sides": (("red", ("LF", "LM", "LH")), ("green", ("RF", "RM", "RH"))),
+    "segments": (("red", ("LF", "RF")), ("green", ("LM", "RM")), ("blue", ("LH", "RH"))),
+    "legs": tuple(zip(("red", "yellow", "green", "cyan", "blue", "magenta"),
+                      ((leg,) for leg in LEGS), strict=True)),
+}
+
+
+def colours_of(scheme: str, names) -> tuple:
+    """SynthOptions.colours for the markers ``names`` (a colour none of them has is left
+    out)."""
+    out = []
+    for colour, legs in COLOUR_SCHEMES[scheme]:
+        mine = tuple(m for m in names if m[:2] in legs)
+        if mine:
+            out.append((colour, mine))
+    return tuple(out)
+
+
+def fit_views(cams, colours, body_markers):
+    """The fit's views of a video drawn with ``colours``: (view name -> camera, view name ->
+    the body's markers it shows or None), as ``videotrack synth`` names them."""
+    if not colours:
+        return cams, None
+    views, shows = {}, {}
+    for cam, camera in cams.items():
+        for colour, markers in colours:
+            views[f"{cam}_{colour}"] = camera
+            shows[f"{cam}_{colour}"] = [m for m in body_markers if m in markers]
+    return views, shows
+
+
 def parse_frames(spec: str, n: int) -> np.ndarray:
     """``A:B:S`` (a slice of the clip) or a comma list of frame numbers."""
     try:
@@ -323,9 +358,10 @@ def place_cameras(points, n: int, px_per_mm: float, distance=60.0, size=(640, 64
     return cams
 
 
-def render_and_detect(out: Path, names, points, cams, diameter, seed):
-    """Render points (n, m, 3) as a marker video per camera, detect them; (detections,
-    seconds to render, seconds to detect)."""
+def render_and_detect(out: Path, names, points, cams, diameter, seed, colours=()):
+    """Render points (n, m, 3) as a marker video per camera (markers in ``colours``: one
+    view per camera and colour), detect them; (detections, seconds to render, seconds to
+    detect)."""
     from videotrack.detect import detect_project
     from videotrack.project import command_config
     from videotrack.synth import SynthOptions, read_points, write_points_project
@@ -340,7 +376,8 @@ def render_and_detect(out: Path, names, points, cams, diameter, seed):
     pnames, pts = read_points(out / "points.csv")
     project = write_points_project(out / "video", pnames, pts, cams,
                                    SynthOptions(marker_diameter=diameter, seed=seed,
-                                                layout="separate"), fps=FPS, units="mm")
+                                                layout="separate", colours=colours),
+                                   fps=FPS, units="mm")
     t_render = time.perf_counter() - t0
     t0 = time.perf_counter()
     det, _, _ = detect_project(command_config(project.config, None), force=True)
@@ -405,10 +442,11 @@ def build_params(args, threshold_px: float):
         raise SystemExit(f"--param: {err}") from None
 
 
-def fit(body, cams, det, params):
+def fit(body, cams, det, params, colours=()):
     from kinematics.anneal import Fitter
 
-    fitter = Fitter(body, cams, params)
+    views, shows = fit_views(cams, colours, body.marker_names)
+    fitter = Fitter(body, views, params, view_markers=shows)
     fitter.fit_frame([det.points_of(0, v) for v in range(det.n_views)], frame=0)  # compile
     t0 = time.perf_counter()
     res = list(fitter.iter_fit(det))
@@ -509,6 +547,11 @@ def main() -> int:
                          "legs span ~400 px of the 640x640 images, the closest markers of a "
                          "leg (the middle coxa, 0.18 mm) 18 px apart")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--colours", choices=tuple(COLOUR_SCHEMES), default="none",
+                    help="draw the markers in colours, one view per camera and colour, each "
+                         "matched to its colour's markers: tripods (LF RM LH red, the other "
+                         "three green: neighbouring legs differ), sides (left red, right "
+                         "green), segments (front, middle, hind legs), legs (six colours)")
     ap.add_argument("--measure-ranges", action="store_true",
                     help="only fit the chain to all 660 frames' true points with opened "
                          "ranges and print the observed angle ranges (~2 min)")
@@ -589,17 +632,22 @@ def run(args, out: Path, keep: bool) -> int:
     need_video = args.fit_set & {"body", "among", "alone"}
     if need_video:
         cams = place_cameras(pts, args.cameras, args.px_per_mm)
+        colours = colours_of(args.colours, names)
         det, t_r, t_d = render_and_detect(out / "all", names, truth, cams, args.diameter,
-                                          args.seed)
+                                          args.seed, colours)
         counts = det.counts()
         print(f"Rendered {n} frames x {len(cams)} views (640x640, {args.px_per_mm:g} px/mm at "
               f"the fly, 60 mm away, {args.diameter:g}-px markers) in {t_r:.1f} s, "
               f"detected in {t_d:.1f} s: {int(counts.sum())} detections of {n * len(cams) * 30}"
-              f" marker images ({int((counts < 30).sum())} of {counts.size} view images with "
-              f"fused markers).")
+              f" marker images" + (f" in {det.n_views} views ({args.colours}: "
+                                  f"{len(colours)} colours)" if colours else
+                                  f" ({int((counts < 30).sum())} of {counts.size} view "
+                                  f"images with fused markers)") + ".")
     if "alone" in args.fit_set:
+        leg_colours = colours_of(args.colours, names[leg_cols])
         det_leg, _, _ = render_and_detect(out / f"{leg}_alone", names[leg_cols],
-                                          truth[:, leg_cols], cams, args.diameter, args.seed)
+                                          truth[:, leg_cols], cams, args.diameter, args.seed,
+                                          leg_colours)
     p = build_params(args, args.threshold * 30 * args.cameras)
     threshold = ("threshold_mode='auto'" if args.profile == "best" else
                  f"reanalysis_threshold={args.threshold:g} px x markers x views")
@@ -611,7 +659,7 @@ def run(args, out: Path, keep: bool) -> int:
 
     if "body" in args.fit_set:
         params = build_params(args, args.threshold * 30 * args.cameras)
-        res, ang, roots, dt = fit(body, cams, det, params)
+        res, ang, roots, dt = fit(body, cams, det, params, colours)
         s = score(fitted_markers(body, ang, roots), truth, LEGS, res, dt)
         results[f"whole body ({args.cameras} cams)"] = s
         series["whole body"] = leg_series(s, li)
@@ -620,7 +668,8 @@ def run(args, out: Path, keep: bool) -> int:
         if key not in args.fit_set:
             continue
         params = build_params(args, args.threshold * 5 * args.cameras)
-        res, ang, roots, dt = fit(one, cams, det if key == "among" else det_leg, params)
+        res, ang, roots, dt = fit(one, cams, det if key == "among" else det_leg, params,
+                                  colours if key == "among" else leg_colours)
         fm = fitted_markers(one, ang, roots)
         s = score(fm, truth, (leg,), res, dt)
         results[label] = s
