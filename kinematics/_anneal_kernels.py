@@ -448,15 +448,25 @@ def takes(n, c):
 
 
 @njit(cache=True, nogil=True, inline="always")
+def may_take(cloud, c, i):
+    """Whether model marker ``i`` may take cloud point ``c``. A cloud of markers of several
+    colours (each colour triangulated on its own) has one column per model marker after x,
+    y, z, s: nonzero where the marker has the point's colour; a cloud of 4 columns lets
+    every marker take every point."""
+    return cloud.shape[1] <= 4 or cloud[c, 4 + i] != 0.0
+
+
+@njit(cache=True, nogil=True, inline="always")
 def _dist2(X, i, Y, c, scaled):
     """Squared distance of marker ``X[i]`` to point ``Y[c]``: 2D, or with ``scaled`` 3D times
-    the point's px per length unit ``Y[c, 3]`` squared (a cloud)."""
+    the point's px per length unit ``Y[c, 3]`` squared (a cloud; infinite where the marker
+    may not take the point, :func:`may_take`)."""
     dx = X[i, 0] - Y[c, 0]
     dy = X[i, 1] - Y[c, 1]
     d2 = dx * dx + dy * dy
     if scaled:
         dz = X[i, 2] - Y[c, 2]
-        d2 = (d2 + dz * dz) * (Y[c, 3] * Y[c, 3])
+        d2 = (d2 + dz * dz) * (Y[c, 3] * Y[c, 3]) if may_take(Y, c, i) else np.inf
     return d2
 
 
@@ -618,8 +628,9 @@ def points3d_error(mk, obs, cap):
 @njit(cache=True, nogil=True, inline="always")
 def cloud_nearest(mk, i, cloud, claimed):
     """Marker ``i``'s nearest cloud point not ``claimed`` (in px-equivalents: the 3D
-    distance times the point's px per length unit, ``cloud[c, 3]``; 0 marks padding);
-    returns (distance, row), row -1 when there is none."""
+    distance times the point's px per length unit, ``cloud[c, 3]``; 0 marks padding) among
+    those it may take (:func:`may_take`); returns (distance, row), row -1 when there is
+    none."""
     best = np.inf
     arg = -1
     for c in range(cloud.shape[0]):
@@ -628,7 +639,8 @@ def cloud_nearest(mk, i, cloud, claimed):
         dy = mk[i, 1] - cloud[c, 1]
         dz = mk[i, 2] - cloud[c, 2]
         d2 = s * s * (dx * dx + dy * dy + dz * dz)
-        if s > 0.0 and d2 < best and not (c < claimed.shape[0] and claimed[c]):
+        if s > 0.0 and d2 < best and not (c < claimed.shape[0] and claimed[c]) and (
+                may_take(cloud, c, i)):
             best = d2
             arg = c
     return np.sqrt(best), arg
@@ -640,9 +652,11 @@ def cloud_error(mk, cloud, m0, m1, claimed, penalty, cap, penalty_cap, one, near
     min(s_c |X_i - Y_c|, cap)`` over the markers ``m0:m1``, ``Y_c`` marker i's nearest cloud
     point among those not ``claimed`` (by other partitions; an empty ``claimed`` claims
     nothing) and ``s_c`` its px per length unit (``cloud`` (k, 4): x, y, z, s; s = 0 marks
-    padding), so E reads in pixels like Eq. 5's. With ``penalty > 0`` (the bidirectional
-    modes) each unclaimed point that none of these markers takes adds ``penalty · min(s_c ·
-    distance to the nearest of them, penalty_cap)``. With ``one`` each point explains at
+    padding; with a column per marker after them, only where it may take the point,
+    :func:`may_take`), so E reads in pixels like Eq. 5's. With ``penalty > 0`` (the
+    bidirectional modes) each unclaimed point that none of these markers takes adds
+    ``penalty · min(s_c · distance to the nearest of them that may take it, penalty_cap)``
+    (nothing where none may). With ``one`` each point explains at
     most one marker (:func:`one_to_one`). ``nearest`` (n_markers,) is scratch."""
     missing = cap if cap < np.inf else NAN_MARKER_COST
     total = 0.0
@@ -661,8 +675,9 @@ def cloud_error(mk, cloud, m0, m1, claimed, penalty, cap, penalty_cap, one, near
                 dx = mk[i, 0] - cloud[c, 0]
                 dy = mk[i, 1] - cloud[c, 1]
                 dz = mk[i, 2] - cloud[c, 2]
-                best = min(best, dx * dx + dy * dy + dz * dz)
-            if not taken:
+                if may_take(cloud, c, i):
+                    best = min(best, dx * dx + dy * dy + dz * dz)
+            if not taken and best < np.inf:
                 total += penalty * min(s * np.sqrt(best), penalty_cap)
     return total
 
@@ -691,7 +706,8 @@ def count_unexplained_cloud(mk, cloud, gate):
             dx = mk[i, 0] - cloud[c, 0]
             dy = mk[i, 1] - cloud[c, 1]
             dz = mk[i, 2] - cloud[c, 2]
-            near = near or s * np.sqrt(dx * dx + dy * dy + dz * dz) <= gate
+            near = near or (s * np.sqrt(dx * dx + dy * dy + dz * dz) <= gate and
+                            may_take(cloud, c, i))
         n += 0 if near else 1
     return n
 

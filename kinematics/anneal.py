@@ -400,7 +400,16 @@ class Fitter:
         p = self.params
         if p.match != "auto":
             return p.match == "3d"
-        return self.n_views >= 3 and self.unseen is None and self._limbs(p)
+        return self._views_3d >= 3 and self._limbs(p)
+
+    @property
+    def _views_3d(self) -> int:
+        """The views a marker can be triangulated from: all, or with ``view_markers`` the
+        fewest that show the same markers (one colour's views)."""
+        if self.unseen is None:
+            return self.n_views
+        rows = [row.tobytes() for row in self.unseen]
+        return min(rows.count(r) for r in rows)
 
     def _limbs(self, p: AnnealParams) -> bool:
         """Whether the body is annealed in several partitions (many limbs)."""
@@ -444,18 +453,17 @@ class Fitter:
         if obs.hidden is not None and obs.hidden.shape[2] != nm:
             raise KinematicsError(f"hidden marks are for {obs.hidden.shape[2]} markers, the "
                                   f"body has {nm}", field="hidden")
+        if obs.kind == "points" and self.matches_in_3d:
+            if self._views_3d < 3:
+                each = " of each colour (views that show the same markers)" if (
+                    self.unseen is not None) else ""
+                raise KinematicsError(f"match '3d' triangulates markers seen in 3 or more "
+                                      f"views{each}; there are {self._views_3d}: use 'views'",
+                                      field="match")
+            return cloud_observations(self.cameras, obs, self.unseen)
         if self.unseen is not None and obs.kind in ("points", "keypoints"):
-            if self.params.match == "3d" and obs.kind == "points":
-                raise KinematicsError("views that show only some markers (view_markers) are "
-                                      "matched per view: set match = 'views'", field="match")
             obs = obs.with_hidden(np.broadcast_to(self.unseen, (obs.n_frames,
                                                                 *self.unseen.shape)))
-        if obs.kind == "points" and self.matches_in_3d:
-            if self.n_views < 3:
-                raise KinematicsError(f"match '3d' triangulates markers seen in 3 or more "
-                                      f"views; there are {self.n_views}: use 'views'",
-                                      field="match")
-            obs = cloud_observations(self.cameras, obs)
         return obs
 
     def _to_range_deg(self, angles_rad: np.ndarray) -> np.ndarray:
@@ -1173,6 +1181,8 @@ class Fitter:
         seen = np.ones(proj.shape[:2], bool)
         if obs.hidden is not None:  # hidden markers: no residual, explain nothing
             seen = arrays.points3d[0].T == 0.0
+        elif self.unseen is not None:  # a cloud of several colours: views show some
+            seen = ~self.unseen
         unexplained = 0
         for v in range(obs.n_views):  # 3D points have none, even with cameras
             d = pts[view_off[v]: view_off[v + 1]]

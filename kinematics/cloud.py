@@ -474,15 +474,51 @@ def pixels_per_unit(cameras, xyz: np.ndarray, seen: np.ndarray) -> np.ndarray:
     return np.where(count > 0, total / np.maximum(count, 1), 0.0)
 
 
-def cloud_observations(cameras, obs: Observations, **options) -> Observations:
+def cloud_observations(cameras, obs: Observations, unseen=None, **options) -> Observations:
     """Unlabelled observations ``obs`` with their cloud (:func:`triangulate_unlabelled`,
     ``options`` passed on) in the layout of :meth:`Observations.with_cloud`: x, y, z and
-    :func:`pixels_per_unit` of each point."""
-    cloud = triangulate_unlabelled(cameras, obs.points, obs.offsets, **options)
+    :func:`pixels_per_unit` of each point.
+
+    ``unseen`` (n_views, n_markers) bool, optional: markers each view does not show (views
+    of one colour of markers, ``Fitter(view_markers=...)``). The views that show the same
+    markers (one colour, seen by several cameras) are triangulated together, apart from the
+    others, and each point gets a column per marker after x, y, z, s: 1 where the marker
+    may take it (:func:`kinematics._anneal_kernels.may_take`).
+    """
+    cams = _camera_list(cameras)
+    if unseen is None or not np.any(unseen):
+        return obs.with_cloud(_cloud_rows(cams, obs.points, obs.offsets, options))
+    unseen = np.asarray(unseen, bool)
+    groups: dict[bytes, list[int]] = {}
+    for v in range(len(cams)):
+        groups.setdefault(unseen[v].tobytes(), []).append(v)
+    parts = []
+    for views in groups.values():
+        pts, off = _views_of(obs, views)
+        rows = _cloud_rows([cams[v] for v in views], pts, off, options)
+        may = np.where(rows[..., 3:4] > 0, ~unseen[views[0]], False).astype(float)
+        parts.append(np.concatenate([rows, may], axis=2))
+    return obs.with_cloud(np.concatenate(parts, axis=1))
+
+
+def _cloud_rows(cams, points, offsets, options) -> np.ndarray:
+    """(n_frames, k, 4) x, y, z, px per unit of the triangulated points (zeros: padding)."""
+    cloud = triangulate_unlabelled(cams, points, offsets, **options)
     f, k = cloud.xyz.shape[:2]
     out = np.zeros((f, k, 4))
     ok = cloud.views > 0
     out[..., :3] = np.where(ok[..., None], cloud.xyz, 0.0)
     seen = np.moveaxis(cloud.support >= 0, 2, 0)[:, ok]  # (n_views, points)
-    out[ok, 3] = pixels_per_unit(cameras, cloud.xyz[ok], seen)
-    return obs.with_cloud(out)
+    out[ok, 3] = pixels_per_unit(cams, cloud.xyz[ok], seen)
+    return out
+
+
+def _views_of(obs: Observations, views: Sequence[int]) -> tuple[np.ndarray, np.ndarray]:
+    """``points, offsets`` of some views of every frame (the ragged layout)."""
+    nv = obs.n_views
+    starts = obs.offsets[:-1].reshape(obs.n_frames, nv)[:, views].ravel()
+    counts = np.diff(obs.offsets).reshape(obs.n_frames, nv)[:, views].ravel()
+    off = np.zeros(counts.size + 1, np.int64)
+    np.cumsum(counts, out=off[1:])
+    rows = np.repeat(starts - off[:-1], counts) + np.arange(off[-1])
+    return np.ascontiguousarray(obs.points[rows].reshape(-1, 2)), off

@@ -248,30 +248,36 @@ def cloud_error(markers, cloud, options: ErrorOptions | None = None, claimed=Non
     Parameters
     ----------
     markers : (n_markers, 3) model markers
-    cloud : (k, 4) x, y, z, s of each point; s <= 0 marks padding
+    cloud : (k, 4) x, y, z, s of each point; s <= 0 marks padding; or (k, 4 + n_markers):
+        then column 4 + i is nonzero where marker i may take the point (markers of several
+        colours, each colour triangulated on its own)
     options : ErrorOptions, optional (default: the paper's Eq. 5)
     claimed : (k,) bool, optional: points another partition took, left out entirely
     """
     opts = options or ErrorOptions()
     mk = np.asarray(markers, dtype=float)
-    c = np.asarray(cloud, dtype=float).reshape(-1, 4)
+    c = np.asarray(cloud, dtype=float)
+    c = c.reshape(-1, c.shape[-1] if c.ndim > 1 else 4)
     use = c[:, 3] > 0
     if claimed is not None:
         use &= ~np.asarray(claimed, bool)
+    missing = opts.cap if np.isfinite(opts.cap) else NAN_MARKER_COST
     if not use.any():
-        missing = opts.cap if np.isfinite(opts.cap) else NAN_MARKER_COST
         return float(len(mk) * min(missing, opts.cap))
     diff = mk[:, None, :] - c[None, use, :3]
     dist = c[use, 3] * np.sqrt((diff * diff).sum(axis=2))  # (markers, used points)
+    if c.shape[1] > 4:  # a marker only takes points of its colour
+        dist = np.where(c[use, 4:4 + len(mk)].T != 0, dist, np.inf)
     nearest, cost = np.argmin(dist, axis=1), dist.min(axis=1)
+    nearest = np.where(np.isfinite(cost), nearest, -1)
     if opts.one_to_one:
-        missing = opts.cap if np.isfinite(opts.cap) else NAN_MARKER_COST
         nearest, cost = one_to_one(dist)
-        cost = np.where(nearest >= 0, cost, missing)
+    cost = np.where(nearest >= 0, cost, missing)
     e = float(np.minimum(cost, opts.cap).sum())
     if opts.bidirectional:
         taken = np.zeros(dist.shape[1], bool)
         taken[nearest[nearest >= 0]] = True
-        e += opts.penalty_weight * float(np.minimum(dist.min(axis=0)[~taken],
+        left = dist.min(axis=0)[~taken]
+        e += opts.penalty_weight * float(np.minimum(left[np.isfinite(left)],
                                                     opts.penalty_cap).sum())
     return e

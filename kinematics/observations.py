@@ -110,7 +110,9 @@ class Observations:
 
     def with_cloud(self, cloud) -> Observations:
         """These unlabelled points with their 3D cloud ``cloud`` (n_frames, k, 4): x, y, z
-        and the pixels per length unit at each point (0 or NaN rows: padding)."""
+        and the pixels per length unit at each point (0 or NaN rows: padding); optionally
+        followed by one column per model marker, nonzero where it may take the point
+        (markers of several colours, :func:`kinematics.cloud.cloud_observations`)."""
         if self.kind != "points":
             raise KinematicsError(f"a cloud is made of unlabelled points, not {self.kind}",
                                   field="observations")
@@ -118,9 +120,9 @@ class Observations:
             raise KinematicsError("markers hidden in a view cannot be matched in 3D: set "
                                   "match = 'views'", field="hidden")
         c = np.array(cloud, dtype=float, copy=True)
-        if c.ndim != 3 or c.shape[0] != self.n_frames or c.shape[2] != 4:
-            raise KinematicsError(f"a cloud needs shape ({self.n_frames} frames, points, 4), "
-                                  f"got {c.shape}", field="cloud")
+        if c.ndim != 3 or c.shape[0] != self.n_frames or c.shape[2] < 4:
+            raise KinematicsError(f"a cloud needs shape ({self.n_frames} frames, points, 4 "
+                                  f"or 4 + markers), got {c.shape}", field="cloud")
         bad = ~np.isfinite(c).all(axis=2) | ~(c[..., 3] > 0)
         c[bad] = 0.0
         return Observations("cloud", self.view_names, self.n_frames, self.points, self.conf,

@@ -47,6 +47,34 @@ def test_cloud_error_kernel_equals_twin(opts):
         assert got == pytest.approx(cloud_error(mk, cloud, opts), rel=1e-12)
 
 
+@pytest.mark.parametrize("opts", OPTIONS, ids=lambda o: f"{o.mode}-{o.cap_px}-{o.one_to_one}")
+def test_a_cloud_of_colours_lets_a_marker_take_only_its_colours_points(opts):
+    """Each point carries which markers may take it (its colour's): the kernel equals the
+    twin, a marker whose colour has no point pays the missing cost, and a point no marker
+    may take is explained by none and costs nothing."""
+    rng = np.random.default_rng(8)
+    for trial in range(30):
+        mk, cloud = random_cloud(rng)
+        colour = rng.integers(0, 3, len(mk))
+        point_colour = rng.integers(0, 3 if trial % 5 else 2, len(cloud))
+        may = (point_colour[:, None] == colour[None]).astype(float)
+        coloured = np.concatenate([cloud, may], axis=1)
+        nearest = np.empty(len(mk), np.int64)
+        got = ak.cloud_error(mk, coloured, 0, len(mk), ak.NO_CLAIMS,
+                             opts.penalty_weight if opts.bidirectional else 0.0, opts.cap,
+                             opts.penalty_cap, opts.one_to_one, nearest)
+        assert got == pytest.approx(cloud_error(mk, coloured, opts), rel=1e-12)
+        for i, c in enumerate(nearest):  # every pairing within the colour
+            point = c if c >= 0 else -c - 2
+            if c != -1 and not opts.one_to_one:
+                assert may[point, i]
+        claimed = np.zeros(len(cloud), np.bool_)
+        ak.claim_cloud(mk, coloured, np.ones(len(mk), np.bool_), 1e9, claimed)
+        assert all(may[c].any() for c in np.flatnonzero(claimed))
+        far = ak.count_unexplained_cloud(mk, coloured, 1e9)  # only colours no marker has
+        assert far == int(((cloud[:, 3] > 0) & ~may.any(axis=1)).sum())
+
+
 def test_partition_cloud_error_leaves_claimed_points_out():
     rng = np.random.default_rng(5)
     opts = ErrorOptions(mode="bounded", cap_px=30.0)

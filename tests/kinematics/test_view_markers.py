@@ -11,8 +11,11 @@ import pytest
 from kinematics.anneal import AnnealParams, Fitter
 from kinematics.error_function import posture_error
 from kinematics.errors import KinematicsError
-from kinematics.fk import forward_kinematics
+from kinematics.fk import forward_kinematics, forward_kinematics_reference
 from kinematics.refine import refine, refine_many
+from kinematics.settings import ErrorOptions
+from tests.kinematics.test_cloud_objective import ring
+from tests.kinematics.test_partitions import marker_errors, planted, three_legs
 from videotrack.motion import smooth_random_motion
 from videotrack.paper_setup import locust_cameras
 
@@ -111,7 +114,51 @@ def test_view_markers_refuse_what_they_cannot_mean(locust):
                   ).unseen is None
     fitter = Fitter(locust, cams, replace(AnnealParams(), match="3d"), view_markers=shows)
     frames = coloured_frames(locust, locust_cameras(), smooth_random_motion(locust, 2, 2, seed=0))
-    with pytest.raises(KinematicsError, match="matched per view") as err:
+    with pytest.raises(KinematicsError, match="3 or more views of each colour") as err:
         fitter.fit(frames)
     assert err.value.field == "match"
     assert not Fitter(locust, cams, view_markers=shows).matches_in_3d
+
+
+def test_legs_of_two_colours_fitted_in_3d_each_colour_triangulated_apart():
+    """Three legs, the middle one green, seen by 5 cameras: one view per camera and colour.
+    Each colour is triangulated from its own views; the cloud says which markers may take a
+    point; the body is fitted in 3D with every leg on its own points."""
+    body = three_legs()
+    cams = ring()
+    names = body.marker_names
+    green = [m for m in names if m.startswith("b")]
+    angles, _ = planted(body, cams, 6, seed=3)
+    rng = np.random.default_rng(0)
+    views, shows, split = {}, {}, []
+    for name, cam in cams.items():
+        for colour, markers in (("red", [m for m in names if m not in green]),
+                                ("green", green)):
+            views[f"{name}_{colour}"] = cam
+            shows[f"{name}_{colour}"] = markers
+    for a in angles:
+        m = forward_kinematics_reference(body, a).markers
+        row = []
+        for cam in cams.values():
+            p = cam.project(m) + rng.normal(0, 0.05, (len(m), 2))
+            row += [p[[names.index(k) for k in shows[f"{cam.name}_{c}"]]]
+                    for c in ("red", "green")]
+        split.append(row)
+    params = AnnealParams(candidates=1, threshold_mode="absolute", reanalysis_threshold=8.0,
+                          error=ErrorOptions("bounded", cap_px=10.0)).with_schedule(3000)
+    fitter = Fitter(body, views, params, view_markers=shows)
+    assert fitter.matches_in_3d
+    obs = fitter.observations(split)
+    assert obs.kind == "cloud" and obs.points3d.shape[2] == 4 + len(names)
+    used = obs.points3d[..., 3] > 0
+    assert used.sum(axis=1).tolist() == [len(names)] * 6
+    may = obs.points3d[..., 4:][used]  # each point: one colour's markers
+    is_green = np.array([m in green for m in names])
+    assert all(row.astype(bool).tolist() in (is_green.tolist(), (~is_green).tolist())
+               for row in may)
+    res = fitter.fit(split)
+    err = marker_errors(body, res, angles)
+    assert np.median(err) < 0.05 and err.max() < 0.2, err
+    assert all(r.unexplained == 0 for r in res)
+    for r in res:  # residuals only where a view shows the marker
+        assert np.isnan(r.marker_residuals[np.asarray(fitter.unseen)]).all()
