@@ -275,6 +275,11 @@ def _unseen_markers(view_markers, view_names: Sequence[str], marker_names: Seque
         if isinstance(shown, str):
             raise KinematicsError(f"view {view!r}: give a list of marker names, not one "
                                   f"string", field="view_markers")
+        try:
+            shown = [str(m) for m in shown]
+        except TypeError:
+            raise KinematicsError(f"view {view!r}: give a list of marker names, got "
+                                  f"{shown!r}", field="view_markers") from None
         unknown = [m for m in shown if m not in index]
         if unknown:
             raise KinematicsError(f"view {view!r}: {unknown[0]!r} is not a marker of the "
@@ -408,8 +413,8 @@ class Fitter:
         fewest that show the same markers (one colour's views)."""
         if self.unseen is None:
             return self.n_views
-        rows = [row.tobytes() for row in self.unseen]
-        return min(rows.count(r) for r in rows)
+        rows = [row.tobytes() for row in self.unseen if not row.all()]  # a view of none
+        return min((rows.count(r) for r in rows), default=0)
 
     def _limbs(self, p: AnnealParams) -> bool:
         """Whether the body is annealed in several partitions (many limbs)."""
@@ -450,9 +455,13 @@ class Fitter:
             raise KinematicsError(f"observations are for views {list(obs.view_names)} but "
                                   f"the cameras are {self.view_names}", field="observations")
         nm = len(self.body.marker_names)
-        if obs.hidden is not None and obs.hidden.shape[2] != nm:
-            raise KinematicsError(f"hidden marks are for {obs.hidden.shape[2]} markers, the "
-                                  f"body has {nm}", field="hidden")
+        for marks in (obs.hidden, obs.unseen):
+            if marks is not None and marks.shape[-1] != nm:
+                raise KinematicsError(f"hidden marks are for {marks.shape[-1]} markers, the "
+                                      f"body has {nm}", field="hidden")
+        if obs.kind == "cloud" and obs.points3d.shape[2] not in (4, 4 + nm):
+            raise KinematicsError(f"a cloud needs 4 columns, or 4 + {nm} (one per marker), "
+                                  f"got {obs.points3d.shape[2]}", field="cloud")
         if obs.kind == "points" and self.matches_in_3d:
             if self._views_3d < 3:
                 each = " of each colour (views that show the same markers)" if (
@@ -462,9 +471,15 @@ class Fitter:
                                       field="match")
             return cloud_observations(self.cameras, obs, self.unseen)
         if self.unseen is not None and obs.kind in ("points", "keypoints"):
-            obs = obs.with_hidden(np.broadcast_to(self.unseen, (obs.n_frames,
-                                                                *self.unseen.shape)))
+            obs = obs.with_unseen(self.unseen)
         return obs
+
+    def _marks(self, obs: Observations, frames) -> np.ndarray | None:
+        """(len(frames), n_views, n_markers) markers hidden in each view: the observations'
+        marks, or for a cloud the views' (``view_markers``), or None."""
+        if obs.kind == "cloud" and self.unseen is not None:
+            return np.broadcast_to(self.unseen, (len(frames), *self.unseen.shape))
+        return obs.marks(frames)
 
     def _to_range_deg(self, angles_rad: np.ndarray) -> np.ndarray:
         """Degrees, each angle moved by whole turns to lie nearest its range centre."""
@@ -568,8 +583,9 @@ class Fitter:
             if labelled is None:
                 track = np.empty((len(idx), 3))
                 p_k, off_k = pts, off
-                if obs.hidden is not None:  # a view where the root marker is hidden: none
-                    p_k, off_k = _emptied(pts, off, obs.hidden[idx, :, self._root_marker[k]])
+                marks = self._marks(obs, idx)
+                if marks is not None:  # a view where the root marker is hidden: none
+                    p_k, off_k = _emptied(pts, off, marks[:, :, self._root_marker[k]])
                 _ak.track_root(p_k, off_k, x0, gate, 1e-9, self.problem.cams, track)
             else:  # a labelled root marker needs no tracking; gaps keep the last position
                 track = _carry_forward(labelled[:, self._root_marker[k]], x0)
@@ -784,8 +800,11 @@ class Fitter:
         if score.size == 0:
             return float(p.reanalysis_threshold)
         per_image = auto_threshold(score, p.auto_k, p.auto_floor_px)
-        views = 1 if obs.kind in ("cloud", "points3d") else max(obs.n_views, 1)
-        return per_image * len(self.body.marker_names) * views
+        if obs.kind in ("cloud", "points3d"):
+            return per_image * len(self.body.marker_names)
+        if self.unseen is not None:  # the marker images a frame has at most
+            return per_image * int((~self.unseen).sum())
+        return per_image * len(self.body.marker_names) * max(obs.n_views, 1)
 
     def fit(self, detections, frames=None, **kwargs) -> list[FrameResult]:
         """All results of :meth:`iter_fit` as a list."""
@@ -799,7 +818,8 @@ class Fitter:
         n, ns, nv = len(frame_ids), pr.n_state, len(cams.kind)
         out = FitOutputs.empty(n, ns, nv, max(p.max_runs, p.candidates))
         parts = self._partitions(p)
-        if self._use_lanes(p, arrays.objective, parts, n, hidden=obs.hidden is not None):
+        if self._use_lanes(p, arrays.objective, parts, n,
+                           hidden=obs.hidden is not None or obs.unseen is not None):
             threads = numba.get_num_threads()
             groups = np.unique(np.linspace(0, n, min(threads, n) + 1).astype(np.int64))
             _lk.fit_frames_lanes(groups, frame_ids, roots, rots, start, pr.folded, pr.cams,
@@ -849,7 +869,8 @@ class Fitter:
         if p.backend == "lanes" and not valid:
             raise KinematicsError("the lanes backend fits unlabelled points with one "
                                   "partition, start 'mean', no start samples and no hidden "
-                                  "markers; use backend 'auto' or 'scalar'",
+                                  "markers (nor views that show only some: [[views]] "
+                                  "model_markers); use backend 'auto' or 'scalar'",
                                   field="backend")
         runs = n_frames * max(1, p.candidates)
         return p.backend == "lanes" or (p.backend == "auto" and valid
@@ -926,8 +947,9 @@ class Fitter:
         slope to follow (the fly with the defaults: 3 % of frames right, 45 % with this)."""
         args = error_args(p.error)
         if objective == _ak.OBJ_CLOUD:
-            return args._replace(cap=args.cap * self.n_views,
-                                 penalty_cap=args.penalty_cap * self.n_views)
+            views = self.n_views if self.unseen is None else int(
+                (~self.unseen).sum(axis=0).max())  # the views that show a marker
+            return args._replace(cap=args.cap * views, penalty_cap=args.penalty_cap * views)
         return args
 
     # -- candidates and the path through time ----------------------------------------------
@@ -1179,7 +1201,7 @@ class Fitter:
         pts, view_off = arrays.points, arrays.offsets
         out = np.full(proj.shape[:2], np.nan)
         seen = np.ones(proj.shape[:2], bool)
-        if obs.hidden is not None:  # hidden markers: no residual, explain nothing
+        if obs.hidden is not None or obs.unseen is not None:  # no residual, explain nothing
             seen = arrays.points3d[0].T == 0.0
         elif self.unseen is not None:  # a cloud of several colours: views show some
             seen = ~self.unseen
@@ -1233,7 +1255,8 @@ def marker_images(obs: Observations, frames, n_markers: int) -> np.ndarray:
         return (obs.points3d[frames, :, 3] > 0).sum(axis=1)
     if obs.kind == "cloud":  # E sums one distance per marker
         return n_markers * (obs.points3d[frames, :, 3] > 0).any(axis=1)
-    seen = n_markers if obs.hidden is None else n_markers - obs.hidden[frames].sum(axis=2)
+    marks = obs.marks(frames)
+    seen = n_markers if marks is None else n_markers - marks.sum(axis=2)
     return (seen * (obs.view_counts(frames) > 0)).sum(axis=1)
 
 

@@ -491,7 +491,8 @@ def cloud_observations(cameras, obs: Observations, unseen=None, **options) -> Ob
     unseen = np.asarray(unseen, bool)
     groups: dict[bytes, list[int]] = {}
     for v in range(len(cams)):
-        groups.setdefault(unseen[v].tobytes(), []).append(v)
+        if not unseen[v].all():  # a view that shows no marker adds no point
+            groups.setdefault(unseen[v].tobytes(), []).append(v)
     parts = []
     for views in groups.values():
         pts, off = _views_of(obs, views)

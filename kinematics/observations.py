@@ -69,6 +69,8 @@ class Observations:
     dropped : ndarray (n_frames,) unlabelled points dropped for a NaN coordinate
     hidden : ndarray (n_frames, n_views, n_markers) of bool, or None: model markers the user
         marked hidden in a view (unlabelled points only; :meth:`with_hidden`)
+    unseen : ndarray (n_views, n_markers) of bool, or None: markers a view never shows, in
+        every frame (unlabelled points only; :meth:`with_unseen`)
     """
 
     kind: str
@@ -80,6 +82,7 @@ class Observations:
     points3d: np.ndarray
     dropped: np.ndarray
     hidden: np.ndarray | None = None
+    unseen: np.ndarray | None = None
 
     @property
     def n_views(self) -> int:
@@ -116,7 +119,7 @@ class Observations:
         if self.kind != "points":
             raise KinematicsError(f"a cloud is made of unlabelled points, not {self.kind}",
                                   field="observations")
-        if self.hidden is not None:
+        if self.hidden is not None or self.unseen is not None:
             raise KinematicsError("markers hidden in a view cannot be matched in 3D: set "
                                   "match = 'views'", field="hidden")
         c = np.array(cloud, dtype=float, copy=True)
@@ -148,24 +151,70 @@ class Observations:
             raise KinematicsError(f"a marker is hidden in a view of 2D points, not of "
                                   f"{self.kind} (matching in 3D: set match = 'views')",
                                   field="hidden")
+        nm = h.shape[2]
         if self.kind == "points":
             if self.hidden is not None:
                 if self.hidden.shape != h.shape:
                     raise KinematicsError(f"hidden marks are for {self.hidden.shape[2]} "
-                                          f"markers, these for {h.shape[2]}", field="hidden")
+                                          f"markers, these for {nm}", field="hidden")
                 h = h | self.hidden
+            self._check_markers(nm, self.unseen)
             return replace(self, hidden=np.ascontiguousarray(h))
-        conf = self.conf.copy()
+        return self._keypoints_without(lambda f, v, i: h[f, v, i], nm)
+
+    def with_unseen(self, unseen) -> Observations:
+        """These observations with markers some views never show, ``unseen`` (n_views,
+        n_markers) of bool (a view of one colour of markers: the others; a camera that
+        never sees the far side of the body): in every frame as :meth:`with_hidden` marks,
+        kept per view, not per frame (long videos)."""
+        u = np.asarray(unseen)
+        if u.ndim != 2 or u.shape[0] != self.n_views or u.dtype != bool:
+            raise KinematicsError(f"unseen markers need a boolean array of shape "
+                                  f"({self.n_views} views, markers), got {u.dtype} {u.shape}",
+                                  field="view_markers")
+        if not u.any():
+            return self
+        if self.kind == "keypoints":
+            return self._keypoints_without(lambda f, v, i: u[v, i], u.shape[1])
+        if self.kind != "points":
+            raise KinematicsError(f"a view shows some markers of 2D points, not of "
+                                  f"{self.kind}", field="view_markers")
+        self._check_markers(u.shape[1], self.hidden)
+        if self.unseen is not None:
+            self._check_markers(u.shape[1], self.unseen)
+            u = u | self.unseen
+        return replace(self, unseen=np.ascontiguousarray(u))
+
+    @staticmethod
+    def _check_markers(nm: int, marks) -> None:
+        if marks is not None and marks.shape[-1] != nm:
+            raise KinematicsError(f"hidden marks are for {marks.shape[-1]} markers, these for "
+                                  f"{nm}", field="hidden")
+
+    def marks(self, frames) -> np.ndarray | None:
+        """(len(frames), n_views, n_markers) bool: markers hidden in each view of these
+        frames (:meth:`with_hidden` and :meth:`with_unseen` together), or None."""
+        if self.hidden is None and self.unseen is None:
+            return None
+        frames = np.asarray(frames, dtype=np.int64)
+        if self.hidden is None:
+            return np.broadcast_to(self.unseen, (len(frames), *self.unseen.shape)).copy()
+        out = self.hidden[frames]
+        return out | self.unseen if self.unseen is not None else out
+
+    def _keypoints_without(self, hide, nm: int) -> Observations:
+        """Keypoints with those ``hide(frame, view, marker)`` says (vectorised over rows)
+        weighted 0; a view left without any keypoint holds no rows, as one that never had
+        any."""
         counts = np.diff(self.offsets).reshape(self.n_frames, self.n_views)
-        for f, v in zip(*np.nonzero(h.any(axis=2)), strict=True):
-            if counts[f, v] == h.shape[2]:  # the view has its rows (the body's markers)
-                start = self.offsets[f * self.n_views + v]
-                conf[start: start + h.shape[2]][h[f, v]] = 0.0
-            elif counts[f, v]:
-                raise KinematicsError(f"hidden marks are for {h.shape[2]} markers, the "
-                                      f"keypoints for {counts[f, v]}", field="hidden")
-        # a view left without any keypoint holds no rows, as one that never had any
+        wrong = (counts != 0) & (counts != nm)
+        if wrong.any():
+            raise KinematicsError(f"hidden marks are for {nm} markers, the keypoints for "
+                                  f"{counts[wrong][0]}", field="hidden")
         cell = np.repeat(np.arange(counts.size), counts.ravel())
+        marker = np.arange(len(cell)) - self.offsets[cell]
+        conf = np.where(hide(cell // self.n_views, cell % self.n_views, marker), 0.0,
+                        self.conf)
         alive = np.zeros(counts.size, bool)
         np.logical_or.at(alive, cell, conf > 0)
         keep = alive[cell]
@@ -248,8 +297,9 @@ class Observations:
         frames = np.asarray(frames, dtype=np.int64)
         nv = self.n_views
         p3 = np.ascontiguousarray(self.points3d[frames])
-        if self.hidden is not None:  # the kernels' hidden marks (n, n_markers, n_views)
-            p3 = np.ascontiguousarray(self.hidden[frames].transpose(0, 2, 1), dtype=float)
+        marks = self.marks(frames)
+        if marks is not None:  # the kernels' hidden marks (n, n_markers, n_views)
+            p3 = np.ascontiguousarray(marks.transpose(0, 2, 1), dtype=float)
         if nv == 0:
             return self.points, self.conf, np.zeros(1, np.int64), p3
         starts = self.offsets[frames * nv]
@@ -269,7 +319,7 @@ class Observations:
         hidden = None if self.hidden is None else self.hidden[frames]
         return Observations(self.kind, self.view_names, len(frames), points, conf, offsets,
                             np.ascontiguousarray(self.points3d[frames]), self.dropped[frames],
-                            hidden)
+                            hidden, self.unseen)
 
     def arrays(self, frames: np.ndarray) -> ObservationArrays:
         """:meth:`select` as the kernels' namedtuple."""

@@ -261,8 +261,9 @@ class AnnealParams:
         "points (a marker seen in at least 3 views; kinematics.cloud), and each model marker "
         "is matched to its nearest 3D point, its distance read in pixels at that point, so "
         "every pixel setting keeps its meaning; 'auto' — '3d' for a body annealed in several "
-        "partitions (many limbs) seen by 3 or more views, where blobs of different limbs "
-        "fuse in the images, else 'views' (docs/fitting.md, 'Matching in 3D').",
+        "partitions (many limbs) seen by 3 or more views (with markers of several colours: "
+        "3 or more views of each colour), where blobs of different limbs fuse in the "
+        "images, else 'views' (docs/fitting.md, 'Matching in 3D').",
         choices=MATCH_MODES)
     backend: str = setting(
         "auto", "Which kernel anneals: 'scalar' one run at a time, 'lanes' many runs at once "

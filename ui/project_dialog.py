@@ -47,6 +47,8 @@ from ui.video_view import display_image
 from ui.workers import TaskWorker
 
 VIEW_COLUMNS = ("name", "x", "y", "width", "height", "flip_x", "flip_y", "camera", "video")
+#: The [[views]] keys the view table edits; any other key of a view is kept as it is.
+_VIEW_KEYS = ("name", "roi", "flip_x", "flip_y", "camera", "video")
 
 
 # -- a form generated from a config Section -------------------------------------------------
@@ -227,12 +229,17 @@ class ProjectDialog(QDialog):
             QHeaderView.ResizeMode.ResizeToContents)
         self.view_table.itemChanged.connect(self._view_cell_changed)
         self.rois: list[pg.RectROI] = []
+        # keys of each row's [[views]] table the table does not show (model_markers, a
+        # view's colour range): kept as they are when the dialog writes the views back
+        raw_views = {t.get("name"): t for t in self.raw.get("views", []) if isinstance(t, dict)}
+        self._view_extra: list[dict] = []
         add = QPushButton("Add view")
         add.clicked.connect(self.add_view)
         remove = QPushButton("Remove view")
         remove.clicked.connect(self.remove_view)
         for view in s.views:
-            self._append_view(view.to_dict())
+            self._append_view(view.to_dict(), {k: v for k, v in raw_views.get(
+                view.name, {}).items() if k not in _VIEW_KEYS})
         left = QWidget()
         lv = QVBoxLayout(left)
         lv.addWidget(QLabel("Drag or resize a rectangle to set a view's region of interest:"))
@@ -263,7 +270,8 @@ class ProjectDialog(QDialog):
         for roi, row in zip(self.rois, range(self.view_table.rowCount()), strict=True):
             roi.setVisible(self._cell(row, "video") == str(k))
 
-    def _append_view(self, d: dict) -> None:
+    def _append_view(self, d: dict, extra: dict | None = None) -> None:
+        self._view_extra.append(dict(extra or {}))
         row = self.view_table.rowCount()
         self.view_table.blockSignals(True)
         self.view_table.insertRow(row)
@@ -330,6 +338,7 @@ class ProjectDialog(QDialog):
         if row < 0:
             return
         self.view_table.removeRow(row)
+        self._view_extra.pop(row)
         self.frame_plot.removeItem(self.rois.pop(row))
         self.schedule_preview()
 
@@ -347,7 +356,7 @@ class ProjectDialog(QDialog):
                 d["camera"] = c(row, "camera")
             if _int(c(row, "video")):
                 d["video"] = _int(c(row, "video"))
-            out.append(d)
+            out.append({**copy.deepcopy(self._view_extra[row]), **d})
         return out
 
     # -- filters ------------------------------------------------------------------------

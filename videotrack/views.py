@@ -68,7 +68,10 @@ class View:
         if not self.camera:
             object.__setattr__(self, "camera", self.name)
         if self.hsv is not None:
-            lower, upper = (tuple(int(c) for c in bound) for bound in self.hsv)
+            try:
+                lower, upper = (tuple(int(c) for c in bound) for bound in self.hsv)
+            except (TypeError, ValueError):
+                lower = upper = ()
             if len(lower) != 3 or len(upper) != 3:
                 raise VideoTrackError(f"view {self.name!r}: hsv needs a lower and an upper "
                                       "(hue, saturation, value)", field="hsv")

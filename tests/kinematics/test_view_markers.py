@@ -162,3 +162,39 @@ def test_legs_of_two_colours_fitted_in_3d_each_colour_triangulated_apart():
     assert all(r.unexplained == 0 for r in res)
     for r in res:  # residuals only where a view shows the marker
         assert np.isnan(r.marker_residuals[np.asarray(fitter.unseen)]).all()
+
+
+def test_markers_a_view_never_shows_are_kept_per_view_not_per_frame(locust):
+    """with_unseen keeps one (views, markers) array however long the video; the kernels get
+    it with the user's marks of each frame; keypoints of a marker a view does not show
+    count as missing."""
+    from kinematics.observations import Observations
+
+    cams, shows = colour_views(locust_cameras())
+    fitter = Fitter(locust, cams, view_markers=shows)
+    frames = coloured_frames(locust, locust_cameras(), smooth_random_motion(locust, 5, 5))
+    obs = fitter.observations(frames)
+    assert obs.hidden is None and obs.unseen.shape == (4, 4)
+    marks = np.zeros((5, 4, 4), bool)
+    marks[2, 1, 3] = True  # the user also hides the tip in side_green, frame 2
+    both = obs.with_hidden(marks)
+    want = np.broadcast_to(fitter.unseen, (5, 4, 4)) | marks
+    np.testing.assert_array_equal(both.marks(np.arange(5)), want)
+    p3 = both.arrays(np.array([2]))[4][0]
+    np.testing.assert_array_equal(p3 != 0, want[2].T)
+    assert both.take([2, 4]).unseen is obs.unseen
+    kp = np.ones((2, 4, 4, 3))
+    kobs = Observations.keypoints(kp, list(cams), locust.marker_names, locust.marker_names)
+    seen = fitter.observations(kobs)
+    np.testing.assert_array_equal(seen.conf.reshape(2, 4, 4) == 0,
+                                  np.broadcast_to(fitter.unseen, (2, 4, 4)))
+    with pytest.raises(KinematicsError, match="unseen markers need a boolean array"):
+        obs.with_unseen(np.zeros((3, 4), bool))
+
+
+def test_a_view_that_shows_no_marker_does_not_count_against_3d():
+    body = three_legs()
+    cams = ring()
+    views = {**cams, "c0_blank": cams["c0"]}
+    fitter = Fitter(body, views, view_markers={"c0_blank": []})
+    assert fitter._views_3d == 5 and fitter.matches_in_3d

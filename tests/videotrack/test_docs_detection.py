@@ -34,7 +34,9 @@ def positions(tau):
 
 
 def test_worked_example_runs(tmp_path, video_writer, capsys):
-    toml = re.search(r"```toml\n(.*?)```", DOC.read_text(), flags=re.S).group(1)
+    text = DOC.read_text()
+    example = text[text.index("## Worked example"):]
+    toml = re.search(r"```toml\n(.*?)```", example, flags=re.S).group(1)
     config = tmp_path / "project.toml"
     config.write_text(toml)
     rng = np.random.default_rng(0)
