@@ -256,7 +256,7 @@ def _as_ragged(detections, view_names: Sequence[str]) -> _Ragged:
     return _Ragged(sorted_by_x(pts[good], new_off), new_off, dropped.astype(np.int64), nv)
 
 
-def _unseen_markers(view_markers, view_names: Sequence[str], marker_names: Sequence[str]
+def unseen_markers(view_markers, view_names: Sequence[str], marker_names: Sequence[str]
                     ) -> np.ndarray | None:
     """(n_views, n_markers) bool: markers a view cannot show, from ``view_markers`` (view
     name -> the marker names it shows; views not named show all); None when every view
@@ -332,7 +332,7 @@ class Fitter:
         self.body = body
         self.cameras = list(self.problem.cameras)
         self.view_names = list(self.problem.view_names)
-        self.unseen = _unseen_markers(view_markers, self.view_names, body.marker_names)
+        self.unseen = unseen_markers(view_markers, self.view_names, body.marker_names)
         self._locked = body.locked_mask()
         self._mean_deg = self.problem.mean_deg
         self._ranges_deg = body.ranges_deg()

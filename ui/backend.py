@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from kinematics.anneal import AnnealParams, Fitter, FrameResult
+from kinematics.anneal import unseen_markers as _unseen_markers
 from kinematics.model import Body
 from kinematics.observations import Observations
 from ui.adapters import frame_detections
@@ -80,11 +81,19 @@ __all__ = [
     "read_mapped_keypoints",
     "read_project_results",
     "save_project_results",
+    "unseen_markers",
     "with_status",
 ]
 
 #: Status of a frame whose posture was set by hand (the results files know it).
 CORRECTED = "corrected"
+
+
+def unseen_markers(view_markers: Mapping, view_names, marker_names) -> np.ndarray:
+    """(n_views, n_markers) bool: the markers a view does not show (``[[views]]
+    model_markers``), all False when every view shows every marker."""
+    out = _unseen_markers(view_markers, list(view_names), list(marker_names))
+    return np.zeros((len(view_names), len(marker_names)), bool) if out is None else out
 
 
 def make_fitter(body: Body, cameras: Mapping, params: AnnealParams,

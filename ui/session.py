@@ -615,7 +615,14 @@ class Session(QObject):
         if observed is not None and observed.kind == "points3d":
             return out  # fitted to 3D points: a mark in a view means nothing there
         marks = self._marks_of(self.detection_edits, record, names)
-        return out if marks is None else marks
+        out = out if marks is None else marks
+        shown = {} if self.model is None else self._fit_model().view_markers
+        if shown and len(names) and len(self.views) == len(self.model.view_names):
+            # a view of one colour of markers: the others are not matched there either
+            out = out | backend.unseen_markers(
+                {v: [m for m in ms if m in names] for v, ms in shown.items()},
+                self.model.view_names, names)
+        return out
 
     def frame_detections(self, record: int | None = None) -> list[np.ndarray]:
         """Detected centroids of a record, one (n, 2) array per view (none in a keypoint

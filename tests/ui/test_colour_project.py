@@ -41,6 +41,10 @@ def test_colour_views_are_fitted_with_their_markers_and_kept_by_the_dialog(
         # the tip is green: no residual in the red views, one in the green ones
         assert np.isnan(r.marker_residuals[[0, 2], tip]).all()
         assert np.isfinite(r.marker_residuals[[1, 3], tip]).all()
+    # drawn as not matched there: the tip in the red views, the red markers in the green
+    hidden = s.hidden_in_frame()
+    assert hidden[[0, 2], tip].all() and not hidden[[1, 3], tip].any()
+    assert hidden[1, :tip].all() and not hidden[0, :tip].any()
     dialog = window.open_project_dialog()
     dialog.wait_preview()
     counts = [len(v.points) for v in dialog.preview_result]
