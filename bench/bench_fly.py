@@ -677,7 +677,7 @@ def run(args, out: Path, keep: bool) -> int:
 
     columns = list(results)
     fmt = {"median": "{:.3f}", "within": "{:.1f}", "off": "{:.1f}", "fti": "{:.1f}",
-           "fps": "{:.1f}"}
+           "fps": "{:.2f}"}
     labels = {"median": "median 3D joint error (mm)",
               "within": "frames with every joint within 0.2 mm (%)",
               "off": "frames with a joint off by > 0.2 mm (%)",

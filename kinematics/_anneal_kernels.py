@@ -159,11 +159,15 @@ def mul33(q00, q01, q02, q10, q11, q12, q20, q21, q22, m00, m01, m02, m10, m11, 
 @njit(cache=True, nogil=True, inline="always")
 def _project_cs(values, cs, sn, root_pos, root_rot, parent, chain, pre_rot, pre_trans,
                 post_trans, elem_axis, elem_index, joint_flags, marker_joint, marker_local,
-                slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj, any_pinhole, span):
+                slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj, any_pinhole, span,
+                marks):
     """Markers of the posture with cosines ``cs`` and sines ``sn`` (n_axes,) projected into
     every view: fills ``proj`` (n_views, n_markers, 2); ``rot`` (nj, 3, 3), ``pos`` (nj, 3)
     and ``mk`` (nm, 3) receive A'_j, the joint centres and the 3D markers.
-    ``any_pinhole`` says whether ``kind`` has a pinhole view. ``span = (j0, j1, m0, m1)``:
+    ``any_pinhole`` says whether ``kind`` has a pinhole view. A marker hidden in a pinhole
+    view by ``marks`` (a frame's hidden marks, :func:`hidden_in`; an empty array for none)
+    is not projected there: every reader skips it, and with one view per camera and marker
+    colour most markers are hidden in most views. ``span = (j0, j1, m0, m1)``:
     only joints ``j0:j1`` and markers ``m0:m1`` are computed (a partition's subtree; its
     parents' ``rot``, ``pos`` must be current); ``(0, nj, 0, nm)`` computes everything. (One
     tuple, not four numbers: a call with more than 30 arguments compiles to a star-args call,
@@ -251,15 +255,19 @@ def _project_cs(values, cs, sn, root_pos, root_rot, parent, chain, pre_rot, pre_
             proj[v, m, 0] = P[v, 0, 0] * x + P[v, 0, 1] * y + P[v, 0, 2] * z + P[v, 0, 3]
             proj[v, m, 1] = P[v, 1, 0] * x + P[v, 1, 1] * y + P[v, 1, 2] * z + P[v, 1, 3]
     if any_pinhole:
-        _project_pinhole(kind, P, K, dist, R, t, mk, proj, m0, m1)
+        _project_pinhole(kind, P, K, dist, R, t, mk, proj, m0, m1, marks)
 
 
 @njit(cache=True, nogil=True)
-def _project_pinhole(kind, P, K, dist, R, t, mk, proj, m0, m1):
-    """Project the 3D markers ``mk[m0:m1]`` into the pinhole views of ``proj``."""
+def _project_pinhole(kind, P, K, dist, R, t, mk, proj, m0, m1, marks):
+    """Project the 3D markers ``mk[m0:m1]`` into the pinhole views of ``proj``, but not
+    where ``marks`` hides them (:func:`hidden_in`)."""
+    skip = marks.shape[0] > 0  # tested once: a test per marker slowed every pinhole fit
     for v in range(kind.shape[0]):
         if kind[v] != ORTHOGRAPHIC:
             for m in range(m0, m1):
+                if skip and hidden_in(marks, m, v):
+                    continue
                 u, w = project_point(kind, P, K, dist, R, t, v, mk[m, 0], mk[m, 1], mk[m, 2])
                 proj[v, m, 0] = u
                 proj[v, m, 1] = w
@@ -286,7 +294,7 @@ def project_posture(angles, root_pos, root_rot, parent, chain, pre_rot, pre_tran
     _project_cs(angles, cs, sn, root_pos, root_rot, parent, chain, pre_rot, pre_trans,
                 post_trans, elem_axis, elem_index, joint_flags, marker_joint, marker_local,
                 slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj, _has_pinhole(kind),
-                (0, parent.shape[0], 0, marker_joint.shape[0]))
+                (0, parent.shape[0], 0, marker_joint.shape[0]), mk[:0])
 
 
 # -- Eq. 5 -------------------------------------------------------------------------------
@@ -789,7 +797,10 @@ def partition_error(objective, proj, mk, points, conf, view_off, obs3, cap, m0, 
         if one:
             ev = one_to_one(proj[v], points, a, b, m0, m1, False, claimed, cap, nearest)
         total += ev
-        if penalty > 0.0:
+        if penalty > 0.0 and n_seen == 0:  # no marker of these in the view: each costs missing
+            for c in range(a, b):
+                total += 0.0 if claimed[c] else penalty * min(missing, penalty_cap)
+        elif penalty > 0.0:
             for c in range(a, b):
                 taken = claimed[c]
                 best = np.inf
@@ -799,9 +810,8 @@ def partition_error(objective, proj, mk, points, conf, view_off, obs3, cap, m0, 
                     dy = proj[v, i, 1] - points[c, 1]
                     seen = nearest[i] != UNSEEN
                     best = min(best, dx * dx + dy * dy) if seen else best
-                if not taken:  # every marker hidden: as projection_error, costs missing
-                    d = missing if n_seen == 0 else np.sqrt(best)
-                    total += penalty * min(d, penalty_cap)
+                if not taken:
+                    total += penalty * min(np.sqrt(best), penalty_cap)
     return total
 
 
@@ -919,6 +929,7 @@ def anneal_chain(start, free_idx, step, hist, nbins, th, dof_kind, lo, hi, max_r
     while n_hist < n_free and dof_kind[free_idx[n_hist]] == DOF_HISTOGRAM:
         n_hist += 1
     any_pinhole = _has_pinhole(kind)
+    marks = obs3  # hidden marks not projected (3D objectives read no projection)
     rs = np.uint64(state)  # the stream state; int64 arithmetic with uint64 would be float
     for k in range(start.shape[0]):
         cur[k] = start[k]
@@ -930,7 +941,8 @@ def anneal_chain(start, free_idx, step, hist, nbins, th, dof_kind, lo, hi, max_r
     unexplained = weight if bidirectional else 0.0  # the partition's unexplained-blob weight
     _project_cs(cand, cs, sn, root_pos, root_rot, parent, chain, pre_rot, pre_trans,
                 post_trans, elem_axis, elem_index, joint_flags, marker_joint, marker_local,
-                slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj, any_pinhole, span)
+                slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj, any_pinhole, span,
+                marks)
     if not whole:
         e_cur = partition_error(objective, proj, mk, points, conf, view_off, obs3, cap, m0,
                                 m1, claimed, unexplained, penalty_cap, one, nearest)
@@ -982,7 +994,8 @@ def anneal_chain(start, free_idx, step, hist, nbins, th, dof_kind, lo, hi, max_r
             sn[i], cs[i] = sincos(x)
         _project_cs(cand, cs, sn, root_pos, root_rot, parent, chain, pre_rot, pre_trans,
                     post_trans, elem_axis, elem_index, joint_flags, marker_joint, marker_local,
-                    slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj, any_pinhole, span)
+                    slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj, any_pinhole, span,
+                    marks)
         if not whole:
             e = partition_error(objective, proj, mk, points, conf, view_off, obs3, cap, m0,
                                 m1, claimed, unexplained, penalty_cap, one, nearest)
@@ -1041,6 +1054,7 @@ def beam_start(work, s0, s1, stage_dof_off, stage_dofs, stage_mark, n_samples, s
     ns = work.shape[0]
     e_first = np.inf
     any_pinhole = _has_pinhole(kind)
+    marks = obs3  # hidden marks not projected (3D objectives read no projection)
     rs = state
     beams = np.empty((BEAM, ns))
     beams[0, :] = work
@@ -1080,7 +1094,7 @@ def beam_start(work, s0, s1, stage_dof_off, stage_dofs, stage_mark, n_samples, s
                 _project_cs(cands[nc], cs, sn, rp, rr, parent, chain, pre_rot, pre_trans,
                             post_trans, elem_axis, elem_index, joint_flags, marker_joint,
                             marker_local, slide_index, kind, P, K, dist, R, t, rot, pos, mk,
-                            proj, any_pinhole, span)
+                            proj, any_pinhole, span, marks)
                 cand_e[nc] = partition_error(objective, proj, mk, points, conf, view_off,
                                              obs3, cap, m0, m_end, claimed, 0.0, penalty_cap,
                                              one, nearest)
