@@ -1376,6 +1376,12 @@ class Session(QObject):
         if name not in self.body.marker_names:
             self.status.emit("that marker is not in the chain yet: apply the chain edit first")
             return False
+        unseen = fitter.unseen
+        if unseen is not None and 0 <= view < len(unseen) and unseen[view][
+                self.body.marker_names.index(name)]:
+            self.status.emit(f"view {self.view_names[view]} does not show {name} ([[views]] "
+                             f"model_markers): it is never matched there")
+            return False
         frames = [self.frame] if frames is None else sorted({int(f) for f in frames})
         n_records = (observed.n_frames if isinstance(observed, Observations)
                      else observed.n_records)

@@ -45,6 +45,10 @@ def test_colour_views_are_fitted_with_their_markers_and_kept_by_the_dialog(
     hidden = s.hidden_in_frame()
     assert hidden[[0, 2], tip].all() and not hidden[[1, 3], tip].any()
     assert hidden[1, :tip].all() and not hidden[0, :tip].any()
+    messages = []
+    s.status.connect(messages.append)
+    assert not s.toggle_hidden(0, tip)  # side_red does not show the green tip
+    assert "does not show M3" in messages[-1] and not s.detection_edits
     dialog = window.open_project_dialog()
     dialog.wait_preview()
     counts = [len(v.points) for v in dialog.preview_result]
