@@ -218,6 +218,12 @@ def load_model(config, **overrides) -> ProjectModel:
                                                    f"views[{i}].model_markers")
     if not cameras:
         raise VideoTrackError("no views: add [[views]] tables", file=config.path, field="views")
+    if shown and len(shown) == len(cameras):  # every view lists its markers: any left out?
+        nowhere = [m for m in body.marker_names if not any(m in s for s in shown.values())]
+        if nowhere:
+            warnings.warn(f"{config.path}: views.model_markers: no view shows "
+                          f"{', '.join(nowhere)}; the fit never places them",
+                          VideoTrackWarning, stacklevel=2)
     return ProjectModel(body, cameras, anneal_params(config, **overrides), Path(chain_path),
                         Path(cameras_path), Path(hist_path) if hist_path else None, shown)
 

@@ -3,6 +3,7 @@
 
 import re
 import shutil
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -12,7 +13,7 @@ from videotrack.cli import main
 from videotrack.config import load_config
 from videotrack.detect import detect_video, settings_from_config
 from videotrack.detections import DetectSettings, load_detections
-from videotrack.errors import VideoTrackError
+from videotrack.errors import VideoTrackError, VideoTrackWarning
 from videotrack.evaluate import evaluate_files
 from videotrack.filters import FilterChain
 from videotrack.marker_colours import bgr, colour_of_markers, hsv_range, parse_colour
@@ -222,3 +223,19 @@ def test_a_views_colour_survives_its_dict():
     assert View.from_dict(view.to_dict()) == view
     plain = View("b", (0, 0, 10, 10))
     assert "hsv" not in plain.to_dict() and View.from_dict(plain.to_dict()) == plain
+
+
+def test_a_marker_no_view_shows_is_warned_about(fitted, tmp_path):
+    """Every view lists its markers and none lists M3: loading says so, once, and still
+    loads."""
+    text = fitted.read_text().replace('model_markers = ["M3"]', 'model_markers = ["M0"]')
+    for key in ("chain", "cameras"):  # the copy lies elsewhere: absolute paths
+        text = text.replace(f'path = "{key}.', f'path = "{fitted.parent.as_posix()}/{key}.')
+    path = tmp_path / "project.toml"
+    path.write_text(text)
+    with pytest.warns(VideoTrackWarning, match="no view shows M3; the fit never places"):
+        model = load_model(load_config(path))
+    assert model.view_markers["side_green"] == ["M0"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        load_model(load_config(fitted))  # the tip is green: every marker is shown
