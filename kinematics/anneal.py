@@ -49,7 +49,7 @@ from kinematics import _anneal_kernels as _ak
 from kinematics import _lane_kernels as _lk
 from kinematics import placement, temporal
 from kinematics.cameras import CameraArrays
-from kinematics.cloud import cloud_observations
+from kinematics.cloud import cloud_observations, view_groups
 from kinematics.error_function import projection_error
 from kinematics.errors import KinematicsError
 from kinematics.fk import forward_kinematics, forward_kinematics_reference
@@ -413,8 +413,7 @@ class Fitter:
         fewest that show the same markers (one colour's views)."""
         if self.unseen is None:
             return self.n_views
-        rows = [row.tobytes() for row in self.unseen if not row.all()]  # a view of none
-        return min((rows.count(r) for r in rows), default=0)
+        return min((len(g) for g in view_groups(self.unseen)), default=0)
 
     def _limbs(self, p: AnnealParams) -> bool:
         """Whether the body is annealed in several partitions (many limbs)."""

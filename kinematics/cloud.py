@@ -489,17 +489,23 @@ def cloud_observations(cameras, obs: Observations, unseen=None, **options) -> Ob
     if unseen is None or not np.any(unseen):
         return obs.with_cloud(_cloud_rows(cams, obs.points, obs.offsets, options))
     unseen = np.asarray(unseen, bool)
-    groups: dict[bytes, list[int]] = {}
-    for v in range(len(cams)):
-        if not unseen[v].all():  # a view that shows no marker adds no point
-            groups.setdefault(unseen[v].tobytes(), []).append(v)
     parts = []
-    for views in groups.values():
+    for views in view_groups(unseen):
         pts, off = _views_of(obs, views)
         rows = _cloud_rows([cams[v] for v in views], pts, off, options)
         may = np.where(rows[..., 3:4] > 0, ~unseen[views[0]], False).astype(float)
         parts.append(np.concatenate([rows, may], axis=2))
     return obs.with_cloud(np.concatenate(parts, axis=1))
+
+
+def view_groups(unseen: np.ndarray) -> list[list[int]]:
+    """The views that show the same markers (one colour, seen by several cameras), grouped,
+    from ``unseen`` (n_views, n_markers); a view that shows no marker is in no group."""
+    groups: dict[bytes, list[int]] = {}
+    for v, row in enumerate(np.asarray(unseen, bool)):
+        if not row.all():
+            groups.setdefault(row.tobytes(), []).append(v)
+    return list(groups.values())
 
 
 def _cloud_rows(cams, points, offsets, options) -> np.ndarray:

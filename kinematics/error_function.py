@@ -126,7 +126,7 @@ def projection_error(
     if hidden is not None:
         if np.shape(hidden) != proj.shape[:2]:
             raise KinematicsError(f"hidden marks must have shape {proj.shape[:2]} (views, "
-                                  f"markers), got {np.shape(hidden)}")
+                                  f"markers), got {np.shape(hidden)}", field="hidden")
         seen = ~np.asarray(hidden, bool)
     for v, det in enumerate(detections):
         d = np.asarray(det, dtype=float).reshape(-1, 2)

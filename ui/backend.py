@@ -75,7 +75,6 @@ __all__ = [
     "keypoint_input",
     "load_model",
     "load_project_config",
-    "make_fitter",
     "output_paths",
     "posture_error",
     "read_mapped_keypoints",
@@ -94,14 +93,6 @@ def unseen_markers(view_markers: Mapping, view_names, marker_names) -> np.ndarra
     model_markers``), all False when every view shows every marker."""
     out = _unseen_markers(view_markers, list(view_names), list(marker_names))
     return np.zeros((len(view_names), len(marker_names)), bool) if out is None else out
-
-
-def make_fitter(body: Body, cameras: Mapping, params: AnnealParams,
-                view_markers: Mapping | None = None) -> Fitter:
-    """A :class:`~kinematics.anneal.Fitter` for a body, the cameras of the views (name ->
-    camera, in view order), parameters and the markers each view shows (``[[views]]
-    model_markers``)."""
-    return Fitter(body, cameras, params, view_markers=view_markers)
 
 
 def detect_markers(config, progress: Callable[[int, int], object],

@@ -913,9 +913,7 @@ class Session(QObject):
         if self.model is None or self.body is None:
             raise VideoTrackError("no chain and cameras: set them under Project ▸ Settings",
                                   file=self.config_path)
-        model = self._fit_model()
-        return backend.make_fitter(body or self.body, model.cameras, self.params,
-                                   model.view_markers)
+        return replace(self._fit_model(), params=self.params).fitter(body or self.body)
 
     def _fitter_or_report(self):
         """The fitter for the next task, or None after reporting on :attr:`error` why there

@@ -60,24 +60,35 @@ def check_colours(colours: Sequence[tuple[str, Sequence[str]]]) -> None:
         seen.add(name)
 
 
+def markers_matching(patterns: Sequence[str], marker_names: Sequence[str], file=None,
+                     where: str = "model_markers") -> list[str]:
+    """The markers (in ``marker_names``' order) that names or shell patterns (``LF_*``)
+    pick; a pattern that picks none is an error naming it (field ``where[j]``)."""
+    picked = set()
+    for j, pattern in enumerate(patterns):
+        hits = {m for m in marker_names if fnmatchcase(m, pattern)}
+        if not hits:
+            raise VideoTrackError(f"{pattern!r} names no marker (markers: "
+                                  f"{', '.join(marker_names)})", file=file,
+                                  field=f"{where}[{j}]")
+        picked |= hits
+    return [m for m in marker_names if m in picked]
+
+
 def colour_of_markers(colours: Sequence[tuple[str, Sequence[str]]],
                       names: Sequence[str]) -> np.ndarray:
     """(n_markers,) index into ``colours`` of each marker; every marker needs exactly one
     colour, and every pattern must name a marker."""
     check_colours(colours)
     out = np.full(len(names), -1, np.int64)
+    index = {m: k for k, m in enumerate(names)}
     for c, (colour, patterns) in enumerate(colours):
-        for pattern in patterns:
-            hits = [k for k, m in enumerate(names) if fnmatchcase(m, pattern)]
-            if not hits:
-                raise VideoTrackError(f"{colour}: {pattern!r} names no marker (markers: "
-                                      f"{', '.join(names)})", field="colours")
-            for k in hits:
-                if out[k] not in (-1, c):
-                    raise VideoTrackError(f"marker {names[k]!r} is both "
-                                          f"{colours[out[k]][0]} and {colour}",
-                                          field="colours")
-                out[k] = c
+        picked = markers_matching(patterns, names, where=f"colours.{colour}")
+        for k in (index[m] for m in picked):
+            if out[k] not in (-1, c):
+                raise VideoTrackError(f"marker {names[k]!r} is both {colours[out[k]][0]} "
+                                      f"and {colour}", field="colours")
+            out[k] = c
     left = [names[k] for k in np.flatnonzero(out < 0)]
     if left:
         raise VideoTrackError(f"marker {left[0]!r} has no colour: give every marker one",

@@ -63,6 +63,7 @@ from kinematics.model import Body
 from videotrack.config import anneal_from_table
 from videotrack.errors import VideoTrackError, VideoTrackWarning
 from videotrack.identity import relative_message, relative_path
+from videotrack.marker_colours import markers_matching
 from videotrack.markerless import KeypointInput, fitting_model, is_markerless, load_keypoints
 from videotrack.results import (
     Results,
@@ -227,22 +228,6 @@ def load_model(config, **overrides) -> ProjectModel:
     return ProjectModel(body, cameras, anneal_params(config, **overrides), Path(chain_path),
                         Path(cameras_path), Path(hist_path) if hist_path else None, shown)
 
-
-def markers_matching(patterns: Sequence[str], marker_names: Sequence[str], file=None,
-                     where: str = "model_markers") -> list[str]:
-    """The markers (in the chain's order) that names or shell patterns (``LF_*``) pick;
-    a pattern that picks none is an error naming it."""
-    from fnmatch import fnmatchcase
-
-    picked = set()
-    for j, pattern in enumerate(patterns):
-        hits = {m for m in marker_names if fnmatchcase(m, pattern)}
-        if not hits:
-            raise VideoTrackError(f"{pattern!r} names no marker of the chain (markers: "
-                                  f"{', '.join(marker_names)})", file=file,
-                                  field=f"{where}[{j}]")
-        picked |= hits
-    return [m for m in marker_names if m in picked]
 
 
 def default_results_path(config, detections_path: Path) -> Path:

@@ -157,10 +157,9 @@ class View:
     @classmethod
     def from_dict(cls, d: Mapping) -> View:
         """The view :meth:`to_dict` wrote (e.g. from a detections file's settings)."""
-        hsv = d.get("hsv")
         return cls(d["name"], tuple(d.get("roi") or ()) or None, bool(d.get("flip_x")),
                    bool(d.get("flip_y")), d.get("camera") or None, int(d.get("video", 0)),
-                   (tuple(hsv[0]), tuple(hsv[1])) if hsv else None)
+                   d.get("hsv") or None)
 
     def _need_roi(self) -> None:
         if self.roi is None:
