@@ -1014,30 +1014,40 @@ class Fitter:
         scale = self._posture_scale()
         images = marker_images(obs, idx, len(self.body.marker_names))
         pending: list[FrameResult] = []
+        # the last frames decided: the left anchor, and context for finding cuts
+        history = [] if previous is None else [previous]
         done = 0  # frames of idx already yielded
         for chunk in chunks:
             pending.extend(chunk)
             while len(pending) > 2 * lag:
                 # a window of fixed length, so the choice does not depend on the chunk size
                 decided = self._decide(obs, idx, roots, rots, pending[:2 * lag], done, images,
-                                       scale, previous, starts, p)
+                                       scale, history, starts, p)
                 out, pending = decided[:lag], pending[lag:]
                 done += lag
-                previous = out[-1]
+                history = (history + out)[-CUT_CONTEXT:]
                 yield from out
         if pending:
             yield from self._decide(obs, idx, roots, rots, pending, done, images, scale,
-                                    previous, starts, p)
+                                    history, starts, p)
 
     def _decide(self, obs, idx, roots, rots, window: list, first: int, images, scale,
-                previous: FrameResult | None, starts, p: AnnealParams) -> list[FrameResult]:
+                history: list[FrameResult], starts, p: AnnealParams) -> list[FrameResult]:
         """The window's results with the path's choice applied (module :mod:`temporal`);
-        ``previous`` is the result chosen just before the window (its left anchor)."""
+        ``history`` holds the results chosen just before the window, the last one its left
+        anchor."""
         n_angles = self._n_wrapped
         window = list(window)
+        # decided frames right before the window, consecutive up to its first frame
+        context: list[FrameResult] = []
+        for r in reversed(history):
+            if r.frame != (context[0].frame if context else window[0].frame) - 1 or not (
+                    r.runs or r.candidates):
+                break
+            context.insert(0, r)
+        previous = context[-1] if context else None
         anchor = None
-        if previous is not None and window and previous.frame == window[0].frame - 1 and (
-                previous.runs or previous.candidates):
+        if previous is not None:
             anchor = self._posture_vector(previous)
             # the anchor as a seed for re-fitting the window's first frame
             previous = Candidate(previous.angles_deg, previous.root_positions,
@@ -1047,7 +1057,7 @@ class Fitter:
             k = max((len(r.candidates) for r in window), default=0)
             if k == 0:  # no frame of the window had observations
                 return (np.full(len(window), -1), np.zeros((len(window), 0)),
-                        np.zeros((len(window), 0, len(scale))))
+                        np.zeros((len(window), 0, len(scale))), np.zeros((len(window), 0)))
             unary = np.full((len(window), k), np.inf)
             post = np.zeros((len(window), k, len(scale)))
             for i, r in enumerate(window):
@@ -1055,16 +1065,23 @@ class Fitter:
                     e = np.array([c.error for c in r.candidates])
                     unary[i, : len(e)] = (e - e.min()) / max(images[first + i], 1)
                     post[i, : len(e)] = [self._posture_vector(c) for c in r.candidates]
-            return temporal.choose_path(unary, post, scale, n_angles, p.path_weight,
-                                        breaks, anchor), unary, post
+            choice, cost = temporal.solve_path(unary, post, scale, n_angles, p.path_weight,
+                                               breaks, anchor)
+            return choice, unary, post, cost
 
         frames = np.array([r.frame for r in window])
         breaks = np.r_[False, np.diff(frames) != 1] | np.isin(frames, starts)
-        best = np.array([self._posture_vector(r.candidates[0]) if r.candidates
-                         else np.full(len(scale), np.nan) for r in window])
-        breaks |= temporal.cuts(best, scale, n_angles)
+        # cuts in the movement, from every candidate of the window and the decided context
+        k = max((len(r.candidates) for r in window), default=0)
+        cands = np.full((len(context) + len(window), max(k, 1), len(scale)), np.nan)
+        for i, r in enumerate(context):
+            cands[i, 0] = self._posture_vector(r)
+        for i, r in enumerate(window, len(context)):
+            for j, c in enumerate(r.candidates):
+                cands[i, j] = self._posture_vector(c)
+        breaks |= temporal.cuts(cands, scale, n_angles, before=len(context))
 
-        choice, unary, post = path()
+        choice, unary, post, cost = path()
         # Re-analysis seeded by neighbours: a frame where the chosen path jumps (to or from
         # it) is fitted again, cold and locally, from every candidate of both neighbours;
         # two rounds, so a run of a few wrong frames is entered from both ends.
@@ -1115,12 +1132,22 @@ class Fitter:
                     grown = grown or len(merged) > before
                     changed = True
             if changed:  # the path's choice indexes the candidates as they are now
-                choice, unary, post = path()
+                choice, unary, post, cost = path()
             if not grown:
                 break
         # a jump the re-fits could not remove: the frames on both sides need a look (relative
         # to the window's own movement only: a fast or coarsely sampled one jumps throughout)
         still_jumping = jumping(cap=np.inf)
+        # ... and a frame off the line through its neighbours (a jump too small to see
+        # against the movement, e.g. a marker a ghost took for a frame or two)
+        chosen = np.array([post[i, c] if c >= 0 else np.full(len(scale), np.nan)
+                           for i, c in enumerate(choice)])
+        if anchor is not None and not breaks[0]:
+            kinked = temporal.kinks(np.r_[anchor[None], chosen], scale, n_angles,
+                                    np.r_[False, breaks])[1:]
+        else:
+            kinked = temporal.kinks(chosen, scale, n_angles, breaks)
+        still_jumping |= set(np.flatnonzero(kinked).tolist())
         # "about as well": within ambiguous_px per marker image, and within half the typical
         # E per image of the window (on a clean video a posture 60x worse than the chosen
         # one is a poor local minimum, not an ambiguity)
@@ -1139,6 +1166,10 @@ class Fitter:
                 moves = np.zeros(len(near))  # (the window's rows are padded)
                 moves[:len(r.candidates)] = self._marker_moves(chosen, r.candidates)
                 near &= moves > p.ambiguous_move * self._segment_scale
+            # ... and the movement does not rule it out: the best path through it costs as
+            # little more (fit and movement together; a mirror branch as smooth as the
+            # chosen one costs nothing more, a flip for one frame two jumps)
+            near &= cost[i] - cost[i, choice[i]] <= margin
             ambiguous = bool(near.any()) or i in still_jumping
             cands = (chosen, *(c for k, c in enumerate(r.candidates) if k != choice[i]))
             if np.array_equal(chosen.angles_deg, r.angles_deg) and np.array_equal(
@@ -1229,6 +1260,8 @@ REDO_JUMP_RATIO, REDO_JUMP_MIN = 16.0, 0.02
 #: A re-fit from a neighbour becomes a candidate only within this E per marker image (px)
 #: of the frame's best.
 REFIT_KEEP_PX = 1.0
+#: Decided frames kept before a window: the cut rule (:func:`temporal.cuts`) looks 2 back.
+CUT_CONTEXT = 2
 #: The least difference in E per marker image (px) that still counts as "about as well".
 AMBIGUOUS_FLOOR_PX = 1e-3
 

@@ -33,6 +33,12 @@ JUMP_CAP = 4.0
 #: A jump of the best candidates larger than CUT_RATIO x the typical change (at least
 #: CUT_MIN) between stretches that each move by at most STILL_RATIO x it is a cut.
 CUT_RATIO, CUT_MIN, STILL_RATIO, STILL_MIN = 50.0, 1.0, 4.0, 0.05
+#: A frame kinks the path when it lies farther from the midpoint of its two neighbours than
+#: KINK_RATIO x the typical such distance (squared, in spreads; at least KINK_MIN) and more
+#: than KINK_OWN x its neighbours' own kinks (a wrong frame's neighbours kink by a quarter).
+KINK_RATIO, KINK_MIN, KINK_OWN = 500.0, 0.05, 0.5
+#: ... and the frames between two kinks at most this many frames apart.
+KINK_GAP = 1
 
 
 def angle_difference(a, b, n_angles: int) -> np.ndarray:
@@ -75,31 +81,82 @@ def transition_costs(prev, cur, scale, n_angles: int) -> np.ndarray:
     return np.where(np.isfinite(cost), cost, np.inf)
 
 
-def cuts(best, scale, n_angles: int) -> np.ndarray:
+def cuts(postures, scale, n_angles: int, before: int = 0) -> np.ndarray:
     """Where the movement itself jumps (concatenated sequences): ``(n,)`` bool, True where
-    frame t starts a new stretch. ``best`` (n, d) is each frame's lowest-E posture (NaN rows:
-    none). A cut needs a jump from t-1 to t much larger than the typical frame-to-frame change
-    while the two frames before and the three from t on move little: an isolated wrong frame,
-    or a short run of them, is not a cut (the path is what sorts those out)."""
-    best = np.asarray(best, float)
-    n = best.shape[0]
+    frame t starts a new stretch.
+
+    ``postures`` is (n, d), each frame's posture, or (n, K, d), its candidates (NaN rows:
+    none); the change from t-1 to t is the smallest over pairs of candidates, so a frame whose
+    lowest-E candidate is wrong but another is right does not hide a cut next to it. The
+    first ``before`` frames are context only (frames decided earlier): they are never cuts,
+    but let a cut be found at the first frames after them. A cut needs a jump from t-1 to t
+    much larger than the typical frame-to-frame change while the two frames before and the
+    three from t on move little: an isolated wrong frame, or a short run of them, is not a
+    cut (the path is what sorts those out)."""
+    postures = np.asarray(postures, float)
+    if postures.ndim == 2:
+        postures = postures[:, None]
+    n = postures.shape[0]
     out = np.zeros(n, bool)
     if n < 5:
-        return out
-    d = angle_difference(best[1:], best[:-1], n_angles) / scale
-    jump = np.r_[np.nan, np.sum(d * d, axis=1)]  # jump[t]: from t-1 to t
+        return out[before:]
+    jump = np.full(n, np.nan)  # jump[t]: from t-1 to t
+    for t in range(1, n):
+        cost = transition_costs(postures[t - 1], postures[t], scale, n_angles)
+        jump[t] = np.min(cost) if np.isfinite(cost).any() else np.nan
     typical = np.nanmedian(jump) if np.isfinite(jump).any() else 0.0
     hi = max(CUT_MIN, CUT_RATIO * typical)
     lo = max(STILL_MIN, STILL_RATIO * typical)
-    for t in range(2, n - 2):
+    for t in range(max(2, before), n - 2):
         if jump[t] > hi and jump[t - 1] <= lo and jump[t + 1] <= lo and jump[t + 2] <= lo:
             out[t] = True
+    return out[before:]
+
+
+def kinks(postures, scale, n_angles: int, breaks=None) -> np.ndarray:
+    """Frames where a chosen path kinks: ``(n,)`` bool (constants :data:`KINK_RATIO`, ...).
+
+    Smooth movement passes close to the midpoint of its neighbours; a wrong frame in a right
+    stretch (a marker taken by a ghost for a frame or two) does not, however small the jump
+    it makes, so this finds wrong frames that the first difference, which carries the
+    movement itself, misses. ``postures`` (n, d) is one posture per frame (NaN rows: none);
+    ``breaks`` marks frames that start a new stretch (no kink is measured across one)."""
+    postures = np.asarray(postures, float)
+    n = postures.shape[0]
+    cut = np.zeros(n, bool) if breaks is None else np.asarray(breaks, bool)
+    kink = np.full(n, np.nan)
+    for t in range(1, n - 1):
+        if cut[t] or cut[t + 1]:
+            continue
+        mid = postures[t - 1] + angle_difference(postures[t + 1], postures[t - 1],
+                                                 n_angles) / 2.0
+        d = angle_difference(postures[t], mid, n_angles) / scale
+        kink[t] = np.sum(d * d)
+    if not np.isfinite(kink).any():
+        return np.zeros(n, bool)
+    limit = max(KINK_MIN, KINK_RATIO * np.nanmedian(kink))
+    side = np.fmax(np.r_[np.nan, kink[:-1]], np.r_[kink[1:], np.nan])
+    with np.errstate(invalid="ignore"):
+        out = (kink > limit) & ~(kink < KINK_OWN * side)
+    # a short wrong stretch kinks where it starts and ends, not inside: the frames between
+    # two kinks at most KINK_GAP apart go with them
+    at = np.flatnonzero(out)
+    for a, b in itertools.pairwise(at):
+        if 1 < b - a <= KINK_GAP + 1 and not cut[a + 1:b + 1].any():
+            out[a + 1:b] = True
     return out
 
 
 def choose_path(unary, postures, scale, n_angles: int, weight: float = 1.0,
                 breaks=None, anchor=None) -> np.ndarray:
-    """One candidate per frame minimising the summed cost (module doc).
+    """One candidate per frame minimising the summed cost (module doc): the choice of
+    :func:`solve_path`."""
+    return solve_path(unary, postures, scale, n_angles, weight, breaks, anchor)[0]
+
+
+def solve_path(unary, postures, scale, n_angles: int, weight: float = 1.0,
+               breaks=None, anchor=None) -> tuple[np.ndarray, np.ndarray]:
+    """The path of least summed cost (module doc) and what each candidate would cost it.
 
     Parameters
     ----------
@@ -113,7 +170,12 @@ def choose_path(unary, postures, scale, n_angles: int, weight: float = 1.0,
 
     Returns
     -------
-    (n,) index of the chosen candidate per frame (-1 for a frame without any)
+    choice : (n,) index of the chosen candidate per frame (-1 for a frame without any)
+    cost : (n, K) per candidate, the least cost of a path through it over its stretch
+        (between cuts; inf where no candidate). Its minimum in a frame is the chosen
+        path's cost; another candidate's excess over it is what choosing that candidate
+        costs the movement and the fit together (a min-marginal: the neighbours may change
+        with it), the measure of how surely the path rules it out.
     """
     unary = np.asarray(unary, float)
     unary = np.where(np.isfinite(unary), unary, np.inf)
@@ -121,9 +183,10 @@ def choose_path(unary, postures, scale, n_angles: int, weight: float = 1.0,
     n = unary.shape[0]
     scale = np.asarray(scale, float)
     choice = np.full(n, -1, np.int64)
+    cost = np.full(unary.shape, np.inf)
     raw = [None] + [transition_costs(postures[t - 1], postures[t], scale, n_angles)
                     for t in range(1, n)]
-    trans = [None] + [np.minimum(c, JUMP_CAP) for c in raw[1:]]
+    trans = [None] + [weight * np.minimum(c, JUMP_CAP) for c in raw[1:]]
     cut = np.zeros(n, bool) if breaks is None else np.asarray(breaks, bool).copy()
     has = np.isfinite(unary).any(axis=1)
     for t in range(n):
@@ -138,16 +201,23 @@ def choose_path(unary, postures, scale, n_angles: int, weight: float = 1.0,
     for a, b in itertools.pairwise(bounds):
         if not has[a]:
             continue
-        total = unary[a] + (start0 if a == 0 and start0 is not None else 0.0)
+        # forward: least cost of a path ending at each candidate; backward: least cost of
+        # the rest of the stretch after it
+        ahead = [unary[a] + (start0 if a == 0 and start0 is not None else 0.0)]
         back = []
         for t in range(a + 1, b):
-            step = total[:, None] + weight * trans[t]
+            step = ahead[-1][:, None] + trans[t]
             arg = np.argmin(step, axis=0)
             back.append(arg)
-            total = step[arg, np.arange(step.shape[1])] + unary[t]
-        j = int(np.argmin(total))
+            ahead.append(step[arg, np.arange(step.shape[1])] + unary[t])
+        rest = np.zeros(unary.shape[1])
+        for t in range(b - 1, a - 1, -1):
+            cost[t] = ahead[t - a] + rest
+            if t > a:
+                rest = np.min(trans[t] + (unary[t] + rest)[None, :], axis=1)
+        j = int(np.argmin(ahead[-1]))
         choice[b - 1] = j
         for t in range(b - 1, a, -1):
             j = int(back[t - a - 1][j])
             choice[t - 1] = j
-    return choice
+    return choice, np.where(np.isfinite(unary), cost, np.inf)

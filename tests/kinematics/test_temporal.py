@@ -3,6 +3,8 @@ Fitter's use of them with ``candidates`` > 1)."""
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 
@@ -10,7 +12,15 @@ from kinematics.anneal import AnnealParams, Fitter
 from kinematics.cameras import OrthographicCamera
 from kinematics.fk import forward_kinematics
 from kinematics.model import Body, Chain, Marker, Root, Segment
-from kinematics.temporal import BREAK_COST, choose_path, distinct, transition_costs
+from kinematics.temporal import (
+    BREAK_COST,
+    JUMP_CAP,
+    choose_path,
+    cuts,
+    distinct,
+    solve_path,
+    transition_costs,
+)
 from tests.conftest import hinge
 
 
@@ -84,6 +94,74 @@ def test_path_skips_frames_without_candidates_and_honours_an_anchor():
     # a window whose left end chose the flip branch continues it
     chosen = choose_path(unary, post, np.array([10.0]), 1, anchor=np.array([41.0]))
     assert (chosen[:3] == 1).all() and (chosen[4:] == 0).all()
+
+
+def brute_force_costs(unary, post, scale, weight, anchor=None):
+    """Every path of a small problem: its cost, and per (frame, candidate) the least cost of
+    a path through it."""
+    n, k = unary.shape
+    best = np.full((n, k), np.inf)
+    for path in itertools.product(range(k), repeat=n):
+        c = sum(unary[t, j] for t, j in enumerate(path))
+        for t in range(1, n):
+            c += weight * min(JUMP_CAP, transition_costs(post[t - 1, [path[t - 1]]],
+                                                         post[t, [path[t]]], scale, 1)[0, 0])
+        if anchor is not None:
+            c += weight * min(JUMP_CAP, transition_costs(anchor[None], post[0, [path[0]]],
+                                                         scale, 1)[0, 0])
+        for t, j in enumerate(path):
+            best[t, j] = min(best[t, j], c)
+    return best
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_solve_path_costs_are_the_least_cost_through_each_candidate(seed):
+    rng = np.random.default_rng(seed)
+    n, k = 6, 3
+    unary = rng.uniform(0, 2, (n, k))
+    post = rng.normal(0, 12, (n, k, 1)) + np.arange(n)[:, None, None]
+    scale = np.array([10.0])
+    anchor = np.array([rng.normal(0, 12)]) if seed % 2 else None
+    choice, cost = solve_path(unary, post, scale, 1, weight=0.7, anchor=anchor)
+    want = brute_force_costs(unary, post, scale, 0.7, anchor)
+    np.testing.assert_allclose(cost, want, rtol=1e-12)
+    # the chosen candidates lie on the cheapest path: each is its frame's least cost
+    np.testing.assert_allclose(cost[np.arange(n), choice], want.min())
+    np.testing.assert_array_equal(choice, choose_path(unary, post, scale, 1, 0.7,
+                                                      anchor=anchor))
+
+
+def test_solve_path_costs_say_how_surely_the_movement_rules_a_candidate_out():
+    unary, post = two_branches()
+    choice, cost = solve_path(unary, post, np.array([10.0]), 1)
+    # frame 5's flip fits better by 0.3, but taking it costs two 40° jumps (capped at 4
+    # each) or the flip branch's worse E (0.5) in the 11 other frames
+    assert choice[5] == 0
+    assert cost[5, 1] - cost[5, 0] == pytest.approx(min(2 * JUMP_CAP, 11 * 0.5) - 0.3)
+    # a mirror branch as smooth as the true one: nothing rules it out
+    unary[:] = 0.0
+    _, cost = solve_path(unary, post, np.array([10.0]), 1)
+    np.testing.assert_allclose(cost[:, 1], cost[:, 0])
+
+
+def test_cuts_see_past_a_wrong_best_candidate_and_into_decided_frames():
+    # a still movement that jumps by 50° at frame 6 (a new sequence)
+    n = 12
+    post = np.full((n, 2, 1), np.nan)
+    post[:, 0, 0] = np.where(np.arange(n) < 6, 0.0, 50.0) + 0.1 * np.arange(n)
+    scale = np.array([10.0])
+    assert np.flatnonzero(cuts(post[:, 0], scale, 1)).tolist() == [6]
+    # frame 8's best candidate is wrong, its second right: the cut is still found
+    wrong = post.copy()
+    wrong[8] = [[90.0], [50.8]]
+    assert np.flatnonzero(cuts(wrong[:, 0], scale, 1)).tolist() == []
+    assert np.flatnonzero(cuts(wrong, scale, 1)).tolist() == [6]
+    # a window starting one frame before the jump: with two decided frames before it the
+    # cut at its second frame is found, and the context frames are not returned
+    window = post[5:]
+    assert not cuts(window, scale, 1).any()
+    found = cuts(post[3:], scale, 1, before=2)
+    assert found.shape == (n - 5,) and np.flatnonzero(found).tolist() == [1]
 
 
 # -- the fitter ------------------------------------------------------------------------------
