@@ -37,6 +37,7 @@ depend on the thread count. Re-runs of a frame always start from the means.
 from __future__ import annotations
 
 import copy
+import itertools
 import math
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, replace
@@ -1057,7 +1058,7 @@ class Fitter:
             k = max((len(r.candidates) for r in window), default=0)
             if k == 0:  # no frame of the window had observations
                 return (np.full(len(window), -1), np.zeros((len(window), 0)),
-                        np.zeros((len(window), 0, len(scale))), np.zeros((len(window), 0)))
+                        np.zeros((len(window), 0, len(scale))))
             unary = np.full((len(window), k), np.inf)
             post = np.zeros((len(window), k, len(scale)))
             for i, r in enumerate(window):
@@ -1065,9 +1066,9 @@ class Fitter:
                     e = np.array([c.error for c in r.candidates])
                     unary[i, : len(e)] = (e - e.min()) / max(images[first + i], 1)
                     post[i, : len(e)] = [self._posture_vector(c) for c in r.candidates]
-            choice, cost = temporal.solve_path(unary, post, scale, n_angles, p.path_weight,
-                                               breaks, anchor)
-            return choice, unary, post, cost
+            choice = temporal.choose_path(unary, post, scale, n_angles, p.path_weight,
+                                          breaks, anchor)
+            return choice, unary, post
 
         frames = np.array([r.frame for r in window])
         breaks = np.r_[False, np.diff(frames) != 1] | np.isin(frames, starts)
@@ -1081,13 +1082,15 @@ class Fitter:
                 cands[i, j] = self._posture_vector(c)
         breaks |= temporal.cuts(cands, scale, n_angles, before=len(context))
 
-        choice, unary, post, cost = path()
+        choice, unary, post = path()
         # Re-analysis seeded by neighbours: a frame where the chosen path jumps (to or from
         # it) is fitted again, cold and locally, from every candidate of both neighbours;
         # two rounds, so a run of a few wrong frames is entered from both ends.
-        def jumping(cap: float = REDO_JUMP) -> set[int]:
+        def jumping(cap: float = REDO_JUMP, stretches: bool = False) -> set[int]:
             """Frames next to a jump of the chosen path: larger than REDO_JUMP_RATIO times the
-            window's typical change (at least REDO_JUMP_MIN, at most ``cap``)."""
+            window's typical change (at least REDO_JUMP_MIN, at most ``cap``); with
+            ``stretches``, also the frames between two jumps at most
+            ``temporal.WRONG_STRETCH`` apart."""
             jumps = np.full(len(window), np.nan)
             if anchor is not None and choice[0] >= 0 and not breaks[0]:
                 jumps[0] = temporal.transition_costs(anchor[None], post[0, choice[0]][None],
@@ -1099,8 +1102,13 @@ class Fitter:
                                                          n_angles)[0, 0]
             typical = np.nanmedian(jumps) if np.isfinite(jumps).any() else 0.0
             limit = min(cap, max(REDO_JUMP_MIN, REDO_JUMP_RATIO * typical))
-            return {int(k) for i in np.flatnonzero(jumps > limit) for k in (i - 1, i)
-                    if k >= 0}
+            at = np.flatnonzero(jumps > limit)
+            out = {int(k) for i in at for k in (i - 1, i) if k >= 0}
+            if stretches:  # a short stretch between two jumps: the whole of it is suspect
+                for a, b in itertools.pairwise(at):
+                    if b - a <= temporal.WRONG_STRETCH and not breaks[a + 1:b].any():
+                        out.update(range(int(a), int(b)))
+            return out
 
         tried: set[tuple[int, int]] = set()
         for _ in range(2):
@@ -1132,12 +1140,12 @@ class Fitter:
                     grown = grown or len(merged) > before
                     changed = True
             if changed:  # the path's choice indexes the candidates as they are now
-                choice, unary, post, cost = path()
+                choice, unary, post = path()
             if not grown:
                 break
         # a jump the re-fits could not remove: the frames on both sides need a look (relative
         # to the window's own movement only: a fast or coarsely sampled one jumps throughout)
-        still_jumping = jumping(cap=np.inf)
+        still_jumping = jumping(cap=np.inf, stretches=True)
         # ... and a frame off the line through its neighbours (a jump too small to see
         # against the movement, e.g. a marker a ghost took for a frame or two)
         chosen = np.array([post[i, c] if c >= 0 else np.full(len(scale), np.nan)
@@ -1154,6 +1162,10 @@ class Fitter:
         typical = np.median([min(c.error for c in r.candidates) / max(images[first + i], 1)
                              for i, r in enumerate(window) if r.candidates] or [0.0])
         margin = min(p.ambiguous_px, max(AMBIGUOUS_FLOOR_PX, 0.5 * typical))
+        # per candidate, the least movement of a path through it (min-marginals of the path
+        # without E): a candidate the movement rules out is no ambiguity
+        moved = temporal.solve_path(np.where(np.isfinite(unary), 0.0, np.inf), post, scale,
+                                    n_angles, p.path_weight, breaks, anchor)[1]
         results = []
         for i, r in enumerate(window):
             if choice[i] < 0:
@@ -1166,10 +1178,10 @@ class Fitter:
                 moves = np.zeros(len(near))  # (the window's rows are padded)
                 moves[:len(r.candidates)] = self._marker_moves(chosen, r.candidates)
                 near &= moves > p.ambiguous_move * self._segment_scale
-            # ... and the movement does not rule it out: the best path through it costs as
-            # little more (fit and movement together; a mirror branch as smooth as the
-            # chosen one costs nothing more, a flip for one frame two jumps)
-            near &= cost[i] - cost[i, choice[i]] <= margin
+            # ... and the movement does not rule it out: the smoothest path through it moves
+            # about as little as the smoothest through the chosen one (a mirror branch as
+            # smooth as the chosen one costs nothing more, a flip for one frame two jumps)
+            near &= moved[i] - moved[i, choice[i]] <= AMBIGUOUS_MOVEMENT
             ambiguous = bool(near.any()) or i in still_jumping
             cands = (chosen, *(c for k, c in enumerate(r.candidates) if k != choice[i]))
             if np.array_equal(chosen.angles_deg, r.angles_deg) and np.array_equal(
@@ -1262,6 +1274,10 @@ REDO_JUMP_RATIO, REDO_JUMP_MIN = 16.0, 0.02
 REFIT_KEEP_PX = 1.0
 #: Decided frames kept before a window: the cut rule (:func:`temporal.cuts`) looks 2 back.
 CUT_CONTEXT = 2
+#: A candidate whose smoothest path moves more than this (squared histogram spreads, the
+#: path's units) beyond the chosen candidate's smoothest is ruled out by the movement and
+#: makes no frame ambiguous.
+AMBIGUOUS_MOVEMENT = 0.5
 #: The least difference in E per marker image (px) that still counts as "about as well".
 AMBIGUOUS_FLOOR_PX = 1e-3
 

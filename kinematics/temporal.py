@@ -33,6 +33,9 @@ JUMP_CAP = 4.0
 #: A jump of the best candidates larger than CUT_RATIO x the typical change (at least
 #: CUT_MIN) between stretches that each move by at most STILL_RATIO x it is a cut.
 CUT_RATIO, CUT_MIN, STILL_RATIO, STILL_MIN = 50.0, 1.0, 4.0, 0.05
+#: A large jump is no cut when within WRONG_STRETCH frames a candidate lies within
+#: RETURN_RATIO x the jump of where the movement before it was heading.
+WRONG_STRETCH, RETURN_RATIO = 16, 0.1
 #: A frame kinks the path when it lies farther from the midpoint of its two neighbours than
 #: KINK_RATIO x the typical such distance (squared, in spreads; at least KINK_MIN) and more
 #: than KINK_OWN x its neighbours' own kinks (a wrong frame's neighbours kink by a quarter).
@@ -92,7 +95,9 @@ def cuts(postures, scale, n_angles: int, before: int = 0) -> np.ndarray:
     but let a cut be found at the first frames after them. A cut needs a jump from t-1 to t
     much larger than the typical frame-to-frame change while the two frames before and the
     three from t on move little: an isolated wrong frame, or a short run of them, is not a
-    cut (the path is what sorts those out)."""
+    cut (the path is what sorts those out); nor is a jump after which, within
+    :data:`WRONG_STRETCH` frames, two frames running have a candidate where the movement
+    before the jump was heading (a longer wrong stretch, e.g. a marker lost for a while)."""
     postures = np.asarray(postures, float)
     if postures.ndim == 2:
         postures = postures[:, None]
@@ -110,6 +115,13 @@ def cuts(postures, scale, n_angles: int, before: int = 0) -> np.ndarray:
     for t in range(max(2, before), n - 2):
         if jump[t] > hi and jump[t - 1] <= lo and jump[t + 1] <= lo and jump[t + 2] <= lo:
             out[t] = True
+    # a jump into (or out of) a wrong stretch, e.g. a marker lost for a while, is no cut:
+    # within WRONG_STRETCH frames after (before) it, two frames running have a candidate
+    # where the movement before (after) it was heading
+    for t in np.flatnonzero(out):
+        if _resumes(postures, t - 1, -1, jump[t], scale, n_angles) or _resumes(
+                postures, t, 1, jump[t], scale, n_angles):
+            out[t] = False
     return out[before:]
 
 
@@ -145,6 +157,25 @@ def kinks(postures, scale, n_angles: int, breaks=None) -> np.ndarray:
         if 1 < b - a <= KINK_GAP + 1 and not cut[a + 1:b + 1].any():
             out[a + 1:b] = True
     return out
+
+
+def _resumes(postures, t: int, back: int, size: float, scale, n_angles: int) -> bool:
+    """Whether the movement at frame ``t`` (its lowest-E candidate, heading away from frame
+    ``t + back``) is found again, on two frames running, within :data:`WRONG_STRETCH` frames
+    on the other side of a jump of ``size`` (within :data:`RETURN_RATIO` x ``size``)."""
+    n = postures.shape[0]
+    here = postures[t, 0]
+    if not (0 <= t + back < n):
+        return False
+    pair = transition_costs(postures[t + back], here[None], scale, n_angles)[:, 0]
+    if not np.isfinite(pair).any():
+        return False
+    step = angle_difference(here, postures[t + back, np.argmin(pair)], n_angles)
+    ahead = -back
+    found = [np.min(transition_costs((here + k * step)[None], postures[t + ahead * k], scale,
+                                     n_angles)) < RETURN_RATIO * size
+             for k in range(2, WRONG_STRETCH + 3) if 0 <= t + ahead * k < n]
+    return any(a and b for a, b in itertools.pairwise(found))
 
 
 def choose_path(unary, postures, scale, n_angles: int, weight: float = 1.0,

@@ -15,9 +15,11 @@ from kinematics.model import Body, Chain, Marker, Root, Segment
 from kinematics.temporal import (
     BREAK_COST,
     JUMP_CAP,
+    WRONG_STRETCH,
     choose_path,
     cuts,
     distinct,
+    kinks,
     solve_path,
     transition_costs,
 )
@@ -162,6 +164,47 @@ def test_cuts_see_past_a_wrong_best_candidate_and_into_decided_frames():
     assert not cuts(window, scale, 1).any()
     found = cuts(post[3:], scale, 1, before=2)
     assert found.shape == (n - 5,) and np.flatnonzero(found).tolist() == [1]
+
+
+def test_a_wrong_stretch_that_the_movement_outlives_is_no_cut():
+    # a steady movement (1° per frame), and a new sequence 50° away from frame 8 on: a cut
+    n = 30
+    scale = np.array([10.0])
+    post = np.full((n, 2, 1), np.nan)
+    post[:, 0, 0] = np.where(np.arange(n) < 8, 0.0, 50.0) + np.arange(n)
+    assert np.flatnonzero(cuts(post, scale, 1)).tolist() == [8]
+    # frames 8-12 50° away and the movement found again from frame 13 where it was heading:
+    # a wrong stretch, neither of its ends a cut
+    post[13:, 0, 0] -= 50.0
+    assert not cuts(post, scale, 1).any()
+    # ... also when, for a while, the right posture is only the frames' second candidate
+    post[13:16, 1, 0] = post[13:16, 0, 0]
+    post[13:16, 0, 0] += 50.0
+    assert not cuts(post, scale, 1).any()
+    # a stretch longer than WRONG_STRETCH is taken for two sequences
+    post = np.full((n + 20, 1, 1), np.nan)
+    post[:, 0, 0] = np.arange(n + 20, dtype=float)
+    post[8:8 + WRONG_STRETCH + 4, 0, 0] += 50.0
+    assert np.flatnonzero(cuts(post, scale, 1)).tolist() == [8, 8 + WRONG_STRETCH + 4]
+
+
+def test_kinks_find_wrong_frames_but_not_their_neighbours():
+    scale = np.array([10.0, 10.0])
+    t = np.arange(40, dtype=float)
+    smooth = np.c_[20 * np.sin(t / 7), 0.5 * t]
+    assert not kinks(smooth, scale, 1).any()
+    one = smooth.copy()
+    one[10, 0] += 6.0  # a 6° slip on one frame, less than the movement's 2.9° per frame x 2
+    assert np.flatnonzero(kinks(one, scale, 1)).tolist() == [10]
+    # a run of three wrong frames kinks where it starts and ends, and takes its middle along
+    run = smooth.copy()
+    run[20:23, 0] += 8.0
+    found = np.flatnonzero(kinks(run, scale, 1)).tolist()
+    assert {20, 21, 22} <= set(found) and set(found) <= {19, 20, 21, 22, 23}
+    # no kink across a break
+    breaks = np.zeros(40, bool)
+    breaks[10] = True
+    assert not kinks(one, scale, 1, breaks)[[9, 10]].any()
 
 
 # -- the fitter ------------------------------------------------------------------------------
