@@ -1111,11 +1111,37 @@ class Fitter:
             return out
 
         tried: set[tuple[int, int]] = set()
+
+        def keep(k: int) -> float:
+            """A re-fit joins frame k's candidates only when it fits about as well as the
+            best."""
+            return (min(c.error for c in window[k].candidates)
+                    + REFIT_KEEP_PX * max(images[first + k], 1))
+
+        def carried(i: int, step: int, seed: Candidate) -> Iterator[tuple[int, Candidate]]:
+            """The seed's posture refined at frame i, then each result refined at the next
+            frame in the same direction while it fits about as well and is new there: a
+            wrong stretch a lower-E minimum holds (a ghost in an occluded marker's place)
+            is crossed with the movement, where a cold anneal would fall back into it."""
+            k = i
+            while 0 <= k < len(window) and window[k].candidates and abs(k - i) <= \
+                    temporal.WRONG_STRETCH:
+                c = self._refit_from(obs, int(idx[first + k]), seed, p, polish=True)
+                if c is None or c.error > keep(k):
+                    return
+                yield k, c
+                if k != i and len(self._distinct([*window[k].candidates, c], replace(
+                        p, candidates=len(window[k].candidates) + 1))) == len(
+                        window[k].candidates):
+                    return  # frame k had this posture already: the path can take it on
+                seed, k = c, k + step
+                if not (0 <= k < len(window)) or breaks[max(k, k - step)]:
+                    return
+
         for _ in range(2):
             redo = jumping()
-            grown = changed = False
+            found: dict[int, list[Candidate]] = {}
             for i in sorted(redo):
-                extra = []
                 for j in (i - 1, i + 1):
                     if j == -1 and anchor is not None and not breaks[0]:
                         seeds = (previous,)  # the frame just before the window
@@ -1127,11 +1153,14 @@ class Fitter:
                         if (i, id(cand)) in tried:
                             continue
                         tried.add((i, id(cand)))
-                        extra.append(self._refit_from(obs, int(idx[first + i]), cand, p))
-                # a re-fit joins the candidates only when it fits about as well as the best
-                e_min = min(c.error for c in window[i].candidates)
-                worst = e_min + REFIT_KEEP_PX * max(images[first + i], 1)
-                extra = [c for c in extra if c is not None and c.error <= worst]
+                        found.setdefault(i, []).append(
+                            self._refit_from(obs, int(idx[first + i]), cand, p))
+                        if p.refine:  # ... and the neighbour's posture itself, carried on
+                            for k, c in carried(i, i - j, cand):
+                                found.setdefault(k, []).append(c)
+            grown = changed = False
+            for i, extra in sorted(found.items()):
+                extra = [c for c in extra if c is not None and c.error <= keep(i)]
                 if extra:
                     before = len(window[i].candidates)
                     merged = self._distinct(list(window[i].candidates) + extra,
@@ -1213,12 +1242,20 @@ class Fitter:
         return float(np.median([v for v in lengths if v > 0] or [1.0]))
 
     def _refit_from(self, obs: Observations, position: int, neighbour: Candidate,
-                    p: AnnealParams) -> Candidate | None:
-        """Anneal frame ``position`` again, cold and locally, from a neighbour's posture."""
+                    p: AnnealParams, polish: bool = False) -> Candidate | None:
+        """Anneal frame ``position`` again, cold and locally, from a neighbour's posture;
+        with ``polish``, only refine the neighbour's posture there (one annealing step too
+        small to move it, then the refinement): a posture a wrong minimum with a lower E
+        would draw even a cold anneal into (a ghost in an occluded marker's place) stays
+        where the movement has it."""
         state, pos, rot = self.problem.state(neighbour.angles_deg, neighbour.root_positions)
-        local = replace(p, candidates=1, max_runs=1, tau0=p.tau0 * 0.01, l0=p.l0 * 0.1,
-                        n_end=max(1, p.n_end // 4), n_l=max(1, p.n_l // 4),
-                        n_tau=max(1, p.n_tau // 4), start="mean")
+        if polish:
+            local = replace(p, candidates=1, max_runs=1, tau0=p.tau0 * 1e-6, l0=p.l0 * 1e-6,
+                            n_end=1, n_l=1, n_tau=1, start="mean")
+        else:
+            local = replace(p, candidates=1, max_runs=1, tau0=p.tau0 * 0.01, l0=p.l0 * 0.1,
+                            n_end=max(1, p.n_end // 4), n_l=max(1, p.n_l // 4),
+                            n_tau=max(1, p.n_tau // 4), start="mean")
         cams, arrays = self._kernel_inputs(obs.arrays(np.array([position], np.int64)))
         out = FitOutputs.empty(1, self.problem.n_state, len(cams.kind), 1)
         # no start search: the neighbour's posture is the start
