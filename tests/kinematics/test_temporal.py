@@ -276,6 +276,34 @@ def test_neighbour_seeded_refit_finds_a_posture_the_frame_missed():
     assert abs(abs(again.angles_deg[2]) - truth[4]) < 1.0
 
 
+def test_a_neighbour_posture_refined_in_place_keeps_its_basin():
+    """A tip marker occluded for a few frames and a ghost where the tip of a posture 40° on
+    would be: that wrong posture has the lower E; refining the right neighbour's posture in
+    place keeps the right one (what lets the re-fits carry the movement through such a
+    stretch, where a cold anneal can fall into the ghost's posture)."""
+    seg = Segment("arm", 50.0, markers=(Marker("M0", (-45.0, 0.0, 0.0)), Marker("M1")))
+    body = Body("arm", (Chain("arm", hinge("J", "theta", -70, 70, seg), Root("fixed")),),
+                units="px")
+    cam = OrthographicCamera.from_axes("side", 2.0, ("x", "y"), (150.0, 150.0),
+                                       size=(300, 300))
+    truth = np.linspace(0.0, 30.0, 24)
+    frames = frames_of(body, {"side": cam}, truth)
+    for k in range(8, 13):
+        ghost = cam.project(forward_kinematics(body, np.array([0.0, 0.0, truth[k] + 40]))
+                            .markers)[1]
+        frames[k] = [np.array([frames[k][0][0], ghost])]
+    fitter = Fitter(body, {"side": cam}, AnnealParams(candidates=2, n_end=3000, n_l=300,
+                                                      n_tau=130, seed=1))
+    obs = fitter.observations(frames)
+    res = fitter.fit(obs)
+    assert abs(res[10].angles_deg[2] - truth[10]) > 30  # the ghost's posture, lower E
+    right = res[7].candidates[0]
+    assert abs(right.angles_deg[2] - truth[7]) < 0.5
+    kept = fitter._refit_from(obs, 8, right, fitter.params, polish=True)
+    assert abs(kept.angles_deg[2] - truth[8]) < 0.5
+    assert kept.error > res[8].error  # refined where it is, not drawn to the lower E
+
+
 @pytest.mark.parametrize("profile", ["best", "paper"])
 def test_profiles(profile):
     p = AnnealParams.profile(profile)
