@@ -1089,8 +1089,8 @@ class Fitter:
         def jumping(cap: float = REDO_JUMP, stretches: bool = False) -> set[int]:
             """Frames next to a jump of the chosen path: larger than REDO_JUMP_RATIO times the
             window's typical change (at least REDO_JUMP_MIN, at most ``cap``); with
-            ``stretches``, also the frames between two jumps at most
-            ``temporal.WRONG_STRETCH`` apart."""
+            ``stretches``, two jumps at most ``temporal.WRONG_STRETCH`` apart give the
+            frames between them instead."""
             jumps = np.full(len(window), np.nan)
             if anchor is not None and choice[0] >= 0 and not breaks[0]:
                 jumps[0] = temporal.transition_costs(anchor[None], post[0, choice[0]][None],
@@ -1102,13 +1102,16 @@ class Fitter:
                                                          n_angles)[0, 0]
             typical = np.nanmedian(jumps) if np.isfinite(jumps).any() else 0.0
             limit = min(cap, max(REDO_JUMP_MIN, REDO_JUMP_RATIO * typical))
-            at = np.flatnonzero(jumps > limit)
-            out = {int(k) for i in at for k in (i - 1, i) if k >= 0}
-            if stretches:  # a short stretch between two jumps: the whole of it is suspect
-                for a, b in itertools.pairwise(at):
-                    if b - a <= temporal.WRONG_STRETCH and not breaks[a + 1:b].any():
-                        out.update(range(int(a), int(b)))
-            return out
+            at = [int(i) for i in np.flatnonzero(jumps > limit)]
+            if not stretches:
+                return {k for i in at for k in (i - 1, i) if k >= 0}
+            # a short stretch between two jumps is what is suspect, not the frames around it
+            out, bounds = set(), set()
+            for a, b in itertools.pairwise(at):
+                if b - a <= temporal.WRONG_STRETCH and not breaks[a + 1:b].any():
+                    out.update(range(a, b))
+                    bounds |= {a, b}
+            return out | {k for i in at if i not in bounds for k in (i - 1, i) if k >= 0}
 
         tried: set[tuple[int, int]] = set()
 

@@ -304,6 +304,23 @@ def test_a_neighbour_posture_refined_in_place_keeps_its_basin():
     assert kept.error > res[8].error  # refined where it is, not drawn to the lower E
 
 
+def test_a_frame_off_its_neighbours_line_is_flagged_though_it_fits():
+    """Detections of one frame put the arm 12° off the movement (as a ghost taking a
+    marker would): the fit follows them, E is as good as anywhere, and the frame is
+    flagged for its kink; its neighbours are not."""
+    body, _ = mirror_arm()
+    cams = {"front": OrthographicCamera.from_axes("front", 2.0, ("x", "y"), (150.0, 150.0),
+                                                  size=(300, 300))}
+    truth = np.linspace(20.0, 50.0, 24)
+    shown = truth.copy()
+    shown[12] += 12.0
+    res = Fitter(body, cams, AnnealParams(candidates=2, **FAST)).fit(
+        frames_of(body, cams, shown))
+    assert abs(res[12].angles_deg[2] - shown[12]) < 1.0
+    flagged = [k for k, r in enumerate(res) if r.status == "ambiguous"]
+    assert 12 in flagged and 11 not in flagged and 13 not in flagged, flagged
+
+
 @pytest.mark.parametrize("profile", ["best", "paper"])
 def test_profiles(profile):
     p = AnnealParams.profile(profile)
