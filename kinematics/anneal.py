@@ -1143,8 +1143,9 @@ class Fitter:
 
         for _ in range(2):
             redo = jumping()
-            found: dict[int, list[Candidate]] = {}
+            grown = changed = False
             for i in sorted(redo):
+                found: dict[int, list[Candidate]] = {}
                 for j in (i - 1, i + 1):
                     if j == -1 and anchor is not None and not breaks[0]:
                         seeds = (previous,)  # the frame just before the window
@@ -1161,16 +1162,16 @@ class Fitter:
                         if p.refine:  # ... and the neighbour's posture itself, carried on
                             for k, c in carried(i, i - j, cand):
                                 found.setdefault(k, []).append(c)
-            grown = changed = False
-            for i, extra in sorted(found.items()):
-                extra = [c for c in extra if c is not None and c.error <= keep(i)]
-                if extra:
-                    before = len(window[i].candidates)
-                    merged = self._distinct(list(window[i].candidates) + extra,
-                                            replace(p, candidates=p.candidates + len(extra)))
-                    window[i] = replace(window[i], candidates=merged)
-                    grown = grown or len(merged) > before
-                    changed = True
+                # merged at once: the next frame's re-fits start from these too
+                for k, extra in sorted(found.items()):
+                    extra = [c for c in extra if c is not None and c.error <= keep(k)]
+                    if extra:
+                        before = len(window[k].candidates)
+                        merged = self._distinct(list(window[k].candidates) + extra, replace(
+                            p, candidates=p.candidates + len(extra)))
+                        window[k] = replace(window[k], candidates=merged)
+                        grown = grown or len(merged) > before
+                        changed = True
             if changed:  # the path's choice indexes the candidates as they are now
                 choice, unary, post = path()
             if not grown:
