@@ -17,7 +17,13 @@ explains (every T above :data:`BREAK_COST`) is a cut in the movement (concatenat
 sequences, a gap): the path restarts there, so sequences stay independent.
 
 Everything works on *postures*: a flat vector per candidate (joint angles in degrees, then
-root positions), with a per-entry scale; :func:`posture_scale` builds the scale of a body.
+root positions), with a per-entry scale; the fitter builds the scale of a body
+(``Fitter._posture_scale``).
+
+For the status (the fitter's ``ambiguous``): :func:`solve_path` also gives each candidate's
+min-marginal cost (the least cost of a path through it), which says how surely the path
+rules an alternative out, and :func:`kinks` finds frames off the line through their
+neighbours (a wrong frame that fits better than the truth but breaks the movement).
 """
 
 from __future__ import annotations
@@ -33,8 +39,10 @@ JUMP_CAP = 4.0
 #: A jump of the best candidates larger than CUT_RATIO x the typical change (at least
 #: CUT_MIN) between stretches that each move by at most STILL_RATIO x it is a cut.
 CUT_RATIO, CUT_MIN, STILL_RATIO, STILL_MIN = 50.0, 1.0, 4.0, 0.05
-#: A large jump is no cut when within WRONG_STRETCH frames a candidate lies within
-#: RETURN_RATIO x the jump of where the movement before it was heading.
+#: A large jump is no cut when within WRONG_STRETCH frames after it, on two frames running, a
+#: candidate lies within RETURN_RATIO x the jump of where the movement before it was heading
+#: (or, before it, of where the movement after it came from): a wrong stretch. Two jumps at
+#: most WRONG_STRETCH apart also bound a stretch the status flags whole.
 WRONG_STRETCH, RETURN_RATIO = 16, 0.1
 #: A frame kinks the path when it lies farther from the midpoint of its two neighbours than
 #: KINK_RATIO x the typical such distance (squared, in spreads; at least KINK_MIN) and more
@@ -193,7 +201,7 @@ def solve_path(unary, postures, scale, n_angles: int, weight: float = 1.0,
     ----------
     unary : (n, K) per-frame cost of each candidate (inf or NaN: no such candidate)
     postures : (n, K, d) candidate postures
-    scale : (d,) per-entry scale of a posture change (e.g. :func:`posture_scale`)
+    scale : (d,) per-entry scale of a posture change (e.g. ``Fitter._posture_scale()``)
     n_angles : leading posture entries that are angles (degrees, compared modulo 360)
     weight : weight of continuity against the per-frame cost; 0 keeps every frame's best
     breaks : (n,) bool, optional: frame t starts a new sequence (no transition from t-1)
