@@ -304,6 +304,34 @@ def test_a_neighbour_posture_refined_in_place_keeps_its_basin():
     assert kept.error > res[8].error  # refined where it is, not drawn to the lower E
 
 
+def test_the_re_fits_carry_the_movement_through_a_stretch_a_ghost_holds(monkeypatch):
+    """The tip occluded for 5 frames and a ghost where the tip of a posture 40° on would be:
+    every run of those frames ends in the ghost's posture (lower E), and only the
+    neighbour's posture refined in place and carried frame by frame finds the truth."""
+    seg = Segment("arm", 50.0, markers=(Marker("M0", (-43.0, 0.0, 0.0)), Marker("M1")))
+    body = Body("arm", (Chain("arm", hinge("J", "theta", -70, 70, seg), Root("fixed")),),
+                units="px")
+    cams = {"side": OrthographicCamera.from_axes("side", 2.0, ("x", "y"), (150.0, 150.0),
+                                                 size=(300, 300))}
+    truth = np.linspace(0.0, 30.0, 24)
+    frames = frames_of(body, cams, truth)
+    for k in range(8, 13):
+        ghost = cams["side"].project(forward_kinematics(
+            body, np.array([0.0, 0.0, truth[k] + 40])).markers)[1]
+        frames[k] = [np.array([frames[k][0][0], ghost])]
+    params = AnnealParams(candidates=2, n_end=3000, n_l=300, n_tau=130, seed=1)
+
+    def fitted():
+        return np.array([r.angles_deg[2] for r in Fitter(body, cams, params).fit(frames)])
+
+    np.testing.assert_allclose(fitted(), truth, atol=1.0)
+    # without the carried postures the stretch stays on the ghost
+    refit = Fitter._refit_from
+    monkeypatch.setattr(Fitter, "_refit_from", lambda self, obs, position, nb, p,
+                        polish=False: None if polish else refit(self, obs, position, nb, p))
+    assert (np.abs(fitted()[8:13] - truth[8:13]) > 30).all()
+
+
 def test_a_frame_off_its_neighbours_line_is_flagged_though_it_fits():
     """Detections of one frame put the arm 12° off the movement (as a ghost taking a
     marker would): the fit follows them, E is as good as anywhere, and the frame is
