@@ -335,6 +335,12 @@ def iterate_lanes(n_iter, free_idx, n_hist, step, hist, nbins, th, dof_kind, lo,
     pending = np.empty(nl, np.bool_)
     accept = np.empty(nl, np.bool_)
     better = np.empty(nl, np.bool_)
+    drawn_state = np.empty(nl, np.uint64)
+    drawn = np.empty(nl)
+    bin_of = np.empty(nl, np.int64)
+    good_bin = np.empty(nl, np.bool_)
+    xs_bits = xs.view(np.uint64)  # the same memory: taking a draw copies its bits
+    drawn_bits = drawn.view(np.uint64)
     done = False
     n = 0
     while n < n_iter and not done:
@@ -357,32 +363,36 @@ def iterate_lanes(n_iter, free_idx, n_hist, step, hist, nbins, th, dof_kind, lo,
             any_pending = True
             while any_pending and tries <= max_redraws:
                 any_pending = False
+                # a draw for every lane, then each lane still waiting takes its own. Three
+                # loops, where one did all: with the histogram's lookup (a gather) in the
+                # loop that draws, LLVM kept the whole draw scalar and branchy, 40 % of an
+                # iteration on the paper's protocol
+                for ln in range(nl):
+                    st, u = next_uniform(rs[ln])
+                    x = cur[i, ln] + (length[ln] * s_i) * (2.0 * u - 1.0)
+                    drawn_state[ln] = st
+                    drawn[ln] = x
+                    # hist_at without a branch: the bin index wrapped by a float modulo
+                    kf = np.floor(x * (nf * (0.5 / np.pi)) + 0.5 * nf)
+                    inside = (kf >= 0.0) & (kf < nf)
+                    kf = kf if inside else kf - nf * np.floor(kf / nf)
+                    bin_of[ln] = int(kf) if use_hist else 0
+                    good_bin[ln] = (lo_i <= x) & (x <= hi_i)
                 if use_hist:
                     for ln in range(nl):
-                        st, u = next_uniform(rs[ln])
-                        x = cur[i, ln] + (length[ln] * s_i) * (2.0 * u - 1.0)
-                        # hist_at without a branch: the bin index wrapped by a float modulo
-                        kf = np.floor(x * (nf * (0.5 / np.pi)) + 0.5 * nf)
-                        inside = (kf >= 0.0) & (kf < nf)
-                        kf = kf if inside else kf - nf * np.floor(kf / nf)
-                        good = hist[i, int(kf)] >= th
-                        take = pending[ln]
-                        rs[ln] = st if take else rs[ln]
-                        xs[ln] = x if take else xs[ln]
-                        ok[ln] = good if take else ok[ln]
-                        pending[ln] = take & (not good)
-                        any_pending = any_pending | pending[ln]
-                else:
-                    for ln in range(nl):
-                        st, u = next_uniform(rs[ln])
-                        x = cur[i, ln] + (length[ln] * s_i) * (2.0 * u - 1.0)
-                        good = (lo_i <= x) & (x <= hi_i)
-                        take = pending[ln]
-                        rs[ln] = st if take else rs[ln]
-                        xs[ln] = x if take else xs[ln]
-                        ok[ln] = good if take else ok[ln]
-                        pending[ln] = take & (not good)
-                        any_pending = any_pending | pending[ln]
+                        good_bin[ln] = hist[i, bin_of[ln]] >= th
+                # taking a draw is a bit mask, not a select: LLVM turned the selects of two
+                # loads into a load from a selected address, which it does not vectorise
+                for ln in range(nl):
+                    take = pending[ln]
+                    good = good_bin[ln]
+                    m = np.uint64(0) - np.uint64(take)  # all ones where the lane takes it
+                    rs[ln] = rs[ln] ^ ((rs[ln] ^ drawn_state[ln]) & m)
+                    xs_bits[ln] = xs_bits[ln] ^ ((xs_bits[ln] ^ drawn_bits[ln]) & m)
+                    ok[ln] = (take & good) | (ok[ln] & (not take))
+                    pending[ln] = take & (not good)
+                for ln in range(nl):
+                    any_pending = any_pending | pending[ln]
                 tries += 1
             for ln in range(nl):
                 x = xs[ln] if ok[ln] else cur[i, ln]
