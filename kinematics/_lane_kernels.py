@@ -341,6 +341,9 @@ def iterate_lanes(n_iter, free_idx, n_hist, step, hist, nbins, th, dof_kind, lo,
     good_bin = np.empty(nl, np.bool_)
     xs_bits = xs.view(np.uint64)  # the same memory: taking a draw copies its bits
     drawn_bits = drawn.view(np.uint64)
+    cur_bits = cur.view(np.uint64)
+    cand_bits = cand.view(np.uint64)
+    best_bits = best.view(np.uint64)
     done = False
     n = 0
     while n < n_iter and not done:
@@ -395,9 +398,10 @@ def iterate_lanes(n_iter, free_idx, n_hist, step, hist, nbins, th, dof_kind, lo,
                     any_pending = any_pending | pending[ln]
                 tries += 1
             for ln in range(nl):
-                x = xs[ln] if ok[ln] else cur[i, ln]
-                cand[i, ln] = x
-                sn[i, ln], cs[i, ln] = sincos(x)
+                m = np.uint64(0) - np.uint64(ok[ln])
+                cand_bits[i, ln] = cur_bits[i, ln] ^ ((cur_bits[i, ln] ^ xs_bits[ln]) & m)
+            for ln in range(nl):
+                sn[i, ln], cs[i, ln] = sincos(cand[i, ln])
         project_lanes(cand, cs, sn, parent, chain, pre_rot, pre_trans, post_trans,
                       elem_axis, elem_index, joint_flags, marker_joint, marker_local,
                       slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj)
@@ -412,8 +416,11 @@ def iterate_lanes(n_iter, free_idx, n_hist, step, hist, nbins, th, dof_kind, lo,
         for q in range(n_free):
             i = free_idx[q]
             for ln in range(nl):
-                cur[i, ln] = cand[i, ln] if accept[ln] else cur[i, ln]
-                best[i, ln] = cand[i, ln] if better[ln] else best[i, ln]
+                x = cand_bits[i, ln]
+                m = np.uint64(0) - np.uint64(accept[ln])
+                cur_bits[i, ln] = cur_bits[i, ln] ^ ((cur_bits[i, ln] ^ x) & m)
+                m = np.uint64(0) - np.uint64(better[ln])
+                best_bits[i, ln] = best_bits[i, ln] ^ ((best_bits[i, ln] ^ x) & m)
         for ln in range(nl):
             it[ln] += 1
             to_tau[ln] -= 1
