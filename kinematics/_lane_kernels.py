@@ -17,7 +17,16 @@ detection) are selects, not branches. What LLVM vectorises under numba, found by
   most about nine stores, and loads before stores;
 * no array views (``rot[j]``) in the iteration: each costs atomic reference counts;
 * several small loops beat one fused loop that does more per lane (the redraw loops fused
-  into one were 1.5x slower).
+  into one were 1.5x slower);
+* an indirect load (the histogram's bin, a gather) keeps the loop that holds it scalar, and
+  branchy: it goes in a loop of its own;
+* ``a[k] = b[k] if c else a[k]`` is turned by LLVM into a load from a selected address,
+  which it does not vectorise: copying a value under a condition is done on its bits, under
+  a mask (``view(np.uint64)``), which is exact.
+
+Found with ``perf record`` on a running fit and ``gdb`` on the hot addresses (scalar ``vmulsd``
+against packed ``zmm``), and LLVM's ``-pass-remarks-missed=loop-vectorize`` through
+``llvmlite.binding.set_option`` (with ``NUMBA_DEBUGINFO=1`` for line numbers).
 
 The readable twin and test oracle is the scalar kernel :func:`kinematics._anneal_kernels.
 fit_frames`: each run here performs exactly the scalar kernel's arithmetic in the same order
