@@ -4,6 +4,7 @@ the paper's protocol, fitted frames/s with the defaults, and how the cost grows.
 Run from the repository root::
 
     python bench/bench_lanes.py [--frames 128] [--video-frames 512] [--repeats 3] [--threads 1]
+                                [--sweep-frames 1024] [--sweep-threshold 3]
 
 Problems (detections: every marker projected with 0.2 px noise, plus ``--ghosts`` random
 points per view):
@@ -16,7 +17,9 @@ points per view):
   Table 2's accuracy (refinement, N_end 5000, 1-px threshold) on a longer video: fitted
   frames/s of each backend on 2 threads, and whether the results agree;
 * the growth table: ns per chain-iteration against detections per view (locust) and against
-  markers and views (the stick insect's leg and body with 2 or 4 pinhole views).
+  markers and views (the stick insect's leg and body with 2 or 4 pinhole views);
+* throughput against accuracy (``--sweep-frames``): the Table 1 schedule and shorter ones
+  with refinement, one or two runs per frame, each with its angle RMSE against the truth.
 
 Both backends give the same results to the last bit (tests/kinematics/test_lanes.py); the
 table says so again for the frames timed here.
@@ -111,6 +114,11 @@ def main(argv=None) -> int:
     ap.add_argument("--video-frames", type=int, default=512,
                     help="frames of the defaults row (the threshold's 64-frame sample is "
                          "fitted first, so short videos understate the lanes)")
+    ap.add_argument("--sweep-frames", type=int, default=1024,
+                    help="frames of the short-schedule table (0 to skip)")
+    ap.add_argument("--sweep-threshold", type=float, default=3.0,
+                    help="re-analysis threshold of the short schedules (px): above a right "
+                         "fit's E with this noise (8 marker images x ~0.25 px)")
     args = ap.parse_args(argv)
     with bundled_chain("locust_hindleg.xml") as p:
         locust = load_body(p)
@@ -173,7 +181,38 @@ def main(argv=None) -> int:
                      "same" if ok else "DIFFERENT", ""))
     print(f"machine: {machine()}; numba threads for ns rows: {args.threads}")
     print_table(rows, results=("scalar", "lanes", "speed-up", "results"))
+    if args.sweep_frames:
+        numba.set_num_threads(min(2, numba.config.NUMBA_NUM_THREADS))
+        print(f"\nShort schedules: the default backend, 2 threads, {args.sweep_frames} frames "
+              "(0.2 px noise, 1 ghost per view), refinement, re-analysis threshold "
+              f"{args.sweep_threshold} px; angle RMSE against the truth (deg)")
+        labels, table = sweep(locust, cams, args.sweep_frames, args.sweep_threshold)
+        print_table(table, target="frames > 10 deg off",
+                    results=("frames/s", "runs per frame", *labels))
     return 0
+
+
+def sweep(body, cams, n_frames: int, threshold: float) -> list:
+    """Throughput against accuracy: the Table 1 schedule, then shorter schedules with one
+    or several runs per frame (``candidates``: the path through time picks among them)."""
+    truth = smooth_random_motion(body, n_frames, 1, seed=5)
+    video = detections(body, cams, truth, 1, seed=5)
+    free = np.flatnonzero(np.ptp(truth, axis=0) > 1e-9)
+    short = AnnealParams.paper(refine=True, reanalysis_threshold=threshold)
+    settings = [("paper (Table 1)", AnnealParams.paper())]
+    settings += [(f"N_end {n}, {c} run{'s' if c > 1 else ''} per frame",
+                  replace(short.with_schedule(n), candidates=c))
+                 for n in (5000, 2000, 1000, 500) for c in (1, 2)]
+    rows = []
+    for name, params in settings:
+        dt, res = timed_fit(body, cams, video, params, 2)
+        d = np.array([r.angles_deg for r in res])[:, free] - truth[:, free]
+        d = (d + 180.0) % 360.0 - 180.0
+        rmse = np.sqrt(np.mean(d * d, axis=0))
+        rows.append((name, f"{len(video) / dt:.0f}", f"{np.mean([r.runs for r in res]):.2f}",
+                     *(f"{x:.2f}" for x in rmse),
+                     str(int((np.abs(d) > 10.0).any(axis=1).sum()))))
+    return [body.axis_labels[i] for i in free], rows
 
 
 if __name__ == "__main__":

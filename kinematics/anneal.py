@@ -341,6 +341,9 @@ class Fitter:
         self._tracked = [k for k, c in enumerate(body.chains) if c.root.mode == "marker"]
         names = body.marker_names
         self._root_marker = {k: names.index(body.chains[k].root.marker) for k in self._tracked}
+        # what depends only on the problem, computed once per problem (keys start with it: a
+        # copy made by with_pins shares this dict with another problem)
+        self._per_problem: dict = {}
 
     def with_pins(self, pins) -> Fitter:
         """A fitter that holds the given axes (``joint.axis`` labels or posture indices ->
@@ -424,7 +427,12 @@ class Fitter:
         """The fit's partitions; the start search as ``start_samples`` says (None: 64 for
         several partitions, none for one) and runs confirmed as ``confirm_runs`` says, or
         neither (``search`` False: a re-fit from a neighbour's posture)."""
-        parts = partitions_of(self.problem, p.partitions, p.partition_rounds, p.claim_gate_px)
+        key = (self.problem, "partitions", p.partitions, p.partition_rounds, p.claim_gate_px)
+        parts = self._per_problem.get(key)
+        if parts is None:  # the re-fits ask for them hundreds of times per block
+            parts = partitions_of(self.problem, p.partitions, p.partition_rounds,
+                                  p.claim_gate_px)
+            self._per_problem[key] = parts
         samples = p.start_samples
         if samples is None:
             samples = DEFAULT_START_SAMPLES if parts.bounds.shape[0] > 1 else 0
@@ -981,8 +989,12 @@ class Fitter:
 
     def _joint_axes(self) -> np.ndarray:
         """Posture indices of the angles that are not free-root rotations."""
-        root = set(self.problem.root_axes.ravel().tolist())
-        return np.array([i for i in range(self.problem.n_axes) if i not in root], np.int64)
+        key = (self.problem, "joint axes")
+        if key not in self._per_problem:
+            root = set(self.problem.root_axes.ravel().tolist())
+            self._per_problem[key] = np.array(
+                [i for i in range(self.problem.n_axes) if i not in root], np.int64)
+        return self._per_problem[key]
 
     def _posture_vector(self, c) -> np.ndarray:
         """A candidate's (or result's) posture as one flat vector for comparisons: joint
@@ -992,7 +1004,8 @@ class Fitter:
         a = np.asarray(c.angles_deg, float)
         rots = [np.rad2deg(euler_yxz(*np.deg2rad(a[ix]))).ravel()
                 for ix in self.problem.root_axes]
-        return np.r_[a[self._joint_axes()], *rots, np.ravel(c.root_positions)]
+        return np.concatenate([a[self._joint_axes()], *rots,
+                               np.ravel(np.asarray(c.root_positions, float))])
 
     def _posture_scale(self) -> np.ndarray:
         """Per posture entry, the size of a change that costs 1 on the path: each axis's

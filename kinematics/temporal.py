@@ -92,6 +92,15 @@ def transition_costs(prev, cur, scale, n_angles: int) -> np.ndarray:
     return np.where(np.isfinite(cost), cost, np.inf)
 
 
+def transitions(postures, scale, n_angles: int) -> np.ndarray:
+    """(n - 1, K, K): :func:`transition_costs` from every frame of ``postures`` (n, K, d) to
+    the next, in one array operation (a call per frame was most of the path's time)."""
+    postures = np.asarray(postures, float)
+    d = angle_difference(postures[1:, None, :, :], postures[:-1, :, None, :], n_angles) / scale
+    cost = np.sum(d * d, axis=-1)
+    return np.where(np.isfinite(cost), cost, np.inf)
+
+
 def cuts(postures, scale, n_angles: int, before: int = 0) -> np.ndarray:
     """Where the movement itself jumps (concatenated sequences): ``(n,)`` bool, True where
     frame t starts a new stretch.
@@ -114,9 +123,8 @@ def cuts(postures, scale, n_angles: int, before: int = 0) -> np.ndarray:
     if n < 5:
         return out[before:]
     jump = np.full(n, np.nan)  # jump[t]: from t-1 to t
-    for t in range(1, n):
-        cost = transition_costs(postures[t - 1], postures[t], scale, n_angles)
-        jump[t] = np.min(cost) if np.isfinite(cost).any() else np.nan
+    least = transitions(postures, scale, n_angles).min(axis=(1, 2))
+    jump[1:] = np.where(np.isfinite(least), least, np.nan)
     typical = np.nanmedian(jump) if np.isfinite(jump).any() else 0.0
     hi = max(CUT_MIN, CUT_RATIO * typical)
     lo = max(STILL_MIN, STILL_RATIO * typical)
@@ -223,8 +231,7 @@ def solve_path(unary, postures, scale, n_angles: int, weight: float = 1.0,
     scale = np.asarray(scale, float)
     choice = np.full(n, -1, np.int64)
     cost = np.full(unary.shape, np.inf)
-    raw = [None] + [transition_costs(postures[t - 1], postures[t], scale, n_angles)
-                    for t in range(1, n)]
+    raw = [None, *transitions(postures, scale, n_angles)]
     trans = [None] + [weight * np.minimum(c, JUMP_CAP) for c in raw[1:]]
     cut = np.zeros(n, bool) if breaks is None else np.asarray(breaks, bool).copy()
     has = np.isfinite(unary).any(axis=1)
