@@ -467,7 +467,11 @@ def test_pins_hold_axes_while_the_rest_is_fitted(locust):
     truth = smooth_random_motion(locust, 3, 1, seed=21)
     dets = planted(locust, cams, truth, seed=21)
     fitter = Fitter(locust, cams, AnnealParams.paper().with_schedule(4000))
+    fitter.fit_frame(dets[0], 0)  # what it keeps per problem must not reach the pinned copy
     pinned = fitter.with_pins({"J2.gamma": 90.0, 0: 500.0})  # label or index; clipped
+    moved = pinned._partitions(pinned.params).dofs
+    np.testing.assert_array_equal(np.sort(moved), np.sort(pinned.problem.free_idx))
+    assert moved.size == fitter._partitions(fitter.params).dofs.size - 2
     assert fitter.problem.pins == {}
     assert pinned.problem.pins == {"J2.gamma": 90.0, "J0.phi": 220.0}
     for k, frame in enumerate(dets):

@@ -22,6 +22,7 @@ from kinematics.temporal import (
     kinks,
     solve_path,
     transition_costs,
+    transitions,
 )
 from tests.conftest import hinge
 
@@ -45,6 +46,18 @@ def test_transition_cost_in_spreads():
     cur = np.array([[10.0, 0.0], [0.0, 5.0], [np.nan, 0.0]])
     cost = transition_costs(prev, cur, np.array([10.0, 5.0]), 1)
     np.testing.assert_allclose(cost, [[1.0, 1.0, np.inf]])
+
+
+def test_transitions_of_a_sequence_are_its_transition_costs_frame_by_frame():
+    rng = np.random.default_rng(4)
+    postures = rng.uniform(-200.0, 200.0, (7, 3, 4))
+    postures[2, 1] = np.nan  # a run not made
+    scale = np.array([2.0, 3.0, 5.0, 0.5])
+    both = transitions(postures, scale, 3)
+    assert both.shape == (6, 3, 3)
+    for t in range(1, 7):
+        np.testing.assert_array_equal(
+            both[t - 1], transition_costs(postures[t - 1], postures[t], scale, 3))
 
 
 # -- the path ----------------------------------------------------------------------------------
