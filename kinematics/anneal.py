@@ -822,7 +822,8 @@ class Fitter:
                    params: AnnealParams | None = None) -> list[FrameResult]:
         """Fit frames ``sel`` of ``obs`` (``frame_ids`` key their random streams)."""
         p, pr = params or self.params, self.problem
-        cams, arrays = self._kernel_inputs(obs.arrays(sel))
+        block = obs.arrays(sel)
+        cams, arrays = self._kernel_inputs(block)
         n, ns, nv = len(frame_ids), pr.n_state, len(cams.kind)
         out = FitOutputs.empty(n, ns, nv, max(p.max_runs, p.candidates))
         parts = self._partitions(p)
@@ -847,6 +848,7 @@ class Fitter:
                                          rots[k], p)
             results.append(self._frame_result(
                 obs, int(sel[k]), int(frame_ids[k]), out.angles[k], roots[k], rots[k], p,
+                arrays=block.frame(k, obs.n_views),
                 runs=int(out.runs[k]), iterations=int(out.iterations[k]),
                 pairs=int(out.pairs[k]), error=(float(out.error[k]), view_error[k].copy()),
                 candidates=cands, confirmed_only=parts.confirm > 0 and bool(
@@ -887,14 +889,16 @@ class Fitter:
     def _frame_result(self, obs: Observations, position: int, frame_id: int, state, root_pos,
                       root_rot, p: AnnealParams, *, runs: int, iterations: int, pairs: int,
                       error=None, candidates=(), ambiguous: bool = False,
-                      confirmed_only: bool = False) -> FrameResult:
+                      confirmed_only: bool = False, arrays=None) -> FrameResult:
         """The :class:`FrameResult` of ``state`` fitted to frame ``position`` of ``obs``;
         ``error`` (E, E per view) is computed unless given. ``confirmed_only``: the runs
         beyond the candidates' only confirmed a result already within the threshold (not a
-        re-analysis)."""
+        re-analysis). ``arrays``: that frame's observation arrays, if the caller has them
+        (selecting them again was a tenth of a short fit's time)."""
         pr, nv = self.problem, self.n_views
-        arrays = obs.arrays(np.array([position], np.int64))
-        counts = obs.view_counts(np.array([position], np.int64))[0]
+        if arrays is None:
+            arrays = obs.arrays(np.array([position], np.int64))
+        counts = np.diff(arrays.offsets)
         missing = tuple(self.view_names[v] for v in range(len(counts)) if counts[v] == 0)
         angles, fitted_roots = pr.posture(state, root_pos, root_rot)
         residuals = np.full((nv, pr.folded.marker_joint.size), np.nan)

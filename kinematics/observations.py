@@ -49,6 +49,14 @@ class ObservationArrays(NamedTuple):
     offsets: np.ndarray  # (n_frames * n_views + 1,) int64
     points3d: np.ndarray  # (n_frames, n_markers or 0, 4); a cloud's (n_frames, k, 4)
 
+    def frame(self, k: int, n_views: int) -> ObservationArrays:
+        """The arrays of the ``k``-th of these frames alone, as :meth:`Observations.arrays`
+        gives them for that frame (views of these, no copy)."""
+        off = self.offsets[k * n_views: (k + 1) * n_views + 1]
+        a, b = int(off[0]), int(off[-1])
+        return ObservationArrays(self.objective, self.points[a:b], self.conf[a:b], off - a,
+                                 self.points3d[k: k + 1])
+
 
 _OBJECTIVE = {"points": _ak.OBJ_NEAREST, "keypoints": _ak.OBJ_LABELLED,
               "points3d": _ak.OBJ_POINTS3D, "cloud": _ak.OBJ_CLOUD}

@@ -79,6 +79,24 @@ def test_keypoints_packing_and_errors():
         Observations.points_3d(p3, names[:3], names)
 
 
+def test_one_frame_of_a_block_is_that_frame_selected_alone():
+    body = mouse_like()
+    names = body.marker_names
+    kp = np.random.default_rng(1).uniform(0, 100, (5, 2, 3, 3))
+    kp[1, 0] = np.nan  # a view without rows
+    keypoints = Observations.keypoints(kp, ["a", "b"], [names[2], names[0], names[5]], names)
+    p3 = np.random.default_rng(2).uniform(0, 10, (5, 3, 4))
+    points3d = Observations.points_3d(p3, names[:3], names)
+    for obs in (keypoints, points3d):
+        sel = np.array([4, 1, 2, 1])
+        block = obs.arrays(sel)
+        for k, frame in enumerate(sel):
+            alone, one = obs.arrays(np.array([frame])), block.frame(k, obs.n_views)
+            assert one.objective == alone.objective
+            for a, b in zip(alone[1:], one[1:], strict=True):
+                np.testing.assert_array_equal(a, b)
+
+
 def test_free_body_from_labelled_keypoints():
     body = mouse_like()
     cams = three_pinholes()
