@@ -720,6 +720,45 @@ def count_unexplained_cloud(mk, cloud, gate):
     return n
 
 
+@njit(cache=True, nogil=True)
+def nearest_residuals(proj, points, view_off, seen, gate, out):
+    """Each seen model marker's distance to the nearest detection of its view into ``out``
+    (n_views, n_markers; left as it is for a view without detections or a marker not
+    seen), NaN propagating as NumPy's ``min`` does; returns the detections farther than
+    ``gate`` from every seen marker of their view (all of a view that sees none). The twin
+    is the unlabelled branch of ``Fitter._residuals`` in NumPy."""
+    unexplained = 0
+    for v in range(proj.shape[0]):
+        a, b = view_off[v], view_off[v + 1]
+        if b == a:
+            continue
+        n_seen = 0
+        for m in range(proj.shape[1]):
+            n_seen += 1 if seen[v, m] else 0
+        if n_seen == 0:
+            unexplained += b - a
+            continue
+        for m in range(proj.shape[1]):
+            if seen[v, m]:
+                best = np.inf
+                for c in range(a, b):
+                    dx = proj[v, m, 0] - points[c, 0]
+                    dy = proj[v, m, 1] - points[c, 1]
+                    d = np.sqrt(dx * dx + dy * dy)
+                    best = d if (d < best or np.isnan(d)) and not np.isnan(best) else best
+                out[v, m] = best
+        for c in range(a, b):
+            near = np.inf
+            for m in range(proj.shape[1]):
+                if seen[v, m]:
+                    dx = proj[v, m, 0] - points[c, 0]
+                    dy = proj[v, m, 1] - points[c, 1]
+                    d = np.sqrt(dx * dx + dy * dy)
+                    near = d if (d < near or np.isnan(d)) and not np.isnan(near) else near
+            unexplained += 1 if near > gate else 0
+    return unexplained
+
+
 @njit(cache=True, nogil=True, inline="always")
 def evaluate(objective, proj, mk, points, conf, view_off, obs3, bidirectional, weight, cap,
              penalty_cap, one, per_view, nearest):

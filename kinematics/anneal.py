@@ -1306,17 +1306,15 @@ class Fitter:
         elif self.unseen is not None:  # a cloud of several colours: views show some
             seen = ~self.unseen
         unexplained = 0
-        for v in range(obs.n_views):  # 3D points have none, even with cameras
-            d = pts[view_off[v]: view_off[v + 1]]
-            if len(d) and obs.labelled:  # a missing keypoint (weight 0) has no residual
-                out[v] = np.where(arrays.conf[view_off[v]: view_off[v + 1]] > 0,
-                                  np.linalg.norm(proj[v] - d, axis=1), np.nan)
-            elif len(d) and seen[v].any():
-                dist = np.linalg.norm(proj[v][seen[v]][:, None] - d[None], axis=2)
-                out[v, seen[v]] = dist.min(axis=1)
-                unexplained += int((dist.min(axis=0) > gate).sum())
-            elif len(d):
-                unexplained += len(d)
+        if obs.labelled:
+            for v in range(obs.n_views):  # a missing keypoint (weight 0) has no residual
+                d = pts[view_off[v]: view_off[v + 1]]
+                if len(d):
+                    out[v] = np.where(arrays.conf[view_off[v]: view_off[v + 1]] > 0,
+                                      np.linalg.norm(proj[v] - d, axis=1), np.nan)
+        elif obs.n_views:  # 3D points have no views, even with cameras
+            unexplained = int(_ak.nearest_residuals(proj, pts, view_off, seen, float(gate),
+                                                    out))
         if obs.kind == "cloud":
             unexplained = int(_ak.count_unexplained_cloud(mk, arrays.points3d[0], gate))
         return out, unexplained

@@ -281,3 +281,23 @@ def cloud_error(markers, cloud, options: ErrorOptions | None = None, claimed=Non
         e += opts.penalty_weight * float(np.minimum(left[np.isfinite(left)],
                                                     opts.penalty_cap).sum())
     return e
+
+
+def nearest_residuals(proj, points, view_off, seen, gate: float) -> tuple[np.ndarray, int]:
+    """NumPy twin of the kernel ``_anneal_kernels.nearest_residuals``: (n_views, n_markers)
+    distance of each seen model marker (``seen``, bool) to the nearest detection of its view
+    (NaN where a view has none or the marker is not seen), and how many detections lie
+    farther than ``gate`` from every seen marker of their view (all of a view that sees
+    none)."""
+    proj = np.asarray(proj, float)
+    out = np.full(proj.shape[:2], np.nan)
+    unexplained = 0
+    for v in range(proj.shape[0]):
+        d = np.asarray(points, float)[view_off[v]: view_off[v + 1]]
+        if len(d) and seen[v].any():
+            dist = np.linalg.norm(proj[v][seen[v]][:, None] - d[None], axis=2)
+            out[v, seen[v]] = dist.min(axis=1)
+            unexplained += int((dist.min(axis=0) > gate).sum())
+        elif len(d):
+            unexplained += len(d)
+    return out, unexplained

@@ -9,6 +9,7 @@ from kinematics.cameras import OrthographicCamera, PinholeCamera
 from kinematics.error_function import (
     NAN_MARKER_COST,
     ErrorOptions,
+    nearest_residuals,
     posture_error,
     projection_error,
 )
@@ -202,3 +203,24 @@ def test_bounded_bidirectional_caps_each_ghost():
 def test_bad_penalty_cap_is_named():
     with pytest.raises(KinematicsError, match="penalty_cap_px"):
         ErrorOptions("bounded", penalty_cap_px=0.0)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_nearest_residuals_kernel_equals_twin(seed):
+    """Residuals and unexplained detections: views without detections, markers not seen,
+    a view that sees no marker, and a marker behind a pinhole camera (NaN)."""
+    rng = np.random.default_rng(seed)
+    nv, nm = 3, 5
+    proj = rng.uniform(0, 50, (nv, nm, 2))
+    proj[1, 2] = np.nan
+    counts = rng.integers(0, 7, nv)
+    counts[seed % nv] = 0
+    view_off = np.r_[0, np.cumsum(counts)].astype(np.int64)
+    points = rng.uniform(0, 50, (int(view_off[-1]), 2))
+    seen = rng.uniform(size=(nv, nm)) < 0.7
+    seen[2] = seed % 2 == 0
+    out = np.full((nv, nm), np.nan)
+    n = ak.nearest_residuals(proj, points, view_off, seen, 8.0, out)
+    twin, n_twin = nearest_residuals(proj, points, view_off, seen, 8.0)
+    np.testing.assert_array_equal(out, twin)
+    assert n == n_twin
