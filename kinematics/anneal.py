@@ -866,6 +866,11 @@ class Fitter:
         return cams, arrays._replace(points=np.empty((0, 2)), conf=np.empty(0),
                                      offsets=np.zeros(1, np.int64))
 
+    def lane_frames(self) -> int:
+        """Frames a block needs for backend 'auto' to fit it in lanes (where they are
+        valid): enough runs to fill the lanes of every numba thread."""
+        return -(-_lk.LANES * numba.get_num_threads() // max(1, self.params.candidates))
+
     @staticmethod
     def _use_lanes(p: AnnealParams, objective: int, parts, n_frames: int, *,
                    hidden: bool = False) -> bool:
