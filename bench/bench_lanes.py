@@ -120,6 +120,8 @@ def main(argv=None) -> int:
                     help="re-analysis threshold of the short schedules (px): above a right "
                          "fit's E with this noise (8 marker images x ~0.25 px)")
     args = ap.parse_args(argv)
+    if args.sweep_frames < 0 or args.sweep_threshold <= 0:
+        ap.error("--sweep-frames must be >= 0 and --sweep-threshold > 0")
     with bundled_chain("locust_hindleg.xml") as p:
         locust = load_body(p)
     cams = locust_cameras()
@@ -192,9 +194,10 @@ def main(argv=None) -> int:
     return 0
 
 
-def sweep(body, cams, n_frames: int, threshold: float) -> list:
+def sweep(body, cams, n_frames: int, threshold: float) -> tuple[list, list]:
     """Throughput against accuracy: the Table 1 schedule, then shorter schedules with one
-    or several runs per frame (``candidates``: the path through time picks among them)."""
+    or several runs per frame (``candidates``: the path through time picks among them).
+    Returns the free axes' labels and the table's rows."""
     truth = smooth_random_motion(body, n_frames, 1, seed=5)
     video = detections(body, cams, truth, 1, seed=5)
     free = np.flatnonzero(np.ptp(truth, axis=0) > 1e-9)

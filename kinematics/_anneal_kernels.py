@@ -720,42 +720,36 @@ def count_unexplained_cloud(mk, cloud, gate):
     return n
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _nan_min(a, b):
+    """``min`` as NumPy's ``min`` reduces: a NaN on either side wins."""
+    return a if np.isnan(a) or not (b < a or np.isnan(b)) else b
+
+
 @njit(cache=True, nogil=True)
 def nearest_residuals(proj, points, view_off, seen, gate, out):
     """Each seen model marker's distance to the nearest detection of its view into ``out``
     (n_views, n_markers; left as it is for a view without detections or a marker not
-    seen), NaN propagating as NumPy's ``min`` does; returns the detections farther than
-    ``gate`` from every seen marker of their view (all of a view that sees none). The twin
-    is the unlabelled branch of ``Fitter._residuals`` in NumPy."""
+    seen); returns the detections farther than ``gate`` (finite) from every seen marker of
+    their view (all of a view that sees none). NaN propagates as in NumPy (a marker behind a
+    camera). Twin: :func:`kinematics.error_function.nearest_residuals`."""
     unexplained = 0
+    nm = proj.shape[1]
     for v in range(proj.shape[0]):
         a, b = view_off[v], view_off[v + 1]
-        if b == a:
-            continue
-        n_seen = 0
-        for m in range(proj.shape[1]):
-            n_seen += 1 if seen[v, m] else 0
-        if n_seen == 0:
-            unexplained += b - a
-            continue
-        for m in range(proj.shape[1]):
-            if seen[v, m]:
+        near = np.full(b - a, np.inf)  # per detection, its nearest seen marker (none: inf)
+        for m in range(nm):
+            if seen[v, m] and b > a:
                 best = np.inf
                 for c in range(a, b):
                     dx = proj[v, m, 0] - points[c, 0]
                     dy = proj[v, m, 1] - points[c, 1]
                     d = np.sqrt(dx * dx + dy * dy)
-                    best = d if (d < best or np.isnan(d)) and not np.isnan(best) else best
+                    best = _nan_min(best, d)
+                    near[c - a] = _nan_min(near[c - a], d)
                 out[v, m] = best
-        for c in range(a, b):
-            near = np.inf
-            for m in range(proj.shape[1]):
-                if seen[v, m]:
-                    dx = proj[v, m, 0] - points[c, 0]
-                    dy = proj[v, m, 1] - points[c, 1]
-                    d = np.sqrt(dx * dx + dy * dy)
-                    near = d if (d < near or np.isnan(d)) and not np.isnan(near) else near
-            unexplained += 1 if near > gate else 0
+        for c in range(b - a):
+            unexplained += 1 if near[c] > gate else 0
     return unexplained
 
 

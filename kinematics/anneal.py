@@ -341,9 +341,7 @@ class Fitter:
         self._tracked = [k for k, c in enumerate(body.chains) if c.root.mode == "marker"]
         names = body.marker_names
         self._root_marker = {k: names.index(body.chains[k].root.marker) for k in self._tracked}
-        # what depends only on the problem, computed once per problem (keys start with it: a
-        # copy made by with_pins shares this dict with another problem)
-        self._per_problem: dict = {}
+        self._per_problem: dict = {}  # what depends only on the problem (_once)
 
     def with_pins(self, pins) -> Fitter:
         """A fitter that holds the given axes (``joint.axis`` labels or posture indices ->
@@ -427,12 +425,10 @@ class Fitter:
         """The fit's partitions; the start search as ``start_samples`` says (None: 64 for
         several partitions, none for one) and runs confirmed as ``confirm_runs`` says, or
         neither (``search`` False: a re-fit from a neighbour's posture)."""
-        key = (self.problem, "partitions", p.partitions, p.partition_rounds, p.claim_gate_px)
-        parts = self._per_problem.get(key)
-        if parts is None:  # the re-fits ask for them hundreds of times per block
-            parts = partitions_of(self.problem, p.partitions, p.partition_rounds,
-                                  p.claim_gate_px)
-            self._per_problem[key] = parts
+        parts = self._once(  # the re-fits ask for them hundreds of times per block
+            ("partitions", p.partitions, p.partition_rounds, p.claim_gate_px),
+            lambda: partitions_of(self.problem, p.partitions, p.partition_rounds,
+                                  p.claim_gate_px))
         samples = p.start_samples
         if samples is None:
             samples = DEFAULT_START_SAMPLES if parts.bounds.shape[0] > 1 else 0
@@ -763,7 +759,7 @@ class Fitter:
         if chunk_size is None:  # enough frames (or segments) to keep every thread busy
             chunk = 8 * threads if seg == 1 else 2 * threads * seg
             if seg == 1 and params.backend != "scalar":  # and, for lanes, their lanes
-                chunk = max(chunk, 2 * _lk.LANES * threads // max(1, params.candidates))
+                chunk = max(chunk, 2 * self.lane_frames())
         else:
             chunk = chunk_size
         if isinstance(chunk, bool) or not isinstance(chunk, int | np.integer) or chunk < 1:
@@ -996,14 +992,20 @@ class Fitter:
         """Leading entries of a posture vector that are angles (compared modulo 360)."""
         return self.problem.n_axes - 3 * len(self.problem.free_chains)
 
+    def _once(self, key: tuple, make):
+        """``make()``, computed once per problem and ``key`` (a copy made by
+        :meth:`with_pins` shares the store but not the problem)."""
+        key = (self.problem, *key)
+        if key not in self._per_problem:
+            self._per_problem[key] = make()
+        return self._per_problem[key]
+
     def _joint_axes(self) -> np.ndarray:
         """Posture indices of the angles that are not free-root rotations."""
-        key = (self.problem, "joint axes")
-        if key not in self._per_problem:
+        def make():
             root = set(self.problem.root_axes.ravel().tolist())
-            self._per_problem[key] = np.array(
-                [i for i in range(self.problem.n_axes) if i not in root], np.int64)
-        return self._per_problem[key]
+            return np.array([i for i in range(self.problem.n_axes) if i not in root], np.int64)
+        return self._once(("joint axes",), make)
 
     def _posture_vector(self, c) -> np.ndarray:
         """A candidate's (or result's) posture as one flat vector for comparisons: joint

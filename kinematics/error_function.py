@@ -289,11 +289,11 @@ def nearest_residuals(proj, points, view_off, seen, gate: float) -> tuple[np.nda
     (NaN where a view has none or the marker is not seen), and how many detections lie
     farther than ``gate`` from every seen marker of their view (all of a view that sees
     none)."""
-    proj = np.asarray(proj, float)
+    proj, points = np.asarray(proj, float), np.asarray(points, float)
     out = np.full(proj.shape[:2], np.nan)
     unexplained = 0
     for v in range(proj.shape[0]):
-        d = np.asarray(points, float)[view_off[v]: view_off[v + 1]]
+        d = points[view_off[v]: view_off[v + 1]]
         if len(d) and seen[v].any():
             dist = np.linalg.norm(proj[v][seen[v]][:, None] - d[None], axis=2)
             out[v, seen[v]] = dist.min(axis=1)

@@ -86,8 +86,10 @@ def distinct(postures, errors, tolerance, n_angles: int, keep: int) -> np.ndarra
 
 
 def transition_costs(prev, cur, scale, n_angles: int) -> np.ndarray:
-    """(K_prev, K_cur) squared posture change in units of ``scale`` (NaN rows -> inf)."""
-    d = angle_difference(cur[None, :, :], prev[:, None, :], n_angles) / scale
+    """(..., K_prev, K_cur) squared posture change in units of ``scale`` (NaN rows -> inf)
+    from ``prev`` (..., K_prev, d) to ``cur`` (..., K_cur, d)."""
+    prev, cur = np.asarray(prev, float), np.asarray(cur, float)
+    d = angle_difference(cur[..., None, :, :], prev[..., :, None, :], n_angles) / scale
     cost = np.sum(d * d, axis=-1)
     return np.where(np.isfinite(cost), cost, np.inf)
 
@@ -96,9 +98,7 @@ def transitions(postures, scale, n_angles: int) -> np.ndarray:
     """(n - 1, K, K): :func:`transition_costs` from every frame of ``postures`` (n, K, d) to
     the next, in one array operation (a call per frame was most of the path's time)."""
     postures = np.asarray(postures, float)
-    d = angle_difference(postures[1:, None, :, :], postures[:-1, :, None, :], n_angles) / scale
-    cost = np.sum(d * d, axis=-1)
-    return np.where(np.isfinite(cost), cost, np.inf)
+    return transition_costs(postures[:-1], postures[1:], scale, n_angles)
 
 
 def cuts(postures, scale, n_angles: int, before: int = 0) -> np.ndarray:
