@@ -1109,8 +1109,12 @@ class Fitter:
         choice, unary, post = path()
         # Re-analysis seeded by neighbours: a frame where the chosen path jumps (to or from
         # it) is fitted again, cold and locally, from every candidate of both neighbours;
-        # two rounds, so a run of a few wrong frames is entered from both ends.
-        def jumping(cap: float = REDO_JUMP, stretches: bool = False) -> set[int]:
+        # two rounds, so a run of a few wrong frames is entered from both ends. The absolute
+        # cap is per partition: limbs move, and a fit's axes vary, independently (a fly's
+        # six legs at 330 Hz change by ~10 squared spreads per frame, every frame).
+        n_parts = self._partitions(p, search=False).bounds.shape[0]
+
+        def jumping(cap: float = REDO_JUMP * n_parts, stretches: bool = False) -> set[int]:
             """Frames next to a jump of the chosen path: larger than REDO_JUMP_RATIO times the
             window's typical change (at least REDO_JUMP_MIN, at most ``cap``); with
             ``stretches``, two jumps at most ``temporal.WRONG_STRETCH`` apart give the
@@ -1191,8 +1195,11 @@ class Fitter:
                     extra = [c for c in extra if c is not None and c.error <= keep(k)]
                     if extra:
                         before = len(window[k].candidates)
+                        # bounded: the re-fits seed the next frame's, so a frame that
+                        # kept every distinct re-fit multiplied them along the window
                         merged = self._distinct(list(window[k].candidates) + extra, replace(
-                            p, candidates=p.candidates + len(extra)))
+                            p, candidates=min(p.candidates + len(extra),
+                                              p.candidates + REFIT_CANDIDATES)))
                         window[k] = replace(window[k], candidates=merged)
                         grown = grown or len(merged) > before
                         changed = True
@@ -1333,8 +1340,12 @@ REDO_JUMP = 1.0
 #: ... or larger than this many times the window's median change (at least REDO_JUMP_MIN).
 REDO_JUMP_RATIO, REDO_JUMP_MIN = 16.0, 0.02
 #: A re-fit from a neighbour becomes a candidate only within this E per marker image (px)
-#: of the frame's best.
+#: of the frame's best ...
 REFIT_KEEP_PX = 1.0
+#: ... and a frame keeps at most this many re-fits beyond its own ``candidates`` (lowest E
+#: first; postures 5° apart on any axis count as distinct, which on a 42-axis body is almost
+#: any two: unbounded, a fly's 20-frame window grew from 40 to 3 627 candidates).
+REFIT_CANDIDATES = 4
 #: Decided frames kept before a window: the cut rule (:func:`temporal.cuts`) looks 2 back.
 CUT_CONTEXT = 2
 #: A candidate whose smoothest path moves more than this (squared histogram spreads, the

@@ -8,7 +8,7 @@ import itertools
 import numpy as np
 import pytest
 
-from kinematics.anneal import AnnealParams, Fitter
+from kinematics.anneal import AnnealParams, Candidate, Fitter
 from kinematics.cameras import OrthographicCamera
 from kinematics.fk import forward_kinematics
 from kinematics.model import Body, Chain, Marker, Root, Segment
@@ -360,6 +360,84 @@ def test_a_frame_off_its_neighbours_line_is_flagged_though_it_fits():
     assert abs(res[12].angles_deg[2] - shown[12]) < 1.0
     flagged = [k for k, r in enumerate(res) if r.status == "ambiguous"]
     assert 12 in flagged and 11 not in flagged and 13 not in flagged, flagged
+
+
+def legs_walking(n: int, step_deg: float, seed=0):
+    """The three-legged body of test_partitions moving every leg axis by ``step_deg`` per
+    frame (seen from the top and the side, markers in order), and its fitter's partitions."""
+    from tests.kinematics.test_partitions import three_legs, top_and_side
+
+    body, cams = three_legs(), top_and_side()
+    lo, hi = body.ranges_deg().T
+    t = np.arange(n)[:, None]
+    width = np.maximum(hi - lo - 16.0, 1e-9)
+    # each free axis sweeps its range back and forth at step_deg per frame
+    u = (np.random.default_rng(seed).uniform(0, 2, len(lo)) * width + t * step_deg) % (
+        2 * width)
+    angles = np.where(body.locked_mask(), 0.0, lo + 8.0 + width - np.abs(u - width))
+    rng = np.random.default_rng(seed + 1)
+    frames = [[c.project(forward_kinematics(body, a).markers) + rng.normal(0, 0.05, (8, 2))
+               for c in cams.values()] for a in angles]
+    return body, cams, angles, frames
+
+
+def count_refits(monkeypatch) -> list:
+    calls = []
+    refit = Fitter._refit_from
+
+    def counted(self, obs, position, neighbour, p, polish=False):
+        calls.append(position)
+        return refit(self, obs, position, neighbour, p, polish)
+    monkeypatch.setattr(Fitter, "_refit_from", counted)
+    return calls
+
+
+def test_limbs_moving_at_once_are_no_jump(monkeypatch):
+    """Each of a body's partitions may change by up to REDO_JUMP squared spreads per frame
+    before the frame is re-fitted from its neighbours: three legs each moving about 0.4
+    squared spreads per frame (1.5 together) are no jump. Measured on a fly: its six legs at
+    330 Hz change by ~10 per frame, so the whole clip was re-fitted, at 0.08 frames/s."""
+    body, cams, angles, frames = legs_walking(12, 9.0)
+    fitter = Fitter(body, cams, AnnealParams(candidates=2, **FAST))
+    post = np.array([fitter._posture_vector(Candidate(a, np.zeros((1, 3)), 0.0, None,
+                                                      None, None)) for a in angles])
+    steps = transition_costs(post[:-1, None], post[1:, None], fitter._posture_scale(),
+                             fitter._n_wrapped)[:, 0, 0]
+    assert np.median(steps) > 1.0 and (steps < 4.0).all(), steps  # > 1: one partition's cap
+    calls = count_refits(monkeypatch)
+    res = fitter.fit(frames)
+    assert calls == []
+    err = np.abs(np.array([r.angles_deg for r in res]) - angles).max()
+    assert err < 2.0
+
+
+def test_re_fits_keep_a_bounded_number_of_candidates(monkeypatch):
+    """Postures 5° apart on any axis are distinct, so on a body of many axes almost every
+    re-fit is a new candidate, and each seeds the next frame's re-fits: a fly's 20-frame
+    window grew from 40 to 3 627 candidates. Here every re-fit returns a new posture that
+    fits as well as the frame's best; the candidates and the re-fits must stay bounded."""
+    from kinematics.anneal import REFIT_CANDIDATES
+
+    body, cams, angles, frames = legs_walking(12, 40.0, seed=3)  # jumps every frame
+    p = AnnealParams(candidates=2, **FAST)
+    fitter = Fitter(body, cams, p)
+    obs = fitter.observations(frames)
+    best = [r.error for r in fitter.fit(obs)]
+    rng = np.random.default_rng(0)
+    calls = []
+
+    def distinct_refit(self, obs, position, neighbour, p, polish=False):
+        calls.append(position)
+        moved = neighbour.angles_deg + np.where(body.locked_mask(), 0.0,
+                                                rng.uniform(-20, 20, len(angles[0])))
+        state, pos, rot = self.problem.state(moved, neighbour.root_positions)
+        return Candidate(moved, neighbour.root_positions, best[position], state, pos, rot)
+    monkeypatch.setattr(Fitter, "_refit_from", distinct_refit)
+    res = fitter.fit(obs)
+    assert len(calls) > 0
+    assert max(len(r.candidates) for r in res) == p.candidates + REFIT_CANDIDATES
+    assert len(calls) <= 2 * len(frames) * 2 * (p.candidates + REFIT_CANDIDATES) * (
+        1 + WRONG_STRETCH)
 
 
 @pytest.mark.parametrize("profile", ["best", "paper"])
