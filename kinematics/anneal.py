@@ -40,6 +40,7 @@ import copy
 import itertools
 import math
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from typing import NamedTuple
 
@@ -1169,27 +1170,36 @@ class Fitter:
                 if not (0 <= k < len(window)) or breaks[max(k, k - step)]:
                     return
 
+        def from_seed(i: int, j: int, seed: Candidate) -> list[tuple[int, Candidate | None]]:
+            """Frame i re-fitted from neighbour j's candidate ``seed`` and, with refinement,
+            the seed's own posture carried on from i."""
+            out = [(i, self._refit_from(obs, int(idx[first + i]), seed, p))]
+            if p.refine:
+                out.extend(carried(i, i - j, seed))
+            return out
+
         for _ in range(2):
             redo = jumping()
             grown = changed = False
             for i in sorted(redo):
-                found: dict[int, list[Candidate]] = {}
+                seeds = []
                 for j in (i - 1, i + 1):
                     if j == -1 and anchor is not None and not breaks[0]:
-                        seeds = (previous,)  # the frame just before the window
+                        of_j = (previous,)  # the frame just before the window
                     elif not (0 <= j < len(window)) or breaks[max(i, j)]:
                         continue
                     else:
-                        seeds = window[j].candidates
-                    for cand in seeds:
-                        if (i, id(cand)) in tried:
-                            continue
-                        tried.add((i, id(cand)))
-                        found.setdefault(i, []).append(
-                            self._refit_from(obs, int(idx[first + i]), cand, p))
-                        if p.refine:  # ... and the neighbour's posture itself, carried on
-                            for k, c in carried(i, i - j, cand):
-                                found.setdefault(k, []).append(c)
+                        of_j = window[j].candidates
+                    for cand in of_j:
+                        if (i, id(cand)) not in tried:
+                            tried.add((i, id(cand)))
+                            seeds.append((i, j, cand))
+                # the seeds' re-fits are independent (each keyed by its frame, the window
+                # unchanged until they are merged): on every thread at once, merged in order
+                found: dict[int, list[Candidate]] = {}
+                for out in self._each(from_seed, seeds):
+                    for k, c in out:
+                        found.setdefault(k, []).append(c)
                 # merged at once: the next frame's re-fits start from these too
                 for k, extra in sorted(found.items()):
                     extra = [c for c in extra if c is not None and c.error <= keep(k)]
@@ -1262,6 +1272,16 @@ class Fitter:
                 candidates=cands, ambiguous=ambiguous, confirmed_only=r.status == "ok"))
         return results
 
+    def _each(self, fn, args: list[tuple]) -> list:
+        """``[fn(*a) for a in args]``, on numba's threads at once where its threading layer
+        takes kernels from several threads (:func:`concurrent_fits`); each call's results
+        depend only on its arguments, so the order of work changes nothing."""
+        workers = min(numba.get_num_threads(), len(args))
+        if workers < 2 or not concurrent_fits():
+            return [fn(*a) for a in args]
+        with ThreadPoolExecutor(workers) as pool:
+            return list(pool.map(lambda a: fn(*a), args))
+
     def _marker_moves(self, chosen: Candidate, cands: Sequence[Candidate]) -> np.ndarray:
         """Per candidate, the largest distance of a model marker from where the chosen
         posture puts it (length units)."""
@@ -1332,6 +1352,16 @@ class Fitter:
         if obs.kind == "cloud":
             unexplained = int(_ak.count_unexplained_cloud(mk, arrays.points3d[0], gate))
         return out, unexplained
+
+
+def concurrent_fits() -> bool:
+    """Whether kernels may run from several Python threads at once: numba's OpenMP and TBB
+    threading layers take parallel kernels from several threads, its workqueue layer aborts
+    the process (and before the first parallel kernel the layer is not known)."""
+    try:
+        return numba.threading_layer() in ("omp", "tbb")
+    except ValueError:
+        return False
 
 
 #: A chosen posture change between consecutive frames larger than this (in squared

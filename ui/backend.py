@@ -17,7 +17,12 @@ from pathlib import Path
 
 import numpy as np
 
-from kinematics.anneal import AnnealParams, Fitter, FrameResult
+from kinematics.anneal import (
+    AnnealParams,
+    Fitter,
+    FrameResult,
+    concurrent_fits,  # noqa: F401 (whether two fits may run at once)
+)
 from kinematics.anneal import unseen_markers as _unseen_markers
 from kinematics.model import Body
 from kinematics.observations import Observations
@@ -114,18 +119,6 @@ def fit_chunk_size() -> int:
     import numba
 
     return 2 * numba.get_num_threads()
-
-
-def concurrent_fits() -> bool:
-    """Whether two fits may run at once: numba's OpenMP and TBB threading layers take
-    parallel kernels from several threads, its workqueue layer aborts the process (and
-    before the first parallel kernel the layer is not known)."""
-    import numba
-
-    try:
-        return numba.threading_layer() in ("omp", "tbb")
-    except ValueError:
-        return False
 
 
 def manual_result(frame: int, angles_deg, roots, error: float, error_per_view, seed: int

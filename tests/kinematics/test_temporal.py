@@ -440,6 +440,31 @@ def test_re_fits_keep_a_bounded_number_of_candidates(monkeypatch):
         1 + WRONG_STRETCH)
 
 
+def test_re_fits_on_several_threads_give_the_same_results(monkeypatch):
+    """The re-fits of a frame from its neighbours' candidates run on every thread at once;
+    each is keyed by its frame, so the results equal those made one after the other."""
+    import numba
+
+    from kinematics import anneal
+
+    body, cams, _, frames = legs_walking(12, 40.0, seed=3)  # jumps every frame
+    p = AnnealParams(candidates=2, **FAST)
+    calls = count_refits(monkeypatch)
+    threads = numba.get_num_threads()
+    numba.set_num_threads(min(2, numba.config.NUMBA_NUM_THREADS))
+    try:
+        together = Fitter(body, cams, p).fit(frames)
+    finally:
+        numba.set_num_threads(threads)
+    assert len(calls) > 10
+    monkeypatch.setattr(anneal, "concurrent_fits", lambda: False)
+    alone = Fitter(body, cams, p).fit(frames)
+    for a, b in zip(together, alone, strict=True):
+        np.testing.assert_array_equal(a.angles_deg, b.angles_deg)
+        assert [c.error for c in a.candidates] == [c.error for c in b.candidates]
+        assert a.status == b.status
+
+
 @pytest.mark.parametrize("profile", ["best", "paper"])
 def test_profiles(profile):
     p = AnnealParams.profile(profile)
