@@ -1178,6 +1178,7 @@ class Fitter:
                 out.extend(carried(i, i - j, seed))
             return out
 
+        pools: list[ThreadPoolExecutor] = []  # for the re-fits, made when first needed
         for _ in range(2):
             redo = jumping()
             grown = changed = False
@@ -1197,7 +1198,7 @@ class Fitter:
                 # the seeds' re-fits are independent (each keyed by its frame, the window
                 # unchanged until they are merged): on every thread at once, merged in order
                 found: dict[int, list[Candidate]] = {}
-                for out in self._each(from_seed, seeds):
+                for out in self._each(from_seed, seeds, pools):
                     for k, c in out:
                         found.setdefault(k, []).append(c)
                 # merged at once: the next frame's re-fits start from these too
@@ -1217,6 +1218,8 @@ class Fitter:
                 choice, unary, post = path()
             if not grown:
                 break
+        for pool in pools:
+            pool.shutdown()
         # a jump the re-fits could not remove: the frames on both sides need a look (relative
         # to the window's own movement only: a fast or coarsely sampled one jumps throughout)
         still_jumping = jumping(cap=np.inf, stretches=True)
@@ -1272,15 +1275,19 @@ class Fitter:
                 candidates=cands, ambiguous=ambiguous, confirmed_only=r.status == "ok"))
         return results
 
-    def _each(self, fn, args: list[tuple]) -> list:
+    @staticmethod
+    def _each(fn, args: list[tuple], pools: list) -> list:
         """``[fn(*a) for a in args]``, on numba's threads at once where its threading layer
         takes kernels from several threads (:func:`concurrent_fits`); each call's results
-        depend only on its arguments, so the order of work changes nothing."""
-        workers = min(numba.get_num_threads(), len(args))
-        if workers < 2 or not concurrent_fits():
+        depend only on its arguments, so the order of work changes nothing. The pool is made
+        on first use and kept in ``pools`` for the caller to shut down (one costs ~0.4 ms,
+        about a re-fit of the locust)."""
+        threads = numba.get_num_threads()
+        if min(threads, len(args)) < 2 or not concurrent_fits():
             return [fn(*a) for a in args]
-        with ThreadPoolExecutor(workers) as pool:
-            return list(pool.map(lambda a: fn(*a), args))
+        if not pools:
+            pools.append(ThreadPoolExecutor(threads))
+        return list(pools[0].map(lambda a: fn(*a), args))
 
     def _marker_moves(self, chosen: Candidate, cands: Sequence[Candidate]) -> np.ndarray:
         """Per candidate, the largest distance of a model marker from where the chosen
