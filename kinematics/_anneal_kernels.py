@@ -1082,8 +1082,9 @@ def beam_start(work, s0, s1, stage_dof_off, stage_dofs, stage_mark, n_samples, s
     left out), each kept posture's undrawn values counting too. Joint by joint the search
     follows the limb outward along its own markers, so annealing starts in the right basin
     where the start posture lies nearer another limb's markers. ``rot`` … ``proj`` must
-    hold the current posture of the rest of the body. Returns the E of the partition's
-    markers at the best posture before its last polish."""
+    hold the current posture of the rest of the body. With ``refine_steps`` the best
+    posture is polished by Levenberg-Marquardt at the end. Returns the E of the partition's
+    markers at the best posture before that polish."""
     ns = work.shape[0]
     e_first = np.inf
     any_pinhole = _has_pinhole(kind)
@@ -1151,13 +1152,14 @@ def beam_start(work, s0, s1, stage_dof_off, stage_dofs, stage_mark, n_samples, s
                 beams[nb, :] = cands[o]
                 kept_sig[nb] = cand_sig[o]
                 nb += 1
-        if refine_steps > 0:  # polish each kept posture's entries drawn so far
-            for b in range(nb):
-                _rk.refine_posture(beams[b], stage_dofs[stage_dof_off[s0]:d1], lo, hi,
-                                   dof_kind, refine_steps, refine_gate, rp, rr, parent, chain,
-                                   pre_rot, pre_trans, post_trans, elem_axis, elem_index,
-                                   joint_flags, marker_joint, marker_local, slide_index, kind,
-                                   P, K, dist, R, t, objective, points, conf, view_off, obs3)
+    # Only the best is polished: polishing every kept posture after each stage (32 per joint)
+    # was half of a fly run's cost besides annealing, and measured no better (docs/benchmarks.md)
+    if refine_steps > 0 and s1 > s0:
+        _rk.refine_posture(beams[0], stage_dofs[stage_dof_off[s0]:stage_dof_off[s1]], lo, hi,
+                           dof_kind, refine_steps, refine_gate, rp, rr, parent, chain,
+                           pre_rot, pre_trans, post_trans, elem_axis, elem_index, joint_flags,
+                           marker_joint, marker_local, slide_index, kind, P, K, dist, R, t,
+                           objective, points, conf, view_off, obs3)
     work[:] = beams[0]
     return e_first
 
