@@ -1179,47 +1179,49 @@ class Fitter:
             return out
 
         pools: list[ThreadPoolExecutor] = []  # for the re-fits, made when first needed
-        for _ in range(2):
-            redo = jumping()
-            grown = changed = False
-            for i in sorted(redo):
-                seeds = []
-                for j in (i - 1, i + 1):
-                    if j == -1 and anchor is not None and not breaks[0]:
-                        of_j = (previous,)  # the frame just before the window
-                    elif not (0 <= j < len(window)) or breaks[max(i, j)]:
-                        continue
-                    else:
-                        of_j = window[j].candidates
-                    for cand in of_j:
-                        if (i, id(cand)) not in tried:
-                            tried.add((i, id(cand)))
-                            seeds.append((i, j, cand))
-                # the seeds' re-fits are independent (each keyed by its frame, the window
-                # unchanged until they are merged): on every thread at once, merged in order
-                found: dict[int, list[Candidate]] = {}
-                for out in self._each(from_seed, seeds, pools):
-                    for k, c in out:
-                        found.setdefault(k, []).append(c)
-                # merged at once: the next frame's re-fits start from these too
-                for k, extra in sorted(found.items()):
-                    extra = [c for c in extra if c is not None and c.error <= keep(k)]
-                    if extra:
-                        before = len(window[k].candidates)
-                        # bounded: the re-fits seed the next frame's, so a frame that
-                        # kept every distinct re-fit multiplied them along the window
-                        merged = self._distinct(list(window[k].candidates) + extra, replace(
-                            p, candidates=min(p.candidates + len(extra),
-                                              p.candidates + REFIT_CANDIDATES)))
-                        window[k] = replace(window[k], candidates=merged)
-                        grown = grown or len(merged) > before
-                        changed = True
-            if changed:  # the path's choice indexes the candidates as they are now
-                choice, unary, post = path()
-            if not grown:
-                break
-        for pool in pools:
-            pool.shutdown()
+        try:
+            for _ in range(2):
+                redo = jumping()
+                grown = changed = False
+                for i in sorted(redo):
+                    seeds = []
+                    for j in (i - 1, i + 1):
+                        if j == -1 and anchor is not None and not breaks[0]:
+                            of_j = (previous,)  # the frame just before the window
+                        elif not (0 <= j < len(window)) or breaks[max(i, j)]:
+                            continue
+                        else:
+                            of_j = window[j].candidates
+                        for cand in of_j:
+                            if (i, id(cand)) not in tried:
+                                tried.add((i, id(cand)))
+                                seeds.append((i, j, cand))
+                    # the seeds' re-fits are independent (each keyed by its frame, the window
+                    # unchanged until they are merged): on every thread at once, merged in order
+                    found: dict[int, list[Candidate]] = {}
+                    for out in self._each(from_seed, seeds, pools):
+                        for k, c in out:
+                            found.setdefault(k, []).append(c)
+                    # merged at once: the next frame's re-fits start from these too
+                    for k, extra in sorted(found.items()):
+                        extra = [c for c in extra if c is not None and c.error <= keep(k)]
+                        if extra:
+                            before = len(window[k].candidates)
+                            # bounded: the re-fits seed the next frame's, so a frame that
+                            # kept every distinct re-fit multiplied them along the window
+                            merged = self._distinct(list(window[k].candidates) + extra, replace(
+                                p, candidates=min(p.candidates + len(extra),
+                                                  p.candidates + REFIT_CANDIDATES)))
+                            window[k] = replace(window[k], candidates=merged)
+                            grown = grown or len(merged) > before
+                            changed = True
+                if changed:  # the path's choice indexes the candidates as they are now
+                    choice, unary, post = path()
+                if not grown:
+                    break
+        finally:
+            for pool in pools:
+                pool.shutdown()
         # a jump the re-fits could not remove: the frames on both sides need a look (relative
         # to the window's own movement only: a fast or coarsely sampled one jumps throughout)
         still_jumping = jumping(cap=np.inf, stretches=True)
