@@ -423,11 +423,13 @@ def test_re_fits_keep_a_bounded_number_of_candidates(monkeypatch):
     fitter = Fitter(body, cams, p)
     obs = fitter.observations(frames)
     best = [r.error for r in fitter.fit(obs)]
-    rng = np.random.default_rng(0)
     calls = []
 
     def distinct_refit(self, obs, position, neighbour, p, polish=False):
         calls.append(position)
+        # keyed by the call, as the real re-fits are: they may run on several threads
+        rng = np.random.default_rng([position, int(polish), *np.round(
+            np.abs(neighbour.angles_deg) * 1e3).astype(np.int64)])
         moved = neighbour.angles_deg + np.where(body.locked_mask(), 0.0,
                                                 rng.uniform(-20, 20, len(angles[0])))
         state, pos, rot = self.problem.state(moved, neighbour.root_positions)
