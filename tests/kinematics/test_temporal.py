@@ -4,6 +4,7 @@ Fitter's use of them with ``candidates`` > 1)."""
 from __future__ import annotations
 
 import itertools
+import threading
 
 import numpy as np
 import pytest
@@ -363,8 +364,9 @@ def test_a_frame_off_its_neighbours_line_is_flagged_though_it_fits():
 
 
 def legs_walking(n: int, step_deg: float, seed=0):
-    """The three-legged body of test_partitions moving every leg axis by ``step_deg`` per
-    frame (seen from the top and the side, markers in order), and its fitter's partitions."""
+    """The three-legged body of test_partitions moving every free axis by ``step_deg`` per
+    frame, seen from the top and the side (markers in order): body, cameras, the true
+    angles (n, n_axes) and each frame's detections."""
     from tests.kinematics.test_partitions import three_legs, top_and_side
 
     body, cams = three_legs(), top_and_side()
@@ -381,12 +383,16 @@ def legs_walking(n: int, step_deg: float, seed=0):
     return body, cams, angles, frames
 
 
-def count_refits(monkeypatch) -> list:
+def count_refits(monkeypatch, threads: set | None = None) -> list:
+    """The frames ``Fitter._refit_from`` is called for, in call order (and, into
+    ``threads``, the ids of the threads that made the calls)."""
     calls = []
     refit = Fitter._refit_from
 
     def counted(self, obs, position, neighbour, p, polish=False):
         calls.append(position)
+        if threads is not None:
+            threads.add(threading.get_ident())
         return refit(self, obs, position, neighbour, p, polish)
     monkeypatch.setattr(Fitter, "_refit_from", counted)
     return calls
@@ -449,9 +455,12 @@ def test_re_fits_on_several_threads_give_the_same_results(monkeypatch):
 
     from kinematics import anneal
 
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("one numba thread: nothing runs at once")
     body, cams, _, frames = legs_walking(12, 40.0, seed=3)  # jumps every frame
     p = AnnealParams(candidates=2, **FAST)
-    calls = count_refits(monkeypatch)
+    workers: set = set()
+    calls = count_refits(monkeypatch, workers)
     threads = numba.get_num_threads()
     numba.set_num_threads(min(2, numba.config.NUMBA_NUM_THREADS))
     try:
@@ -459,6 +468,7 @@ def test_re_fits_on_several_threads_give_the_same_results(monkeypatch):
     finally:
         numba.set_num_threads(threads)
     assert len(calls) > 10
+    assert len(workers) >= 2  # the re-fits really ran on several threads
     monkeypatch.setattr(anneal, "concurrent_fits", lambda: False)
     alone = Fitter(body, cams, p).fit(frames)
     for a, b in zip(together, alone, strict=True):
