@@ -126,3 +126,8 @@ class PostureView(QWidget):
     def projections(self) -> list[np.ndarray]:
         """Fallback only: the (x, y) data of the marker items of each projection."""
         return [np.column_stack(m.getData()) for _, m in self.items]
+
+    def gl_markers_world(self) -> np.ndarray:
+        """OpenGL only: the markers the 3D scene holds, back in world coordinates."""
+        p = np.asarray(self.gl_markers.pos, dtype=float).reshape(-1, 3)
+        return np.column_stack([p[:, 0], p[:, 2], -p[:, 1]])

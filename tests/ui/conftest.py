@@ -65,11 +65,16 @@ def open_window(qtbot, project):
 
     from ui.main_window import MainWindow
 
-    w = MainWindow(use_opengl=False)
+    w = MainWindow()  # the 3D view decides: OpenGL on a real display, 2D offscreen
     w.ask_unsaved = lambda: QMessageBox.StandardButton.Discard
     qtbot.addWidget(w)
     w.resize(1400, 900)
     w.show()
+    # on a real X server showing is asynchronous, and shortcuts and focus need the active
+    # window (offscreen, a shown window is both at once)
+    qtbot.waitExposed(w)
+    w.activateWindow()
+    qtbot.waitUntil(w.isActiveWindow)
     assert w.open_project(project)
     return w
 

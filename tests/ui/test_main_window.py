@@ -1,11 +1,13 @@
-"""The main window and its dialogs, offscreen: what the items draw is checked against the
-model's projection, the table against the results, dialogs against the session's state."""
+"""The main window and its dialogs, offscreen or on a real display: what the items draw is
+checked against the model's projection, the table against the results, dialogs against the
+session's state."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 from PySide6.QtCore import Qt
+from PySide6.QtGui import QImage
 from PySide6.QtWidgets import QMessageBox
 
 from kinematics.fk import forward_kinematics
@@ -32,6 +34,21 @@ def assert_drawn_is_model(window, body=None):
         np.testing.assert_allclose(drawn["detections"], s.frame_detections()[k])
 
 
+def assert_gl_draws_markers(posture_view, qtbot):
+    """The OpenGL view's picture has pixels of the marker colour (it renders, not only
+    holds data)."""
+    import pyqtgraph as pg
+
+    qtbot.waitExposed(posture_view.gl_view)
+    image = posture_view.gl_view.grabFramebuffer().convertToFormat(
+        QImage.Format.Format_RGB888)
+    rgb = np.frombuffer(image.constBits(), np.uint8).reshape(
+        image.height(), image.bytesPerLine())[:, :3 * image.width()].reshape(
+        image.height(), image.width(), 3)
+    colour = np.array(pg.mkColor(style.MARKER).getRgb()[:3])
+    assert (np.abs(rgb.astype(int) - colour).max(axis=2) < 40).sum() > 20
+
+
 def test_layout_and_overlays_follow_the_frames(window, qtbot, project):
     s = window.session
     assert [v.name for v in window.video_views] == ["side", "top"]
@@ -48,12 +65,17 @@ def test_layout_and_overlays_follow_the_frames(window, qtbot, project):
                                    det.points_of(frame, 1))
         image = window.video_views[0].image.image
         np.testing.assert_array_equal(image, s.view_images()[0][..., ::-1])
-    # the 3D fallback shows the same posture: side (x, y), top (x, z), front (z, y)
     markers = s.geometry().markers
-    side, top, front = window.posture_view.projections()
-    np.testing.assert_allclose(side, markers[:, [0, 1]])
-    np.testing.assert_allclose(top, markers[:, [0, 2]])
-    np.testing.assert_allclose(front, markers[:, [2, 1]])
+    if window.posture_view.opengl:
+        # a real display: the 3D scene holds the posture and really draws it
+        np.testing.assert_allclose(window.posture_view.gl_markers_world(), markers)
+        assert_gl_draws_markers(window.posture_view, qtbot)
+    else:
+        # the 3D fallback shows the same posture: side (x, y), top (x, z), front (z, y)
+        side, top, front = window.posture_view.projections()
+        np.testing.assert_allclose(side, markers[:, [0, 1]])
+        np.testing.assert_allclose(top, markers[:, [0, 2]])
+        np.testing.assert_allclose(front, markers[:, [2, 1]])
     window.frame_box.setValue(9)
     assert s.frame == 9
     window.act_prev.trigger()

@@ -1,0 +1,72 @@
+"""The GUI tests again, on a real X server (Xvfb, OpenGL from Mesa) where one can be started.
+
+The other GUI tests run on Qt's offscreen platform, where a shown window is exposed and active
+at once and there is no OpenGL. A real X server differs exactly there: showing is
+asynchronous, key shortcuts and focus need the active window, and the 3D view is a real
+OpenGL scene. Without Xvfb (Debian: ``apt-get install xvfb libgl1-mesa-dri``) they are skipped.
+"""
+
+from __future__ import annotations
+
+import os
+import select
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+HERE = Path(__file__).resolve().parent
+XVFB = shutil.which("Xvfb")
+
+
+@pytest.fixture(scope="module")
+def x_display():
+    """A private Xvfb screen; yields its DISPLAY name."""
+    if XVFB is None:
+        pytest.skip("no Xvfb on this machine (Debian: apt-get install xvfb libgl1-mesa-dri)")
+    read, write = os.pipe()
+    # -displayfd: the server picks a free display number and writes it once it is ready
+    server = subprocess.Popen(
+        [XVFB, "-displayfd", str(write), "-screen", "0", "1920x1200x24", "-nolisten", "tcp"],
+        pass_fds=(write,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    os.close(write)
+    try:
+        ready, _, _ = select.select([read], [], [], 30)
+        number = os.read(read, 16).decode().strip() if ready else ""
+        if not number.isdigit():
+            pytest.skip("Xvfb did not start")
+        yield f":{number}"
+    finally:
+        os.close(read)
+        server.terminate()
+        server.wait(timeout=30)
+
+
+def on_display(display: str) -> dict:
+    env = {k: v for k, v in os.environ.items() if k not in ("WAYLAND_DISPLAY",
+                                                             "VIDEOTRACK_NO_OPENGL")}
+    return {**env, "DISPLAY": display, "QT_QPA_PLATFORM": "xcb"}
+
+
+def test_the_window_opens_on_the_x_server_with_opengl(x_display):
+    probe = ("import ui\n"
+             "from PySide6.QtWidgets import QApplication\n"
+             "from ui.posture_view import opengl_available\n"
+             "app = QApplication([])\n"
+             "print(app.platformName(), opengl_available())\n")
+    run = subprocess.run([sys.executable, "-c", probe], env=on_display(x_display),
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr[-3000:]
+    assert run.stdout.split()[-2:] == ["xcb", "True"]
+
+
+def test_the_gui_tests_pass_on_the_x_server(x_display):
+    files = sorted(str(f) for f in HERE.glob("test_*.py") if f.name != Path(__file__).name)
+    run = subprocess.run(
+        [sys.executable, "-m", "pytest", "-p", "no:cacheprovider", "-x", *files],
+        env=on_display(x_display), cwd=HERE.parents[1], capture_output=True, text=True,
+        timeout=900)
+    assert run.returncode == 0, (run.stdout + run.stderr)[-6000:]
+    assert " passed" in run.stdout and " failed" not in run.stdout
