@@ -1,7 +1,8 @@
-"""Screenshots of the correcting workflow for docs/gui.md, rendered offscreen (no display).
+"""Screenshots of the correcting workflow for docs/gui.md, from a real window.
 
-The real MainWindow drawn by Qt's offscreen platform (``QWidget.grab()``; the 3D view is its
-2D fallback, as without OpenGL). Saves into ``docs/img/``:
+The real MainWindow grabbed (``QWidget.grab()``) on a virtual X server, where the 3D view is
+OpenGL; without a display it runs on Qt's offscreen platform (the 3D view then its 2D
+fallback). Saves into ``docs/img/``:
 
 * ``gui_correcting.png`` — the main window on a cluttered 200-frame project (ghosts,
   flickering ghosts, occlusions) after *Fit all* and setting the bar, a wrong frame selected
@@ -15,7 +16,8 @@ The real MainWindow drawn by Qt's offscreen platform (``QWidget.grab()``; the 3D
 
 Usage::
 
-    python tools/make_gui_screenshots.py [--out docs/img] [--keep FOLDER]
+    QT_QPA_PLATFORM=xcb xvfb-run -a -s "-screen 0 1920x1200x24" \\
+        python tools/make_gui_screenshots.py [--out docs/img] [--keep FOLDER]
 """
 
 from __future__ import annotations
@@ -62,14 +64,16 @@ def save(widget, path: Path) -> None:
 
 
 def window_on(project: Path):
-    from PySide6.QtWidgets import QMessageBox
+    from PySide6.QtWidgets import QApplication, QMessageBox
 
     from ui.main_window import MainWindow
 
-    window = MainWindow(use_opengl=False)
+    window = MainWindow()
     window.ask_unsaved = lambda: QMessageBox.StandardButton.Discard  # a demo: no saving
     window.resize(1400, 880)
     window.show()
+    while not window.windowHandle().isExposed():  # a real display shows asynchronously
+        settle(QApplication.instance(), seconds=0.05)
     assert window.open_project(project)
     return window
 

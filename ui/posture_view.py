@@ -1,8 +1,9 @@
 """The 3D posture of the current frame (Fig. 4, part 3).
 
 With OpenGL it is a rotatable :mod:`pyqtgraph.opengl` scene; where OpenGL cannot be had
-(remote sessions, the ``offscreen`` platform, ``VIDEOTRACK_NO_OPENGL=1``) it falls back to
-three orthographic 2D projections: side (x–y), top (x–z) and front (z–y).
+(remote sessions, the ``offscreen`` platform, ``VIDEOTRACK_NO_OPENGL=1``) or draws only in
+software (:data:`SOFTWARE_RENDERERS`, unless ``VIDEOTRACK_OPENGL=1``) it falls back to three
+orthographic 2D projections: side (x–y), top (x–z) and front (z–y).
 World axes as in the shipped chains: x anterior, y dorsal (up), z to the right.
 """
 
@@ -21,19 +22,62 @@ PROJECTIONS = (("side (x, y)", 0, 1, False), ("top (x, z)", 0, 2, True),
                ("front (z, y)", 2, 1, False))
 
 
-def opengl_available() -> bool:
-    """Whether an OpenGL context can be created (and the user has not turned it off)."""
-    from PySide6.QtGui import QGuiApplication, QOpenGLContext
+#: Renderers that draw OpenGL on the CPU (Mesa's llvmpipe, softpipe and swrast, Google's
+#: SwiftShader, Windows' GDI Generic and Basic Render Driver). Once a window holds an OpenGL
+#: view, Qt composes every repaint of the whole window through OpenGL; drawn on the CPU that
+#: made a frame step 42 ms instead of 18 ms and playback 24 frames/s instead of 45 (docs/gui.md).
+SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swrast", "software rasterizer", "swiftshader",
+                      "gdi generic", "basic render")
 
-    if os.environ.get("VIDEOTRACK_NO_OPENGL") or QGuiApplication.platformName() in (
-            "offscreen", "minimal"):
-        return False
+
+def opengl_renderer() -> str | None:
+    """The OpenGL renderer's name (``GL_RENDERER``), or None where no context can be made."""
+    from PySide6.QtGui import QOffscreenSurface, QOpenGLContext
+
+    context = QOpenGLContext()
+    if not context.create():
+        return None
+    surface = QOffscreenSurface()
+    surface.setFormat(context.format())
+    surface.create()
+    try:
+        if not context.makeCurrent(surface):
+            return None
+        return str(context.functions().glGetString(0x1F01) or "")  # GL_RENDERER
+    finally:
+        context.doneCurrent()
+        surface.destroy()
+
+
+def opengl_choice() -> tuple[bool, str]:
+    """Whether the 3D view draws with OpenGL, and if not, why (for the fallback's note).
+
+    ``VIDEOTRACK_NO_OPENGL=1`` turns it off, ``VIDEOTRACK_OPENGL=1`` keeps it on a renderer
+    that draws in software.
+    """
+    from PySide6.QtGui import QGuiApplication
+
+    if os.environ.get("VIDEOTRACK_NO_OPENGL"):
+        return False, "turned off by VIDEOTRACK_NO_OPENGL"
+    if QGuiApplication.platformName() in ("offscreen", "minimal"):
+        return False, "no display"
     try:
         import pyqtgraph.opengl  # noqa: F401  (needs PyOpenGL)
     except Exception:
-        return False
-    context = QOpenGLContext()
-    return bool(context.create())
+        return False, "PyOpenGL cannot be loaded"
+    renderer = opengl_renderer()
+    if renderer is None:
+        return False, "OpenGL is not available here"
+    if not os.environ.get("VIDEOTRACK_OPENGL") and any(
+            name in renderer.lower() for name in SOFTWARE_RENDERERS):
+        return False, (f"OpenGL draws in software here ({renderer.split(' (')[0]}), which "
+                       "would slow every frame step; VIDEOTRACK_OPENGL=1 uses it anyway")
+    return True, ""
+
+
+def opengl_available() -> bool:
+    """Whether the 3D view will draw with OpenGL (:func:`opengl_choice`)."""
+    return opengl_choice()[0]
 
 
 class PostureView(QWidget):
@@ -41,13 +85,14 @@ class PostureView(QWidget):
 
     def __init__(self, parent=None, use_opengl: bool | None = None) -> None:
         super().__init__(parent)
-        self.opengl = opengl_available() if use_opengl is None else use_opengl
+        self.opengl, why_not = (opengl_choice() if use_opengl is None else
+                                (use_opengl, "turned off"))
         layout = QGridLayout(self)
         layout.setContentsMargins(0, 0, 0, 0)
         if self.opengl:
             self._build_gl(layout)
         else:
-            self._build_2d(layout)
+            self._build_2d(layout, why_not)
 
     # -- OpenGL -------------------------------------------------------------------------
     def _build_gl(self, layout) -> None:
@@ -68,7 +113,7 @@ class PostureView(QWidget):
         layout.addWidget(self.gl_view, 0, 0)
 
     # -- fallback -----------------------------------------------------------------------
-    def _build_2d(self, layout) -> None:
+    def _build_2d(self, layout, why_not: str) -> None:
         self.plots = []
         self.items = []
         cells = ((0, 0), (0, 1), (1, 0))
@@ -86,8 +131,8 @@ class PostureView(QWidget):
             self.plots.append(w)
             self.items.append((lines, markers))
             layout.addWidget(w, row, col)
-        note = QLabel("3D posture: OpenGL is not available here, so it is shown as three "
-                      "projections (world x anterior, y up, z right).")
+        note = QLabel(f"3D posture as three projections (world x anterior, y up, z right): "
+                      f"{why_not}.")
         note.setWordWrap(True)
         note.setStyleSheet("color: grey")
         layout.addWidget(note, 1, 1)

@@ -44,29 +44,44 @@ def x_display():
         server.wait(timeout=30)
 
 
-def on_display(display: str) -> dict:
-    env = {k: v for k, v in os.environ.items() if k not in ("WAYLAND_DISPLAY",
-                                                             "VIDEOTRACK_NO_OPENGL")}
-    return {**env, "DISPLAY": display, "QT_QPA_PLATFORM": "xcb"}
+def on_display(display: str, **more: str) -> dict:
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("WAYLAND_DISPLAY", "VIDEOTRACK_NO_OPENGL", "VIDEOTRACK_OPENGL")}
+    return {**env, "DISPLAY": display, "QT_QPA_PLATFORM": "xcb", **more}
 
 
-def test_the_window_opens_on_the_x_server_with_opengl(x_display):
-    probe = ("import ui\n"
-             "from PySide6.QtWidgets import QApplication\n"
-             "from ui.posture_view import opengl_available\n"
-             "app = QApplication([])\n"
-             "print(app.platformName(), opengl_available())\n")
-    run = subprocess.run([sys.executable, "-c", probe], env=on_display(x_display),
+PROBE = """
+import ui
+from PySide6.QtWidgets import QApplication
+from ui.posture_view import opengl_choice, opengl_renderer
+app = QApplication([])
+print("|".join(map(str, (app.platformName(), opengl_renderer(), *opengl_choice()))))
+"""
+
+
+def probe(display: str, **more: str) -> list[str]:
+    run = subprocess.run([sys.executable, "-c", PROBE], env=on_display(display, **more),
                          capture_output=True, text=True, timeout=120)
     assert run.returncode == 0, run.stderr[-3000:]
-    assert run.stdout.split()[-2:] == ["xcb", "True"]
+    return run.stdout.strip().splitlines()[-1].split("|")
+
+
+def test_the_3d_view_chooses_opengl_by_its_renderer(x_display):
+    """Xvfb's OpenGL is Mesa's llvmpipe, drawn on the CPU: the 3D view falls back to 2D
+    (every frame step would pay for it) unless VIDEOTRACK_OPENGL=1 asks for it."""
+    platform, renderer, use, why_not = probe(x_display)
+    assert platform == "xcb" and renderer
+    assert "llvmpipe" in renderer  # Xvfb has no GPU: Mesa draws on the CPU
+    assert use == "False" and "VIDEOTRACK_OPENGL=1" in why_not
+    assert probe(x_display, VIDEOTRACK_OPENGL="1")[2:] == ["True", ""]
 
 
 def test_the_gui_tests_pass_on_the_x_server(x_display):
+    """Every GUI test in a real window, the 3D view in OpenGL."""
     files = sorted(str(f) for f in HERE.glob("test_*.py") if f.name != Path(__file__).name)
     run = subprocess.run(
         [sys.executable, "-m", "pytest", "-p", "no:cacheprovider", "-x", *files],
-        env=on_display(x_display), cwd=HERE.parents[1], capture_output=True, text=True,
-        timeout=900)
+        env=on_display(x_display, VIDEOTRACK_OPENGL="1"), cwd=HERE.parents[1],
+        capture_output=True, text=True, timeout=900)
     assert run.returncode == 0, (run.stdout + run.stderr)[-6000:]
     assert " passed" in run.stdout and " failed" not in run.stdout

@@ -19,7 +19,9 @@ examples:
   videotrack gui
 
 Without a display (e.g. over ssh) set QT_QPA_PLATFORM=offscreen for scripts, or use X
-forwarding. VIDEOTRACK_NO_OPENGL=1 draws the 3D posture as three 2D projections.
+forwarding. VIDEOTRACK_NO_OPENGL=1 draws the 3D posture as three 2D projections, as it
+is drawn where OpenGL runs only in software (llvmpipe); VIDEOTRACK_OPENGL=1 keeps the 3D
+scene there.
 See docs/gui.md for a tour with screenshots.
 """
 
