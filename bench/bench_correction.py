@@ -18,8 +18,8 @@ Home shows frame 0; Ctrl+→ (*next frame needing attention*) goes to the next f
 On each frame the user tries, in this order, and stops at the first that leaves it right:
 
 1. **accept** (Ctrl+Return) when it is right already: this key also goes to the next frame;
-2. **alternative posture** (A) when the frame is ``ambiguous`` (it has one); if that is not
-   right, Ctrl+Z;
+2. **alternative posture** (A) when the frame is ``ambiguous`` and the other posture, drawn
+   dashed in the views, is right;
 3. **re-fit forward from the neighbour** (←, F9, →) when the frame before is corrected and
    right and was not carried forward yet (the run stops at once when this frame's error stays
    above the threshold: then nothing changed and nothing is undone);
@@ -32,12 +32,12 @@ On each frame the user tries, in this order, and stops at the first that leaves 
 After a fix (2–5) the user spreads it with F9 when the next frame is flagged and wrong too
 (a glance at the next red row), Ctrl+Z if that left it wrong; then, the next frames still
 wrong, → to the last wrong frame of the stretch, fix it as above and press I (interpolate
-between the two fixed ends); then Ctrl+→. Every key, drag
-and typed value is one action; all of them are counted, failed tries and navigation included.
-Before the first frame the user sets the bar (walkthrough step 2, one typed value): the table
-sorted by error, at the top of the fit's own ``ok`` rows. Frames that are wrong but never
-flagged are reported apart: no user looking only at flagged frames visits them (the flag's
-misses).
+between the two fixed ends); then Ctrl+→, until the window's summary says "0 to check".
+Every key, drag and typed value is one action; all of them are counted, failed tries and
+navigation included. The user keeps the bar the window shows after *Fit all* (walkthrough
+step 2: the threshold the fit measured) and starts with Ctrl+→ (Home first when the window is
+not at frame 0). Frames that are wrong but never flagged are reported apart: no user looking
+only at flagged frames visits them (the flag's misses).
 
 With ``--hide`` the user also uses H: on a visited frame where the video shows a marker
 missing in a view (occluded in the truth) that is not marked yet, they select the
@@ -110,6 +110,12 @@ class User:
 
     def right(self, frame: int) -> bool:
         return bool(np.all(self.off_deg(frame) <= RIGHT_DEG))
+
+    def right_angles(self, angles_deg, frame: int | None = None) -> bool:
+        """Whether a posture (e.g. the alternative drawn dashed) is right in ``frame``."""
+        frame = self.s.frame if frame is None else frame
+        d = np.asarray(angles_deg, float)[self.free] - self.truth[frame, self.free]
+        return bool(np.all(np.abs((d + 180.0) % 360.0 - 180.0) <= RIGHT_DEG))
 
     def wrong_frames(self) -> list[int]:
         return [f for f in range(self.s.n_frames) if not self.right(f)]
@@ -198,7 +204,9 @@ class User:
         """Make frame ``f`` (shown) right; returns what did it."""
         s = self.s
         r = s.results.get(f)
-        if r is not None and r.status == "ambiguous" and len(r.candidates) >= 2:
+        if (r is not None and r.status == "ambiguous" and len(r.candidates) >= 2
+                and self.right_angles(r.candidates[1].angles_deg)):
+            # the views draw the alternative dashed: the user sees it is right, presses A
             self.press("swap", "alternative (A)")
             if self.right(f):
                 return "alternative"
@@ -228,16 +236,6 @@ class User:
             if self.right(f):
                 return "typed value"
         return "not fixed"
-
-    def set_bar(self) -> None:
-        """Walkthrough step 2: type the error threshold. The user sorts the table by error
-        and sets the bar at the top of the fit's own ``ok`` rows (the fit measured its
-        threshold on the video; the window starts at the project's absolute one)."""
-        ok = [r.error for r in self.s.results.values() if r.status == "ok"]
-        if ok:
-            self.count("typed value")
-            self.window.threshold.setValue(np.ceil(max(ok) * 10) / 10)
-            self.settle()
 
     def spread(self, f: int, how: str, how_by: dict) -> None:
         """After fixing ``f``: F9 when the next frame is flagged and wrong too (the user
@@ -274,7 +272,10 @@ class User:
         """Work through the video; returns the visited frames and how each was fixed."""
         s, flagged = self.s, set(self.flagged())
         how: dict[int, str] = {}
-        self.press("first", "frame step", navigation=True)
+        if not flagged:  # the summary says "0 to check"
+            return how
+        if s.frame != 0:
+            self.press("first", "frame step", navigation=True)
         if s.frame not in flagged:
             self.press("next_bad", "next needing attention", navigation=True)
             if s.frame not in flagged:
@@ -291,6 +292,10 @@ class User:
             else:
                 how[f] = self.fix(f)
                 self.spread(f, how[f], how)
+                if not self.flagged():  # the summary says "0 to check": done
+                    if self.log:
+                        print(f"frame {f}: {how[f]} ({self.actions} actions so far)")
+                    break
                 self.press("next_bad", "next needing attention", navigation=True)
             if self.log:
                 print(f"frame {f}: {how[f]} ({self.actions} actions so far)")
@@ -313,7 +318,6 @@ def measure(project: Path, log: bool, hide: bool = False) -> list[tuple]:
     s = window.session
     app.processEvents()
 
-    threshold0 = s.threshold
     t0 = time.perf_counter()
     window.act_fit_all.trigger()
     run_loop_until(app, lambda: not s.busy, 3600)
@@ -323,9 +327,7 @@ def measure(project: Path, log: bool, hide: bool = False) -> list[tuple]:
                          f"{window.errors}")
     user = User(app, window, project.parent / "truth.csv", log, hide)
     wrong0 = set(user.wrong_frames())
-    flagged_project = set(user.flagged())
-    user.set_bar()
-    flagged0 = set(user.flagged())
+    flagged0 = set(user.flagged())  # at the bar the window shows: the fit's threshold
     missed = sorted(wrong0 - flagged0)
 
     t0 = time.perf_counter()
@@ -345,9 +347,7 @@ def measure(project: Path, log: bool, hide: bool = False) -> list[tuple]:
     return [
         ("frames (fitted by Fit all)", f"{s.n_frames} ({len(s.results)})", "—"),
         ("wrong frames after Fit all (> 10° on an axis)", len(wrong0), "—"),
-        (f"frames flagged at the project's threshold, {threshold0:g} px",
-         len(flagged_project), "—"),
-        (f"frames flagged at the bar set, {s.threshold:g} px (wrong among them)",
+        (f"frames flagged at the fit's threshold, {s.threshold:.1f} px (wrong among them)",
          f"{len(flagged0)} ({len(wrong0 & flagged0)})", "—"),
         ("frames visited", len(how), "—"),
         ("actions (of which navigation keys; failed tries)",

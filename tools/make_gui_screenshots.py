@@ -5,7 +5,7 @@ OpenGL; without a display it runs on Qt's offscreen platform (the 3D view then i
 fallback). Saves into ``docs/img/``:
 
 * ``gui_correcting.png`` — the main window on a cluttered 200-frame project (ghosts,
-  flickering ghosts, occlusions) after *Fit all* and setting the bar, a wrong frame selected
+  flickering ghosts, occlusions) after *Fit all*, a wrong frame selected
   (wrong against the synthetic truth);
 * ``gui_shortcuts.png`` — the shortcut sheet (``?``);
 * ``gui_keypoints.png`` — a keypoint project (DeepLabCut files of three cameras, no video);
@@ -101,7 +101,6 @@ def main() -> int:
         window.act_fit_all.trigger()
         settle(app, s)
         user = User(app, window, project.parent / "truth.csv", log=False)
-        user.set_bar()  # walkthrough step 2, as the correction bench's user sets it
         wrong = user.wrong_frames()
         # the wrong frame the user is sent to first (flagged), else the first wrong one
         flagged = [f for f in wrong if f in set(user.flagged())]

@@ -389,9 +389,11 @@ class MainWindow(QMainWindow):
         keypoints = s.frame_keypoints()
         result = s.results.get(s.frame)
         hidden = s.hidden_in_frame()
+        alternatives = s.alternative_overlays()
         for k, view in enumerate(self.video_views):
             view.set_hidden(hidden[k] if k < len(hidden) else ())
             view.set_overlay(overlays[k] if k < len(overlays) else None, names)
+            view.set_alternative(alternatives[k] if k < len(alternatives) else None)
             if keypoints is None:
                 lines = [f"{len(detections[k])} detected"]
             else:
@@ -435,8 +437,9 @@ class MainWindow(QMainWindow):
         self.timeline.set_frame(s.frame)
         n_bad = len(adapters.bad_frames(s.results, s.threshold))
         n_corr = sum(r.status == "corrected" for r in s.results.values())
+        n_todo = len(adapters.frames_to_check(s.results, s.threshold))
         self.summary.setText(f"{len(s.results)} of {s.n_frames} frames fitted · {n_bad} above "
-                             f"threshold · {n_corr} corrected")
+                             f"threshold · {n_corr} corrected · {n_todo} to check")
 
     # -- interaction --------------------------------------------------------------------
     def _marker_dragged(self, view: int, marker: int, x: float, y: float,

@@ -684,6 +684,24 @@ class Session(QObject):
             return []
         return adapters.project_geometry(geometry, self.cameras)
 
+    def alternative_overlays(self, record: int | None = None) -> list[adapters.ViewOverlay]:
+        """Projected other posture of an ``ambiguous`` frame, the one A swaps to, one per
+        view; empty where the frame is not ambiguous, has no other candidate, or a preview
+        is drawn."""
+        record = self.frame if record is None else record
+        result = self.results.get(record)
+        if (result is None or result.status != "ambiguous" or len(result.candidates) < 2
+                or self.display_body is None or not self.cameras
+                or (record == self.frame and self.preview_angles is not None)):
+            return []
+        other = result.candidates[1]
+        angles = np.asarray(other.angles_deg, float)
+        if not np.all(np.isfinite(angles)):
+            return []
+        geometry = adapters.posture_geometry(self.display_body, angles,
+                                             np.asarray(other.root_positions))
+        return adapters.project_geometry(geometry, self.cameras)
+
     # -- previews (chain editor, sliders) -----------------------------------------------
     def set_preview_body(self, body: Body | None) -> None:
         """Draw ``body`` instead of the session's chain (None: stop previewing)."""
@@ -909,17 +927,26 @@ class Session(QObject):
             return self.model
         return backend.fitting_model(self.model, self.keypoints)
 
-    def _fitter(self, body: Body | None = None):
+    def _fitter(self, body: Body | None = None, whole_video: bool = False):
+        """The fitter of the session's chain, cameras and settings. Only a fit of the whole
+        video measures the threshold on it (``threshold_mode = "auto"``); any other (some
+        frames, a re-fit, a correction) decides statuses by the bar the window shows: a
+        threshold measured on a few frames would be noise, and it would move the bar."""
         if self.model is None or self.body is None:
             raise VideoTrackError("no chain and cameras: set them under Project ▸ Settings",
                                   file=self.config_path)
-        return replace(self._fit_model(), params=self.params).fitter(body or self.body)
+        params = self.params
+        if (not whole_video and params.threshold_mode == "auto"
+                and (self.measured_threshold is not None or self.bar_typed)):
+            params = replace(params, threshold_mode="absolute",
+                             reanalysis_threshold=self.threshold)
+        return replace(self._fit_model(), params=params).fitter(body or self.body)
 
-    def _fitter_or_report(self):
+    def _fitter_or_report(self, whole_video: bool = False):
         """The fitter for the next task, or None after reporting on :attr:`error` why there
         is none (one line)."""
         try:
-            return self._fitter()
+            return self._fitter(whole_video=whole_video)
         except LocatedError as err:
             self.error.emit(str(err))
             return None
@@ -954,7 +981,7 @@ class Session(QObject):
         if not frames:
             self.status.emit("nothing to fit")
             return False
-        fitter = self._fitter_or_report()
+        fitter = self._fitter_or_report(whole_video=not some)
         if fitter is None:
             return False
         wanted = set(frames)

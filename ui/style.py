@@ -1,12 +1,14 @@
 """Colours, pens and sizes shared by every view, so an overlay looks the same everywhere.
 
 Chosen to stand out on dark marker videos and on bright ones: detections are hollow green
-rings, model markers filled orange dots with a dark rim, the skeleton cyan.
+rings, model markers filled orange dots with a dark rim, the skeleton cyan; an ambiguous
+frame's alternative posture dashed violet with hollow markers.
 """
 
 from __future__ import annotations
 
 import pyqtgraph as pg
+from PySide6.QtCore import Qt
 from PySide6.QtGui import QColor
 from PySide6.QtWidgets import QGraphicsItem
 
@@ -19,6 +21,7 @@ PINNED = "#ff3df2"
 CURRENT_FRAME = "#ffd400"
 ERROR_CURVE = "#e8e8e8"
 THRESHOLD = "#ff5050"
+ALTERNATIVE = "#d39bff"  # an ambiguous frame's other posture, the one A swaps to
 STALE_TEXT = "#d97400"  # the warning that errors are of an earlier chain
 BAD_ROW = QColor("#ffd2d2")
 CORRECTED_ROW = QColor("#d5e6ff")
@@ -92,6 +95,17 @@ def residual_pen():
 
 def skeleton_pen():
     return pg.mkPen(SKELETON, width=LINE_WIDTH)
+
+
+def alternative_pen():
+    """The skeleton of the posture A would swap to: dashed, thinner than the fitted one."""
+    return pg.mkPen(ALTERNATIVE, width=1.5, style=Qt.PenStyle.DashLine)
+
+
+def alternative_marker_style() -> dict:
+    """Its markers: hollow rings, so the fitted markers and the detections stay readable."""
+    return {"symbol": "o", "size": MARKER_SIZE, "pen": pg.mkPen(ALTERNATIVE, width=1.5),
+            "brush": None, "pxMode": True}
 
 
 def cache_drawing(*items) -> None:

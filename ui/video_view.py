@@ -103,6 +103,9 @@ class VideoView(pg.GraphicsLayoutWidget):
         self._detected_xy = np.empty((0, 2))
         self.lines = pg.PlotCurveItem(pen=style.skeleton_pen(), connect="pairs")
         self.residual_lines = pg.PlotCurveItem(pen=style.residual_pen(), connect="pairs")
+        # an ambiguous frame's other posture (what A would swap to), under the fitted one
+        self.alternative_lines = pg.PlotCurveItem(pen=style.alternative_pen(), connect="pairs")
+        self.alternative_markers = pg.ScatterPlotItem(**style.alternative_marker_style())
         self.markers = DraggableScatter(**style.marker_style())
         self.markers.setZValue(10)
         self.markers.dragged.connect(self._dropped)
@@ -116,8 +119,9 @@ class VideoView(pg.GraphicsLayoutWidget):
         # labelled keypoints: one colour per marker (the model marker's), faded by score
         self.keypoints = pg.ScatterPlotItem(**style.keypoint_style())
         self._keypoints = np.empty((0, 3))
-        for item in (self.detected, self.keypoints, self.lines, self.residual_lines,
-                     self.markers, self.selection):
+        for item in (self.detected, self.keypoints, self.alternative_lines,
+                     self.alternative_markers, self.lines, self.residual_lines, self.markers,
+                     self.selection):
             self.plot.addItem(item)
         self.labels: list[pg.TextItem] = []
         self.info = pg.TextItem(anchor=(0, 0), color="#ffffff", fill=pg.mkBrush(0, 0, 0, 140))
@@ -196,6 +200,16 @@ class VideoView(pg.GraphicsLayoutWidget):
         lines = np.asarray(overlay.lines, float).reshape(-1, 2)
         self.lines.setData(lines[:, 0], lines[:, 1])
         self._set_labels(names, self._marker_xy)
+
+    def set_alternative(self, overlay) -> None:
+        """Draw the alternative posture's :class:`ui.adapters.ViewOverlay` (None clears)."""
+        if overlay is None:
+            self.alternative_lines.setData([], [])
+            self.alternative_markers.setData(pos=np.empty((0, 2)))
+            return
+        lines = np.asarray(overlay.lines, float).reshape(-1, 2)
+        self.alternative_lines.setData(lines[:, 0], lines[:, 1])
+        self.alternative_markers.setData(pos=np.asarray(overlay.markers, float))
 
     def set_residuals(self, matched) -> None:
         """Draw each model marker's residual: a line from the marker to the point it is
@@ -306,12 +320,14 @@ class VideoView(pg.GraphicsLayoutWidget):
     def drawn(self) -> dict[str, np.ndarray]:
         """The data the items hold: ``markers``, ``hidden`` (which markers are drawn as
         hidden), ``lines`` and ``residuals`` (pairs: marker, the point it is measured to),
-        ``detections`` and ``keypoints`` (x, y, marker index)."""
+        ``detections``, ``keypoints`` (x, y, marker index) and ``alternative`` (the markers
+        of the alternative posture, empty when none is drawn)."""
         mx, my = self.markers.getData()
         lx, ly = self.lines.getData()
         rx, ry = self.residual_lines.getData()
         dx, dy = self.detected.getData()
         kx, ky = self.keypoints.getData()
+        ax, ay = self.alternative_markers.getData()
         return {"markers": np.column_stack([mx, my]),
                 "hidden": np.asarray([p.symbol() == style.HIDDEN_SYMBOL
                                       for p in self.markers.points()], bool),
@@ -320,7 +336,8 @@ class VideoView(pg.GraphicsLayoutWidget):
                               else np.empty((0, 2))),
                 "detections": np.column_stack([dx, dy]),
                 "keypoints": np.column_stack([kx, ky, np.asarray(
-                    self.keypoints.data["data"], float)])}
+                    self.keypoints.data["data"], float)]),
+                "alternative": np.column_stack([ax, ay])}
 
 
 def _small_font():

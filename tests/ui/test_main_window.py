@@ -432,7 +432,57 @@ def test_bar_is_the_threshold_the_fit_measured_until_the_user_sets_one(window, q
     assert window.threshold.value() == pytest.approx(measured, abs=0.06)
     failed = {f for f, r in s.results.items() if r.status == "failed"}
     assert failed <= {f for f, r in s.results.items() if r.error > s.threshold}
+    # fits of some frames, re-fits and corrections keep the bar and are decided by it
+    # (they measured their own on those few frames: it moved the bar, and every frame
+    # after a re-fit forward was flagged)
+    s.fit([3, 4])
+    wait_idle(s)
+    assert s.threshold == measured and s.results[3].threshold == measured
+    s.set_frame(3)
+    assert s.refit_from(1)
+    wait_idle(s)
+    assert s.results[5].threshold == measured and s.threshold == measured
+    assert s.correct({0: float(s.results[8].angles_deg[0]) + 1.0}, frame=8)
+    wait_idle(s)
+    assert s.results[8].status == "corrected" and s.threshold == measured
     window.threshold.setValue(measured + 5.0)  # the user's bar stays after another fit
     s.fit()
     wait_idle(s)
     assert s.threshold == pytest.approx(round(measured + 5.0, 1))
+    s.fit([2])  # and decides a fit of some frames
+    wait_idle(s)
+    assert s.results[2].threshold == pytest.approx(round(measured + 5.0, 1))
+
+
+def test_an_ambiguous_frame_shows_the_posture_a_swaps_to(window, wait_idle):
+    """The other candidate of an ambiguous frame is drawn dashed in every view, so the user
+    sees whether A helps before pressing it; gone once the frame is decided. The summary
+    counts the frames left to check."""
+    from dataclasses import replace
+
+    from kinematics.anneal import Candidate
+
+    s = window.session
+    s.fit([3])
+    wait_idle(s)
+    s.set_frame(3)
+    assert all(len(v.drawn()["alternative"]) == 0 for v in window.video_views)
+    fitted = s.results[3]
+    mirror = fitted.angles_deg.copy()
+    mirror[8] = -mirror[8]  # femur-tibia angle mirrored
+    s.set_results([replace(fitted, status="ambiguous", candidates=(
+        Candidate(fitted.angles_deg, fitted.root_positions, fitted.error, None, None, None),
+        Candidate(mirror, fitted.root_positions, fitted.error + 0.1, None, None, None)))],
+        "ambiguous")
+    expected, _ = expected_markers(s, angles=mirror)
+    for k, view in enumerate(window.video_views):
+        np.testing.assert_allclose(view.drawn()["alternative"], expected[k], atol=1e-9)
+    window.refresh_timeline()
+    assert window.summary.text().endswith("· 1 to check")
+    window.act_swap.trigger()  # A: the frame is decided (corrected), nothing else drawn
+    assert s.results[3].status == "corrected"
+    for k, view in enumerate(window.video_views):
+        assert len(view.drawn()["alternative"]) == 0
+        np.testing.assert_allclose(view.drawn()["markers"], expected[k], atol=1e-9)
+    window.refresh_timeline()
+    assert window.summary.text().endswith("· 0 to check")
