@@ -705,6 +705,30 @@ class Fitter:
         return self._fit_block(obs, np.zeros(1, np.int64), np.array([int(frame)], np.int64),
                                roots, rots, start, np.array([0, 1], np.int64))[0]
 
+    def refine_frame(self, detections_frame, frame: int, start_deg,
+                     root_positions=None) -> FrameResult | None:
+        """A posture refined at one frame without annealing away from it (the start,
+        refined as the path's carried re-fits refine a neighbour's posture): a posture
+        carried from a neighbour stays on its branch where a lower-E minimum (a mirror
+        posture, a ghost in an occluded marker's place) would draw even a cold anneal
+        away. Arguments as :meth:`fit_frame`; None where the frame has nothing to fit."""
+        if isinstance(frame, bool) or not isinstance(frame, int | np.integer) or frame < 0:
+            raise KinematicsError(f"frame must be an integer >= 0, got {frame!r}",
+                                  field="frame")
+        obs = self.observations(detections_frame if isinstance(detections_frame, Observations)
+                                else [detections_frame])
+        if obs.n_frames != 1:
+            raise KinematicsError(f"refine_frame takes one frame, got {obs.n_frames}",
+                                  field="observations")
+        roots = self._root_array(root_positions)
+        seed = Candidate(self._posture_deg(start_deg), roots, np.nan, None, None, None)
+        found = self._refit_from(obs, 0, seed, self.params, polish=True)
+        if found is None:
+            return None
+        return self._frame_result(obs, 0, int(frame), found.state, found.seed_pos,
+                                  found.seed_rot, self.params, runs=1, iterations=1, pairs=0,
+                                  error=None, candidates=(found,))
+
     def iter_fit(self, detections, frames=None, *, chunk_size: int | None = None,
                  sequence_starts: Iterable[int] = (), previous: FrameResult | None = None,
                  cancel: Callable[[], bool] | None = None) -> Iterator[FrameResult]:

@@ -68,6 +68,13 @@ class PostureGeometry:
         return self.points[self.edges.ravel()]
 
 
+def angle_distance(a_deg, b_deg) -> float:
+    """Distance of two postures in degrees: the norm of their axis differences, each
+    wrapped to ±180°."""
+    d = (np.asarray(a_deg, float) - np.asarray(b_deg, float) + 180.0) % 360.0 - 180.0
+    return float(np.sqrt(np.sum(d * d)))
+
+
 def posture_geometry(body: Body, angles_deg, roots=None) -> PostureGeometry:
     """Forward kinematics (Eq. 1 and 2) of one posture, as points and skeleton lines.
 

@@ -43,6 +43,35 @@ FIT_CONTEXT = 2
 JUMP_FACTOR = 3.0
 JUMP_PX = 2.0
 
+#: Re-fitting forward/backward takes the carried posture refined in place instead of the
+#: anneal's result when the two differ by more than this (degrees, all axes): the anneal
+#: went to another branch (a mirror posture with a lower E). Below it they are the same
+#: posture, and the anneal's is taken (refining alone drifted over 40 frames).
+BRANCH_DEG = 20.0
+#: ... and only when the refined posture's E is at most this times the anneal's: a mirror
+#: posture that flickering ghosts favour is a few per cent lower; a refinement stuck far
+#: from the data (2-5 times the anneal's E, seen on a keypoint project) is no branch.
+BRANCH_E_RATIO = 1.25
+
+#: An alternative posture chosen with A carries to a neighbour (Session._carry_choice) only
+#: when the neighbour kept a candidate nearer the chosen posture than this share of its own
+#: posture's distance: clearly the same branch, not a candidate close to both.
+CARRY_RATIO = 0.5
+
+
+def carried_or_annealed(annealed: backend.FrameResult, carried: backend.FrameResult,
+                        previous_deg) -> backend.FrameResult:
+    """Of a frame re-fitted from its neighbour's posture ``previous_deg``: the anneal's
+    result, unless it left the neighbour's branch (more than :data:`BRANCH_DEG` from the
+    neighbour's posture refined in place, ``carried``, which is nearer the neighbour) for
+    an E not much lower (:data:`BRANCH_E_RATIO`): then the refined posture."""
+    d = adapters.angle_distance
+    if (carried.error <= BRANCH_E_RATIO * annealed.error
+            and d(annealed.angles_deg, carried.angles_deg) > BRANCH_DEG
+            and d(carried.angles_deg, previous_deg) < d(annealed.angles_deg, previous_deg)):
+        return carried
+    return annealed
+
 
 @dataclass
 class Edit:
@@ -1164,6 +1193,10 @@ class Session(QObject):
         start = self.results.get(frame)
         carried = [start.error] if start is not None and np.isfinite(start.error) else []
 
+        def fits_on(r) -> bool:  # within the bar, and no jump against the frames carried
+            return r.error <= threshold and not (
+                carried and r.error > JUMP_FACTOR * float(np.median(carried)) + JUMP_PX)
+
         def work(worker: TaskWorker):
             prev_angles = angles
             tracked = None
@@ -1175,8 +1208,14 @@ class Session(QObject):
                 if f not in known and tracked is None:  # roots of frames never fitted
                     tracked = fitter.track_roots(detections)
                 root = known[f] if f in known else tracked[f]
-                r = fitter.fit_frame(backend.frame_input(detections, f, fitter.n_views),
-                                     f, start_deg=prev_angles, root_positions=root)
+                data = backend.frame_input(detections, f, fitter.n_views)
+                r = fitter.fit_frame(data, f, start_deg=prev_angles, root_positions=root)
+                # an anneal, even one started from the carried posture, can fall into
+                # another branch with a lower E (a mirror posture): then the carried
+                # posture refined in place is taken, if it fits
+                kept = fitter.refine_frame(data, f, prev_angles, root_positions=root)
+                if kept is not None and fits_on(kept):
+                    r = carried_or_annealed(r, kept, prev_angles)
                 if not r.error <= threshold:
                     worker.summary = (f"stopped at frame {f}: error {r.error:.2f} px above the "
                                       f"threshold, left as it was")
@@ -1238,31 +1277,84 @@ class Session(QObject):
     def swap_candidate(self, frame: int | None = None) -> bool:
         """Replace the frame's posture by its next candidate posture (the alternatives the
         fit kept: an ``ambiguous`` frame's mirror posture); again cycles through them. The
-        result is ``corrected`` (the user chose it) and undo restores the frame."""
+        result is ``corrected`` (the user chose it). The choice carries to the neighbours
+        that took the same wrong branch (:meth:`_carry_choice`). One undo step restores
+        every frame it changed."""
         frame = self.frame if frame is None else int(frame)
         current = self.results.get(frame)
         if current is None or len(current.candidates) < 2 or self.model is None:
             self.status.emit(f"frame {frame} has no alternative posture")
             return False
-        cycled = (*current.candidates[1:], current.candidates[0])
-        chosen = cycled[0]
         try:
-            error, per_view = backend.posture_error(self._fitter(), chosen.angles_deg,
-                                                    self.frame_input(frame),
-                                                    chosen.root_positions)
+            fitter = self._fitter()
+            result = self._chosen_result(fitter, frame, current, 1)
+            carried = self._carry_choice(fitter, frame, current, result)
         except LocatedError as err:
             self.error.emit(str(err))
             return False
-        result = replace(backend.manual_result(
-            frame, chosen.angles_deg, chosen.root_positions, error, per_view,
-            self.params.seed if self.params else 0), candidates=cycled)
         edit = Edit(f"frame {frame}: alternative posture")
-        edit.record_result(frame, current, result)
+        for r in (result, *carried):
+            edit.record_result(r.frame, self.results.get(r.frame), r)
         self._apply(edit, 1)
         self._push(edit)
+        swapped = sorted(r.frame for r in carried if r.status == backend.CORRECTED)
+        flagged = sorted(r.frame for r in carried if r.status != backend.CORRECTED)
+        also = "".join([
+            f"; carried to frame{'s' if len(swapped) > 1 else ''} "
+            f"{', '.join(map(str, swapped))}" if swapped else "",
+            f"; frame{'s' if len(flagged) > 1 else ''} {', '.join(map(str, flagged))} still "
+            "on the other branch: needs a look" if flagged else ""])
         self.status.emit(f"frame {frame}: alternative posture {len(current.candidates) - 1} "
-                         f"of {len(current.candidates)}, error {error:.2f} px")
+                         f"of {len(current.candidates)}, error {result.error:.2f} px{also}")
         return True
+
+    def _chosen_result(self, fitter, frame: int, current: backend.FrameResult, k: int
+                       ) -> backend.FrameResult:
+        """``current`` with its candidate ``k`` chosen: ``corrected``, E of that posture on
+        the frame's input, the candidates cycled so that ``k`` is first."""
+        cycled = (*current.candidates[k:], *current.candidates[:k])
+        chosen = cycled[0]
+        error, per_view = backend.posture_error(fitter, chosen.angles_deg,
+                                                self.frame_input(frame), chosen.root_positions)
+        return replace(backend.manual_result(
+            frame, chosen.angles_deg, chosen.root_positions, error, per_view,
+            self.params.seed if self.params else 0), candidates=cycled)
+
+    def _carry_choice(self, fitter, frame: int, before: backend.FrameResult,
+                      after: backend.FrameResult) -> list[backend.FrameResult]:
+        """The neighbours that follow a swap at ``frame``. The fit chose a branch (say the
+        mirror posture) for a stretch of frames, not one frame: walking away from ``frame``
+        each way, a neighbour swaps too while its posture is nearer the branch given up
+        than the one chosen and it kept a candidate clearly nearer the chosen one
+        (:data:`CARRY_RATIO`); it stops at a frame set by hand, one without such a
+        candidate, or one already on the chosen branch. A frame it stops at that is still
+        on the branch given up is flagged ``ambiguous`` (it needs a look)."""
+        held, out = self._held(), []
+        for step in (1, -1):
+            old = np.asarray(before.angles_deg, float)
+            new = np.asarray(after.angles_deg, float)
+            g = frame + step
+            while 0 <= g < self.n_frames and g not in held:
+                r = self.results.get(g)
+                if r is None:
+                    break
+                here = np.asarray(r.angles_deg, float)
+                to_new = adapters.angle_distance(here, new)
+                if not adapters.angle_distance(here, old) < to_new:
+                    break  # on the chosen branch already
+                dist = [adapters.angle_distance(np.asarray(c.angles_deg, float), new)
+                        for c in r.candidates]
+                k = int(np.argmin(dist)) if dist else 0
+                if k == 0 or not dist[k] < CARRY_RATIO * to_new:
+                    # still on the branch given up, and nothing to swap to: a look is
+                    # needed (it may be fitted right from its neighbour, F9)
+                    if r.status in ("ok", "reanalysed"):
+                        out.append(backend.with_status(r, "ambiguous"))
+                    break
+                out.append(self._chosen_result(fitter, g, r, k))
+                old, new = here, np.asarray(r.candidates[k].angles_deg, float)
+                g += step
+        return out
 
     def drag_marker(self, view: int, marker: int, target_xy, refit: bool = True,
                     frame: int | None = None) -> bool:

@@ -316,6 +316,12 @@ def test_a_neighbour_posture_refined_in_place_keeps_its_basin():
     kept = fitter._refit_from(obs, 8, right, fitter.params, polish=True)
     assert abs(kept.angles_deg[2] - truth[8]) < 0.5
     assert kept.error > res[8].error  # refined where it is, not drawn to the lower E
+    # the same for one frame through the public API (the GUI's re-fit forward, F9)
+    one = fitter.refine_frame(frames[8], 8, right.angles_deg)
+    assert one.frame == 8 and one.runs == 1
+    assert one.status == ("ok" if one.error <= fitter.params.reanalysis_threshold else "failed")
+    np.testing.assert_allclose(one.angles_deg, kept.angles_deg, atol=1e-9)
+    assert one.error == pytest.approx(fitter.error(one.angles_deg, frames[8])[0], rel=1e-9)
 
 
 def test_the_re_fits_carry_the_movement_through_a_stretch_a_ghost_holds(monkeypatch):

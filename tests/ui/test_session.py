@@ -331,6 +331,54 @@ def test_an_alternative_posture_is_one_key_away(session, wait_idle, tmp_path):
     assert not s.swap_candidate(4)  # no alternatives there
 
 
+def test_an_alternative_posture_carries_along_the_stretch_on_the_same_branch(session,
+                                                                             wait_idle):
+    """The fit took the mirror branch for frames 3-6: A on frame 4 swaps 3 and 5 as well
+    (each kept the right posture as a candidate, near the chosen one), not frame 2, on the
+    right branch; frame 6 kept no other candidate and is flagged instead; one undo restores
+    them all."""
+    from kinematics.anneal import Candidate
+
+    s = session
+    s.fit()
+    wait_idle(s)
+    fitted = {f: s.results[f] for f in range(12)}
+
+    def cand(r, angles):
+        return Candidate(angles, r.root_positions, r.error, None, None, None)
+
+    for f in (2, 3, 4, 5, 6, 7):
+        r = fitted[f]
+        right, mirror = r.angles_deg.copy(), r.angles_deg.copy()
+        mirror[8] += 60.0  # the femur-tibia angle on the other branch
+        on_mirror = f in (3, 4, 5, 6)
+        shown = mirror if on_mirror else right
+        if f == 6:  # on the mirror too, but the fit kept nothing else
+            s.results[f] = replace(r, angles_deg=shown, status="ok", candidates=(
+                cand(r, shown),))
+            continue
+        s.results[f] = replace(r, angles_deg=shown, status="ambiguous", candidates=(
+            cand(r, shown), cand(r, right if on_mirror else mirror)))
+    before = dict(s.results)
+    assert s.swap_candidate(4)
+    for f in (3, 4, 5):
+        assert s.results[f].status == "corrected"
+        np.testing.assert_allclose(s.results[f].angles_deg, fitted[f].angles_deg)
+    assert s.results[2] is before[2]
+    # frame 6 is left as it was, flagged: the user is sent there next
+    assert s.results[6].status == "ambiguous"
+    np.testing.assert_array_equal(s.results[6].angles_deg, before[6].angles_deg)
+    assert s.results[7] is before[7]
+    assert s.undo_label == "frame 4: alternative posture"
+    s.undo()
+    assert all(s.results[f] is before[f] for f in range(12))
+    # a neighbour set by hand stops the carry
+    s.accept([5])
+    assert s.swap_candidate(4)
+    assert s.results[3].status == "corrected" and s.results[5].angles_deg[8] == pytest.approx(
+        before[5].angles_deg[8])
+
+
 
 def test_reopened_results_keep_the_bar_their_fit_used(session, project, wait_idle):
     from ui.session import Session
@@ -347,3 +395,24 @@ def test_reopened_results_keep_the_bar_their_fit_used(session, project, wait_idl
         assert again.threshold == measured
     finally:
         again.close()
+
+
+def test_a_re_fit_forward_keeps_the_carried_branch_only_when_the_anneal_left_it():
+    """Re-fitting from a neighbour: the anneal's result, unless it went to another branch
+    (far from the neighbour's posture refined in place, which is nearer the neighbour) for
+    an E not much lower; a refinement stuck far from the data never wins."""
+    from types import SimpleNamespace
+
+    from ui.session import carried_or_annealed
+
+    def result(theta, error):
+        return SimpleNamespace(angles_deg=np.array([0.0, theta]), error=error)
+
+    previous = np.array([0.0, 30.0])
+    mirror, kept = result(-28.0, 26.3), result(31.0, 28.0)
+    assert carried_or_annealed(mirror, kept, previous) is kept  # a mirror, 6 % lower E
+    same = result(33.0, 27.0)  # the anneal stayed on the branch: its result
+    assert carried_or_annealed(same, kept, previous) is same
+    stuck = result(31.0, 123.0)  # the refinement far from the data
+    assert carried_or_annealed(mirror, stuck, previous) is mirror
+    assert carried_or_annealed(mirror, result(-25.0, 27.0), previous) is mirror  # not nearer
