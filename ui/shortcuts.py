@@ -108,7 +108,8 @@ COMMANDS: tuple[Command, ...] = (
             lambda w: w.accept_selected()),
     Command("swap", "&Alternative posture", ("A",), "Correct",
             "Replace this frame's posture by the next candidate the fit kept (an ambiguous "
-            "frame's mirror posture); again to cycle", lambda w: _s(w).swap_candidate()),
+            "frame's mirror posture, drawn dashed), and the neighbours on the same wrong "
+            "branch; again to cycle", lambda w: _s(w).swap_candidate()),
     Command("prev_axis", "Select previous axis", ("[",), "Correct",
             "The axis the nudge keys move (bold frame in Manual correction)",
             lambda w: w.correction.select_axis(-1)),
