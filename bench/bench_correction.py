@@ -100,22 +100,20 @@ class User:
         self.carried: set[int] = set()  # frames F9 already ran from
 
     # -- what the user sees ---------------------------------------------------------------
-    def off_deg(self, frame: int) -> np.ndarray:
-        """|fitted − true| per free axis (wrapped to ±180°); inf when not fitted."""
-        r = self.s.results.get(frame)
-        if r is None:
-            return np.full(len(self.free), np.inf)
-        d = np.asarray(r.angles_deg, float)[self.free] - self.truth[frame, self.free]
+    def off_deg(self, frame: int, angles_deg=None) -> np.ndarray:
+        """|posture − truth| per free axis (wrapped to ±180°) in ``frame``: the fitted
+        posture, or ``angles_deg``; inf when not fitted."""
+        if angles_deg is None:
+            r = self.s.results.get(frame)
+            if r is None:
+                return np.full(len(self.free), np.inf)
+            angles_deg = r.angles_deg
+        d = np.asarray(angles_deg, float)[self.free] - self.truth[frame, self.free]
         return np.abs((d + 180.0) % 360.0 - 180.0)
 
-    def right(self, frame: int) -> bool:
-        return bool(np.all(self.off_deg(frame) <= RIGHT_DEG))
-
-    def right_angles(self, angles_deg, frame: int | None = None) -> bool:
-        """Whether a posture (e.g. the alternative drawn dashed) is right in ``frame``."""
-        frame = self.s.frame if frame is None else frame
-        d = np.asarray(angles_deg, float)[self.free] - self.truth[frame, self.free]
-        return bool(np.all(np.abs((d + 180.0) % 360.0 - 180.0) <= RIGHT_DEG))
+    def right(self, frame: int, angles_deg=None) -> bool:
+        """Whether the frame's posture (or ``angles_deg`` there) is right."""
+        return bool(np.all(self.off_deg(frame, angles_deg) <= RIGHT_DEG))
 
     def wrong_frames(self) -> list[int]:
         return [f for f in range(self.s.n_frames) if not self.right(f)]
@@ -205,7 +203,7 @@ class User:
         s = self.s
         r = s.results.get(f)
         if (r is not None and r.status == "ambiguous" and len(r.candidates) >= 2
-                and self.right_angles(r.candidates[1].angles_deg)):
+                and self.right(f, r.candidates[1].angles_deg)):
             # the views draw the alternative dashed: the user sees it is right, presses A
             self.press("swap", "alternative (A)")
             if self.right(f):

@@ -5,15 +5,16 @@ Run from the repository root (offscreen Qt, no display needed)::
 
     python bench/bench_gui.py [--frames 200] [--ghosts 2] [--occlusions 0.02] [--out DIR]
 
-or in a real window on a virtual X server, where the 3D view is OpenGL::
+or in a real window on a virtual X server (the 3D view there is its 2D fallback, as Mesa
+draws OpenGL in software; ``VIDEOTRACK_OPENGL=1`` in front measures it in OpenGL)::
 
     QT_QPA_PLATFORM=xcb xvfb-run -a -s "-screen 0 1920x1200x24" python bench/bench_gui.py
 
 Protocol: ``videotrack synth`` makes the paper's locust test video (``--frames`` frames, two
 views, with ``--ghosts`` static ghost markers per view and ``--occlusions`` of the marker images
 hidden) and ``videotrack detect`` detects it; the project's annealing parameters are the
-defaults (no schedule shortened). In the main window (the 3D view in OpenGL where there is a
-real display, else its 2D fallback):
+defaults (no schedule shortened). In the main window (the 3D view as the window chooses it:
+OpenGL with a hardware renderer or ``VIDEOTRACK_OPENGL=1``, else its 2D fallback):
 
 * **stall during Fit all**: a 10-ms QTimer records when it fires while *Fit all* runs; a
   stall is the gap between two firings (10 ms when nothing blocks). p95 and max over the fit.

@@ -681,13 +681,27 @@ class Fitter:
             track a root marker). Free roots are placed from this frame's detections unless
             given here.
         """
+        obs, roots, rots = self._one_frame(detections_frame, frame, root_positions,
+                                           "fit_frame")
+        start = self.problem.start
+        if start_deg is not None:
+            start = self.problem.state(self._posture_deg(start_deg), roots[0])[0]
+            for q in range(len(self.problem.free_chains)):
+                start[self.problem.root_axes[q]] = 0.0  # the seed holds the root's rotation
+        return self._fit_block(obs, np.zeros(1, np.int64), np.array([int(frame)], np.int64),
+                               roots, rots, start, np.array([0, 1], np.int64))[0]
+
+    def _one_frame(self, detections_frame, frame, root_positions, caller: str):
+        """The observations of one frame, its roots (1, n_chains, 3) and root rotations:
+        the configured roots, or ``root_positions``; free roots placed from the frame's
+        detections unless given."""
         if isinstance(frame, bool) or not isinstance(frame, int | np.integer) or frame < 0:
             raise KinematicsError(f"frame must be an integer >= 0, got {frame!r}",
                                   field="frame")
         obs = self.observations(detections_frame if isinstance(detections_frame, Observations)
                                 else [detections_frame])
         if obs.n_frames != 1:
-            raise KinematicsError(f"fit_frame takes one frame, got {obs.n_frames}",
+            raise KinematicsError(f"{caller} takes one frame, got {obs.n_frames}",
                                   field="observations")
         roots = self._root_array(root_positions)[None].copy()
         rots = self.problem.identity_rotations(1)
@@ -697,13 +711,7 @@ class Fitter:
                 rots[0, c] = seed_rot[0, c]
                 if root_positions is None:
                     roots[0, c] = seed_pos[0, c]
-        start = self.problem.start
-        if start_deg is not None:
-            start = self.problem.state(self._posture_deg(start_deg), roots[0])[0]
-            for q in range(len(self.problem.free_chains)):
-                start[self.problem.root_axes[q]] = 0.0  # the seed holds the root's rotation
-        return self._fit_block(obs, np.zeros(1, np.int64), np.array([int(frame)], np.int64),
-                               roots, rots, start, np.array([0, 1], np.int64))[0]
+        return obs, roots, rots
 
     def refine_frame(self, detections_frame, frame: int, start_deg,
                      root_positions=None) -> FrameResult | None:
@@ -712,16 +720,9 @@ class Fitter:
         carried from a neighbour stays on its branch where a lower-E minimum (a mirror
         posture, a ghost in an occluded marker's place) would draw even a cold anneal
         away. Arguments as :meth:`fit_frame`; None where the frame has nothing to fit."""
-        if isinstance(frame, bool) or not isinstance(frame, int | np.integer) or frame < 0:
-            raise KinematicsError(f"frame must be an integer >= 0, got {frame!r}",
-                                  field="frame")
-        obs = self.observations(detections_frame if isinstance(detections_frame, Observations)
-                                else [detections_frame])
-        if obs.n_frames != 1:
-            raise KinematicsError(f"refine_frame takes one frame, got {obs.n_frames}",
-                                  field="observations")
-        roots = self._root_array(root_positions)
-        seed = Candidate(self._posture_deg(start_deg), roots, np.nan, None, None, None)
+        obs, roots, _ = self._one_frame(detections_frame, frame, root_positions,
+                                        "refine_frame")
+        seed = Candidate(self._posture_deg(start_deg), roots[0], np.nan, None, None, None)
         found = self._refit_from(obs, 0, seed, self.params, polish=True)
         if found is None:
             return None

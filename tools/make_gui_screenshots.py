@@ -1,8 +1,8 @@
 """Screenshots of the correcting workflow for docs/gui.md, from a real window.
 
-The real MainWindow grabbed (``QWidget.grab()``) on a virtual X server, where the 3D view is
-OpenGL; without a display it runs on Qt's offscreen platform (the 3D view then its 2D
-fallback). Saves into ``docs/img/``:
+The real MainWindow grabbed (``QWidget.grab()``) on a virtual X server, the 3D view in
+OpenGL (``VIDEOTRACK_OPENGL=1``: Mesa draws it in software there); without a display it runs
+on Qt's offscreen platform (the 3D view then its 2D fallback). Saves into ``docs/img/``:
 
 * ``gui_correcting.png`` — the main window on a cluttered 200-frame project (ghosts,
   flickering ghosts, occlusions) after *Fit all*, a wrong frame selected
@@ -16,7 +16,7 @@ fallback). Saves into ``docs/img/``:
 
 Usage::
 
-    QT_QPA_PLATFORM=xcb xvfb-run -a -s "-screen 0 1920x1200x24" \\
+    QT_QPA_PLATFORM=xcb VIDEOTRACK_OPENGL=1 xvfb-run -a -s "-screen 0 1920x1200x24" \\
         python tools/make_gui_screenshots.py [--out docs/img] [--keep FOLDER]
 """
 
@@ -72,8 +72,12 @@ def window_on(project: Path):
     window.ask_unsaved = lambda: QMessageBox.StandardButton.Discard  # a demo: no saving
     window.resize(1400, 880)
     window.show()
+    waited = 0
     while not window.windowHandle().isExposed():  # a real display shows asynchronously
         settle(QApplication.instance(), seconds=0.05)
+        waited += 1
+        if waited > 600:
+            sys.exit("the window was never shown (30 s): is the display working?")
     assert window.open_project(project)
     return window
 

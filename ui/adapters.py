@@ -19,7 +19,7 @@ import numpy as np
 from kinematics.chain_xml import default_histogram
 from kinematics.errors import KinematicsError
 from kinematics.fk import forward_kinematics
-from kinematics.histograms import Histogram, bin_centres
+from kinematics.histograms import Histogram, bin_centres, wrap_deg
 from kinematics.model import Axis, Body, Chain, Joint, Marker, Segment
 
 #: Table text of a frame that has not been fitted.
@@ -71,8 +71,7 @@ class PostureGeometry:
 def angle_distance(a_deg, b_deg) -> float:
     """Distance of two postures in degrees: the norm of their axis differences, each
     wrapped to ±180°."""
-    d = (np.asarray(a_deg, float) - np.asarray(b_deg, float) + 180.0) % 360.0 - 180.0
-    return float(np.sqrt(np.sum(d * d)))
+    return float(np.linalg.norm(wrap_deg(np.asarray(a_deg, float) - np.asarray(b_deg, float))))
 
 
 def posture_geometry(body: Body, angles_deg, roots=None) -> PostureGeometry:

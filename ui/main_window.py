@@ -345,6 +345,7 @@ class MainWindow(QMainWindow):
                     self.act_refit_backward, self.act_interpolate):
             act.setEnabled(can_fit)
         self.act_accept_selected.setEnabled(ready)
+        self.act_swap.setEnabled(ready)  # its edit of several frames waits for a task
         self.act_detect.setEnabled(ready and not markerless)
         # the settings dialog edits views and filters of marker videos; a keypoint
         # project's [keypoints] are edited in its file

@@ -64,12 +64,15 @@ def carried_or_annealed(annealed: backend.FrameResult, carried: backend.FrameRes
     """Of a frame re-fitted from its neighbour's posture ``previous_deg``: the anneal's
     result, unless it left the neighbour's branch (more than :data:`BRANCH_DEG` from the
     neighbour's posture refined in place, ``carried``, which is nearer the neighbour) for
-    an E not much lower (:data:`BRANCH_E_RATIO`): then the refined posture."""
+    an E not much lower (:data:`BRANCH_E_RATIO`): then the refined posture, with the
+    anneal's kept as its alternative candidate."""
     d = adapters.angle_distance
     if (carried.error <= BRANCH_E_RATIO * annealed.error
             and d(annealed.angles_deg, carried.angles_deg) > BRANCH_DEG
             and d(carried.angles_deg, previous_deg) < d(annealed.angles_deg, previous_deg)):
-        return carried
+        # the anneal's posture stays the frame's alternative (A swaps to it)
+        return replace(carried, candidates=(*carried.candidates[:1],
+                                            *annealed.candidates[:1]))
     return annealed
 
 
@@ -200,6 +203,10 @@ class Session(QObject):
         #: The re-analysis threshold the last fit measured on the video (threshold_mode
         #: 'auto'), shown as the bar until the user types one (:meth:`set_bar`).
         self.measured_threshold: float | None = None
+        self._measuring = False  # the running task is a fit of the whole video
+        #: frame -> the result the latest A set there (itself or carried): A again on one of
+        #: them cycles that stretch as one
+        self._swapped: dict[int, backend.FrameResult] = {}
         self.bar_typed = False
         self.pins: dict[int, dict[int, float]] = {}
         #: The user's edits of the detections, ``{(record, view): ViewEdit}``.
@@ -727,6 +734,8 @@ class Session(QObject):
         angles = np.asarray(other.angles_deg, float)
         if not np.all(np.isfinite(angles)):
             return []
+        mean, locked = self._mean_posture(self.display_body)
+        angles = np.where(locked, mean, angles)  # as posture() draws it once chosen
         geometry = adapters.posture_geometry(self.display_body, angles,
                                              np.asarray(other.root_positions))
         return adapters.project_geometry(geometry, self.cameras)
@@ -877,6 +886,7 @@ class Session(QObject):
             worker.deleteLater()
             return
         self._task = worker
+        self._measuring = False  # fit() says when its task measures the threshold
         worker.finished.connect(lambda: self._task_finished(worker))
         self.busyChanged.emit(True)
         self.undoChanged.emit()
@@ -965,8 +975,7 @@ class Session(QObject):
             raise VideoTrackError("no chain and cameras: set them under Project ▸ Settings",
                                   file=self.config_path)
         params = self.params
-        if (not whole_video and params.threshold_mode == "auto"
-                and (self.measured_threshold is not None or self.bar_typed)):
+        if not whole_video and params.threshold_mode == "auto":
             params = replace(params, threshold_mode="absolute",
                              reanalysis_threshold=self.threshold)
         return replace(self._fit_model(), params=params).fitter(body or self.body)
@@ -1025,6 +1034,7 @@ class Session(QObject):
         worker.failed.connect(lambda m: None if worker.released else self._failed(m))
         worker.finished.connect(lambda: None if worker.released else self._fit_done(worker))
         self._start(worker, f"fitting {len(frames)} frames …")
+        self._measuring = not some  # only a fit of the whole video measures the threshold
         return True
 
     def _with_context(self, frames: list[int]) -> list[int]:
@@ -1046,7 +1056,7 @@ class Session(QObject):
             r, pins = item if isinstance(item, tuple) else (item, None)
             edit.record_result(r.frame, self.results.get(r.frame), r)
             self.results[r.frame] = r
-            if np.isfinite(r.threshold):
+            if self._measuring and np.isfinite(r.threshold):
                 self.measured_threshold = float(r.threshold)
             if pins or r.frame in self.pins:
                 edit.record_pins(r.frame, self.pins.pop(r.frame, None), pins)
@@ -1193,9 +1203,8 @@ class Session(QObject):
         start = self.results.get(frame)
         carried = [start.error] if start is not None and np.isfinite(start.error) else []
 
-        def fits_on(r) -> bool:  # within the bar, and no jump against the frames carried
-            return r.error <= threshold and not (
-                carried and r.error > JUMP_FACTOR * float(np.median(carried)) + JUMP_PX)
+        def jumps(r) -> bool:  # against the frames carried so far
+            return bool(carried) and r.error > JUMP_FACTOR * float(np.median(carried)) + JUMP_PX
 
         def work(worker: TaskWorker):
             prev_angles = angles
@@ -1214,13 +1223,13 @@ class Session(QObject):
                 # another branch with a lower E (a mirror posture): then the carried
                 # posture refined in place is taken, if it fits
                 kept = fitter.refine_frame(data, f, prev_angles, root_positions=root)
-                if kept is not None and fits_on(kept):
+                if kept is not None and kept.error <= threshold and not jumps(kept):
                     r = carried_or_annealed(r, kept, prev_angles)
                 if not r.error <= threshold:
                     worker.summary = (f"stopped at frame {f}: error {r.error:.2f} px above the "
                                       f"threshold, left as it was")
                     return
-                if carried and r.error > JUMP_FACTOR * float(np.median(carried)) + JUMP_PX:
+                if jumps(r):
                     worker.summary = (f"stopped at frame {f}: error jumps to {r.error:.2f} px "
                                       f"(carried frames {np.median(carried):.2f}), left as it "
                                       "was")
@@ -1278,25 +1287,37 @@ class Session(QObject):
         """Replace the frame's posture by its next candidate posture (the alternatives the
         fit kept: an ``ambiguous`` frame's mirror posture); again cycles through them. The
         result is ``corrected`` (the user chose it). The choice carries to the neighbours
-        that took the same wrong branch (:meth:`_carry_choice`). One undo step restores
-        every frame it changed."""
+        that took the same wrong branch (:meth:`_carry_choice`); A again on that stretch
+        cycles it as one. One undo step restores every frame it changed."""
+        if self.busy:
+            self.status.emit("wait for the running task to finish (or cancel it) first")
+            return False
         frame = self.frame if frame is None else int(frame)
         current = self.results.get(frame)
         if current is None or len(current.candidates) < 2 or self.model is None:
             self.status.emit(f"frame {frame} has no alternative posture")
             return False
+        # A again on a stretch the latest A set: the stretch cycles as one (with two
+        # candidates, back to where it was)
+        stretch = sorted(g for g, r in self._swapped.items() if self.results.get(g) is r)
         try:
             fitter = self._fitter()
             result = self._chosen_result(fitter, frame, current, 1)
-            carried = self._carry_choice(fitter, frame, current, result)
+            carried = ([self._chosen_result(fitter, g, self.results[g], 1) for g in stretch
+                        if g != frame and len(self.results[g].candidates) >= 2]
+                       if frame in stretch else
+                       self._carry_choice(fitter, frame, current, result))
         except LocatedError as err:
             self.error.emit(str(err))
             return False
         edit = Edit(f"frame {frame}: alternative posture")
         for r in (result, *carried):
             edit.record_result(r.frame, self.results.get(r.frame), r)
+        self._freshen(edit, [r.frame for r in (result, *carried)])  # E of today's chain
         self._apply(edit, 1)
         self._push(edit)
+        self._swapped = {r.frame: r for r in (result, *carried)
+                         if r.status == backend.CORRECTED}
         swapped = sorted(r.frame for r in carried if r.status == backend.CORRECTED)
         flagged = sorted(r.frame for r in carried if r.status != backend.CORRECTED)
         also = "".join([
@@ -1342,9 +1363,9 @@ class Session(QObject):
                 to_new = adapters.angle_distance(here, new)
                 if not adapters.angle_distance(here, old) < to_new:
                     break  # on the chosen branch already
-                dist = [adapters.angle_distance(np.asarray(c.angles_deg, float), new)
-                        for c in r.candidates]
-                k = int(np.argmin(dist)) if dist else 0
+                dist = np.array([adapters.angle_distance(np.asarray(c.angles_deg, float),
+                                                         new) for c in r.candidates] or [np.nan])
+                k = int(np.nanargmin(dist)) if np.isfinite(dist).any() else 0
                 if k == 0 or not dist[k] < CARRY_RATIO * to_new:
                     # still on the branch given up, and nothing to swap to: a look is
                     # needed (it may be fitted right from its neighbour, F9)

@@ -1,8 +1,9 @@
 """Fixtures of the GUI tests: a small synthetic project, a session and a main window.
 
-Qt runs offscreen (no display needed); the project is the paper's locust set-up made by
-``videotrack synth`` (12 frames) and detected once per test session, then copied for each
-test so tests may save into it.
+Qt runs offscreen (no display needed) unless QT_QPA_PLATFORM says otherwise
+(tests/ui/test_real_display.py runs these tests again on Xvfb); the project is the paper's
+locust set-up made by ``videotrack synth`` (12 frames) and detected once per test session,
+then copied for each test so tests may save into it.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ import tomllib
 import pytest
 import tomli_w
 
-import ui  # noqa: F401  (guards PySide6's reference counts before any Qt call)
+import ui  # noqa: F401  (before the QApplication: ui sets the shared OpenGL context)
 from videotrack.cli import main
 
 #: A short annealing schedule (the paper's proportions) so fits take a fraction of a second.
@@ -72,7 +73,7 @@ def open_window(qtbot, project):
     w.show()
     # on a real X server showing is asynchronous, and shortcuts and focus need the active
     # window (offscreen, a shown window is both at once)
-    qtbot.waitExposed(w)
+    qtbot.waitUntil(lambda: w.windowHandle() is not None and w.windowHandle().isExposed())
     w.activateWindow()
     qtbot.waitUntil(w.isActiveWindow)
     assert w.open_project(project)

@@ -39,7 +39,6 @@ def assert_gl_draws_markers(posture_view, qtbot):
     holds data)."""
     import pyqtgraph as pg
 
-    qtbot.waitExposed(posture_view.gl_view)
     image = posture_view.gl_view.grabFramebuffer().convertToFormat(
         QImage.Format.Format_RGB888)
     rgb = np.frombuffer(image.constBits(), np.uint8).reshape(
@@ -424,6 +423,10 @@ def test_bar_is_the_threshold_the_fit_measured_until_the_user_sets_one(window, q
                                                                        wait_idle):
     s = window.session
     assert s.params.threshold_mode == "auto"
+    project = s.threshold
+    s.fit([3, 4])  # before any Fit all: decided by the project's threshold, bar unmoved
+    wait_idle(s)
+    assert s.results[3].threshold == project and s.threshold == project
     s.fit()
     wait_idle(s)
     measured = s.results[0].threshold

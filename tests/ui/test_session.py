@@ -370,6 +370,11 @@ def test_an_alternative_posture_carries_along_the_stretch_on_the_same_branch(ses
     np.testing.assert_array_equal(s.results[6].angles_deg, before[6].angles_deg)
     assert s.results[7] is before[7]
     assert s.undo_label == "frame 4: alternative posture"
+    # A again cycles the whole stretch back (the frames the last A set are not held)
+    assert s.swap_candidate(4)
+    for f in (3, 4, 5):
+        np.testing.assert_allclose(s.results[f].angles_deg, before[f].angles_deg)
+    s.undo()
     s.undo()
     assert all(s.results[f] is before[f] for f in range(12))
     # a neighbour set by hand stops the carry
@@ -400,17 +405,23 @@ def test_reopened_results_keep_the_bar_their_fit_used(session, project, wait_idl
 def test_a_re_fit_forward_keeps_the_carried_branch_only_when_the_anneal_left_it():
     """Re-fitting from a neighbour: the anneal's result, unless it went to another branch
     (far from the neighbour's posture refined in place, which is nearer the neighbour) for
-    an E not much lower; a refinement stuck far from the data never wins."""
-    from types import SimpleNamespace
-
+    an E not much lower, then the refined posture with the anneal's as its alternative; a
+    refinement stuck far from the data never wins."""
+    from kinematics.anneal import Candidate
+    from ui import backend
     from ui.session import carried_or_annealed
 
     def result(theta, error):
-        return SimpleNamespace(angles_deg=np.array([0.0, theta]), error=error)
+        angles = np.array([0.0, theta])
+        r = backend.manual_result(7, angles, np.zeros((1, 3)), error, np.ones(2), 0)
+        return replace(r, candidates=(Candidate(angles, r.root_positions, error, None, None,
+                                                None),))
 
     previous = np.array([0.0, 30.0])
     mirror, kept = result(-28.0, 26.3), result(31.0, 28.0)
-    assert carried_or_annealed(mirror, kept, previous) is kept  # a mirror, 6 % lower E
+    chosen = carried_or_annealed(mirror, kept, previous)  # a mirror, 6 % lower E
+    assert chosen.angles_deg[1] == 31.0 and chosen.error == 28.0
+    assert [c.angles_deg[1] for c in chosen.candidates] == [31.0, -28.0]
     same = result(33.0, 27.0)  # the anneal stayed on the branch: its result
     assert carried_or_annealed(same, kept, previous) is same
     stuck = result(31.0, 123.0)  # the refinement far from the data
