@@ -32,6 +32,11 @@ colder schedule (small ``tau0`` and ``l0``) track smooth movement. It makes fram
 each other, so frames are cut into independent segments of ``segment_length`` consecutive
 frames (each starting from the means), fitted one segment per thread; results still do not
 depend on the thread count. Re-runs of a frame always start from the means.
+``start="track"`` is that short cold schedule, for video filmed fast enough that a posture
+moves little from frame to frame (a fly at 330 frames/s): each segment's first frame is
+fitted in full, every next frame by one cold local anneal from the previous frame's result
+(:data:`TRACK_SHARE` of the schedule, as the path's re-fits), and a frame whose E is above the
+threshold or jumps (:data:`TRACK_JUMP`) is fitted in full again (``Fitter._track``).
 """
 
 from __future__ import annotations
@@ -723,12 +728,14 @@ class Fitter:
         obs, roots, _ = self._one_frame(detections_frame, frame, root_positions,
                                         "refine_frame")
         seed = Candidate(self._posture_deg(start_deg), roots[0], np.nan, None, None, None)
-        found = self._refit_from(obs, 0, seed, self.params, polish=True)
+        counted: list[int] = []
+        found = self._refit_from(obs, 0, seed, self.params, polish=True, counted=counted)
         if found is None:
             return None
         return self._frame_result(obs, 0, int(frame), found.state, found.seed_pos,
-                                  found.seed_rot, self.params, runs=1, iterations=1, pairs=0,
-                                  error=None, candidates=(found,))
+                                  found.seed_rot, self.params, runs=1,
+                                  iterations=counted[0], pairs=0, error=None,
+                                  candidates=(found,))
 
     def iter_fit(self, detections, frames=None, *, chunk_size: int | None = None,
                  sequence_starts: Iterable[int] = (), previous: FrameResult | None = None,
@@ -777,6 +784,9 @@ class Fitter:
         starts = np.zeros(0, np.int64) if starts is None else starts
         roots, rots = self._place(obs, idx)
         params = self.params
+        if params.start == "track":  # measures its threshold on its first tracked frames
+            yield from self._track(obs, idx, roots, rots, params, cancel)
+            return
         if params.threshold_mode == "auto" and len(idx):
             params = replace(params, reanalysis_threshold=self._video_threshold(
                 obs, idx, roots, rots))
@@ -824,8 +834,13 @@ class Fitter:
         res = self._fit_block(obs, idx[pick], idx[pick], np.ascontiguousarray(roots[pick]),
                               np.ascontiguousarray(rots[pick]), self.problem.start,
                               np.arange(len(pick) + 1, dtype=np.int64), once)
-        images = marker_images(obs, idx[pick], len(self.body.marker_names))
-        score = np.array([r.error for r in res]) / np.maximum(images, 1)
+        return self._threshold_of(obs, idx[pick], [r.error for r in res])
+
+    def _threshold_of(self, obs: Observations, frames, errors) -> float:
+        """:meth:`_video_threshold`'s threshold from the E of these frames' fits."""
+        p = self.params
+        images = marker_images(obs, np.asarray(frames), len(self.body.marker_names))
+        score = np.asarray(errors, float) / np.maximum(images, 1)
         score = score[np.isfinite(score) & (images > 0)]
         if score.size == 0:
             return float(p.reanalysis_threshold)
@@ -1316,6 +1331,98 @@ class Fitter:
             pools.append(ThreadPoolExecutor(threads))
         return list(pools[0].map(lambda a: fn(*a), args))
 
+    def _track(self, obs: Observations, idx: np.ndarray, roots, rots, p: AnnealParams,
+               cancel: Callable[[], bool] | None) -> Iterator[FrameResult]:
+        """``start="track"``: frames in segments of at most ``segment_length`` consecutive
+        frame numbers, one segment per thread at once; results in the order of ``idx``.
+        With ``threshold_mode="auto"`` the threshold is measured on the first segments'
+        tracked E (a tracked frame costs a tenth of the sample of full fits that measure it
+        otherwise), and their frames above it are then fitted in full."""
+        cut = np.flatnonzero(np.diff(idx) != 1) + 1  # a gap in the frames starts a segment
+        bounds = sorted({0, len(idx), *cut.tolist(),
+                         *range(0, len(idx), max(1, p.segment_length))})
+        segments = list(itertools.pairwise(bounds))
+        p = replace(p, start="mean")  # the full fits of a segment's frames
+        measure = p.threshold_mode == "auto"
+        if measure:
+            p = replace(p, reanalysis_threshold=1e9)  # (the largest allowed): none yet
+        pools: list[ThreadPoolExecutor] = []
+        try:
+            for a in range(0, len(segments), numba.get_num_threads()):
+                if cancel is not None and cancel():
+                    return
+                group = segments[a:a + numba.get_num_threads()]
+                blocks = self._each(self._track_segment,
+                                    [(obs, idx, roots, rots, lo, hi, p) for lo, hi in group],
+                                    pools)
+                if measure:
+                    found = [r for block in blocks for r in block]
+                    p = replace(p, reanalysis_threshold=self._threshold_of(
+                        obs, [r.frame for r in found], [r.error for r in found]))
+                    blocks = [[self._decided(obs, r, idx[lo + k], roots[lo + k],
+                                             rots[lo + k], p) for k, r in enumerate(block)]
+                              for (lo, _), block in zip(group, blocks, strict=True)]
+                    measure = False
+                for block in blocks:
+                    yield from block
+        finally:
+            for pool in pools:
+                pool.shutdown()
+
+    def _decided(self, obs: Observations, r: FrameResult, position, root, rot,
+                 p: AnnealParams) -> FrameResult:
+        """A result of the frames the threshold was measured on, decided by it: above it,
+        the frame is fitted in full too and the lower E kept (as :meth:`_track_segment`)."""
+        if r.error <= p.reanalysis_threshold:
+            return replace(r, threshold=float(p.reanalysis_threshold))
+        again = self._fit_block(obs, np.array([position]), np.array([position]),
+                                np.ascontiguousarray(root[None]),
+                                np.ascontiguousarray(rot[None]), self.problem.start,
+                                np.array([0, 1], np.int64), p)[0]
+        if not again.error >= r.error:
+            return replace(again, status="reanalysed" if again.status == "ok"
+                           else again.status)
+        return replace(r, status="failed", threshold=float(p.reanalysis_threshold))
+
+    def _track_segment(self, obs: Observations, idx, roots, rots, lo: int, hi: int,
+                       p: AnnealParams) -> list[FrameResult]:
+        """Frames ``idx[lo:hi]`` tracked: the first fitted in full, each next one annealed
+        cold from the previous result; one above the threshold or whose E jumps (above
+        :data:`TRACK_JUMP` times the median of the last :data:`TRACK_MEMORY` kept, plus
+        :data:`TRACK_JUMP_PX` per marker image) is fitted in full too, and the lower E of
+        the two goes on."""
+        def fit_full(i: int) -> FrameResult:
+            return self._fit_block(obs, idx[i:i + 1], idx[i:i + 1],
+                                   np.ascontiguousarray(roots[i:i + 1]),
+                                   np.ascontiguousarray(rots[i:i + 1]), self.problem.start,
+                                   np.array([0, 1], np.int64), p)[0]
+
+        out = [fit_full(lo)]
+        kept_e: list[float] = [out[0].error]
+        for i in range(lo + 1, hi):
+            prev = out[-1]
+            seed = Candidate(prev.angles_deg, prev.root_positions, prev.error, None, None,
+                             None)
+            counted: list[int] = []
+            c = (self._refit_from(obs, int(idx[i]), seed, p, share=TRACK_SHARE,
+                                  counted=counted)
+                 if np.all(np.isfinite(prev.angles_deg)) else None)
+            r = None if c is None else self._frame_result(
+                obs, int(idx[i]), int(idx[i]), c.state, c.seed_pos, c.seed_rot, p, runs=1,
+                iterations=counted[0], pairs=0, candidates=(c,))
+            images = int(marker_images(obs, idx[i:i + 1], len(self.body.marker_names))[0])
+            jump = (TRACK_JUMP * float(np.median(kept_e[-TRACK_MEMORY:]))
+                    + TRACK_JUMP_PX * max(images, 1))
+            if r is None or not r.error <= p.reanalysis_threshold or r.error > jump:
+                again = fit_full(i)
+                if r is None or not again.error >= r.error:
+                    r = replace(again, status="reanalysed" if again.status == "ok"
+                                else again.status)
+            out.append(r)
+            if np.isfinite(r.error):
+                kept_e.append(r.error)
+        return out
+
     def _marker_moves(self, chosen: Candidate, cands: Sequence[Candidate]) -> np.ndarray:
         """Per candidate, the largest distance of a model marker from where the chosen
         posture puts it (length units)."""
@@ -1331,20 +1438,22 @@ class Fitter:
         return float(np.median([v for v in lengths if v > 0] or [1.0]))
 
     def _refit_from(self, obs: Observations, position: int, neighbour: Candidate,
-                    p: AnnealParams, polish: bool = False) -> Candidate | None:
+                    p: AnnealParams, polish: bool = False, share: float = 0.25,
+                    counted: list | None = None) -> Candidate | None:
         """Anneal frame ``position`` again, cold and locally, from a neighbour's posture;
         with ``polish``, only refine the neighbour's posture there (one annealing step too
         small to move it, then the refinement): a posture a wrong minimum with a lower E
         would draw even a cold anneal into (a ghost in an occluded marker's place) stays
-        where the movement has it."""
+        where the movement has it. ``share``: the part of the schedule the cold anneal
+        runs; ``counted``, if given, gets the iterations it ran appended."""
         state, pos, rot = self.problem.state(neighbour.angles_deg, neighbour.root_positions)
         if polish:
             local = replace(p, candidates=1, max_runs=1, tau0=p.tau0 * 1e-6, l0=p.l0 * 1e-6,
                             n_end=1, n_l=1, n_tau=1, start="mean")
         else:
             local = replace(p, candidates=1, max_runs=1, tau0=p.tau0 * 0.01, l0=p.l0 * 0.1,
-                            n_end=max(1, p.n_end // 4), n_l=max(1, p.n_l // 4),
-                            n_tau=max(1, p.n_tau // 4), start="mean")
+                            n_end=max(1, int(p.n_end * share)), n_l=max(1, int(p.n_l * share)),
+                            n_tau=max(1, int(p.n_tau * share)), start="mean")
         cams, arrays = self._kernel_inputs(obs.arrays(np.array([position], np.int64)))
         out = FitOutputs.empty(1, self.problem.n_state, len(cams.kind), 1)
         # no start search: the neighbour's posture is the start
@@ -1355,6 +1464,8 @@ class Fitter:
                        state, self.problem.folded, cams, self.problem.dofs,
                        schedule_of(local), self._error_args(p, arrays.objective), arrays,
                        parts, out)
+        if counted is not None:
+            counted.append(int(out.iterations[0]))
         if not out.runs[0]:
             return None
         return self._candidates(out.run_angles[0], out.run_error[0], pos, rot, local)[0]
@@ -1410,6 +1521,19 @@ REFIT_KEEP_PX = 1.0
 #: first; postures 5° apart on any axis count as distinct, which on a 42-axis body is almost
 #: any two: unbounded, a fly's 20-frame window grew from 40 to 3 627 candidates).
 REFIT_CANDIDATES = 4
+
+#: ``start="track"``: the part of the schedule a frame's cold anneal from the previous frame
+#: runs. On the fly's contiguous frames 0-65 a tenth kept every frame a full fit got right
+#: (86.4 %) at 82 frames/s on one thread; a quarter the same at 35 (docs/benchmarks.md).
+TRACK_SHARE = 0.1
+#: ... a tracked frame whose E exceeds this times the median E of the last TRACK_MEMORY
+#: frames kept is fitted in full (the track lost: on the fly's frame 338 E doubled and stayed
+#: so, every joint of a leg off by 1-2 mm, for the rest of the clip).
+TRACK_JUMP = 1.5
+TRACK_MEMORY = 16
+#: ... plus this per marker image of the frame (px): on a clean video E is noise, and
+#: noise doubles from frame to frame.
+TRACK_JUMP_PX = 0.05
 #: Decided frames kept before a window: the cut rule (:func:`temporal.cuts`) looks 2 back.
 CUT_CONTEXT = 2
 #: A candidate whose smoothest path moves more than this (squared histogram spreads, the

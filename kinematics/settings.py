@@ -42,7 +42,7 @@ def setting(default, doc: str, *, min=None, max=None, choices=None, none=None):
     return field(default=default, metadata={k: v for k, v in meta.items() if v is not None})
 
 
-START_MODES = ("mean", "previous")
+START_MODES = ("mean", "previous", "track")
 PARTITION_MODES = ("auto", "none")
 BACKENDS = ("auto", "scalar", "lanes")
 MATCH_MODES = ("auto", "views", "3d")
@@ -160,10 +160,13 @@ class AnnealParams:
     max_runs: int = setting(8, "Runs per frame at most, the first included (the paper: 5).",
                             min=1, max=1000)
     start: str = setting("mean", "Start posture of a frame's first run: the histogram means "
-                         "(frames independent) or the previous frame's result.",
+                         "(frames independent), the previous frame's result, or 'track': "
+                         "a short cold anneal from the previous frame's result, a full fit "
+                         "where E is high or jumps (video filmed fast; see docs/fitting.md).",
                          choices=START_MODES)
     segment_length: int = setting(32, "Frames per independent segment with start = "
-                                  "'previous' (each segment starts from the means).",
+                                  "'previous' or 'track' (each segment starts from the "
+                                  "means).",
                                   min=1, max=10**8)
     refine: bool = setting(True, "Polish every fitted posture by Levenberg-Marquardt (see "
                            "docs/fitting.md); off in the paper profile.")

@@ -6,6 +6,7 @@ from __future__ import annotations
 import itertools
 import threading
 
+import numba
 import numpy as np
 import pytest
 
@@ -489,3 +490,62 @@ def test_profiles(profile):
     assert (p.candidates > 1) == (profile == "best")
     assert p.refine == (profile == "best")
     assert AnnealParams.paper(seed=3).seed == 3
+
+
+def plane_arm() -> tuple[Body, dict]:
+    """A hinge seen square on: every angle projects differently (no mirror)."""
+    seg = Segment("arm", 50.0, markers=(Marker("M0", (-25.0, 0.0, 0.0)), Marker("M1")))
+    body = Body("arm", (Chain("arm", hinge("J", "theta", -70, 70, seg), Root("fixed")),),
+                units="px")
+    cam = OrthographicCamera.from_axes("side", 2.0, ("x", "y"), (150.0, 150.0),
+                                       size=(300, 300))
+    return body, {"side": cam}
+
+
+def test_track_follows_the_movement_with_one_short_cold_run_per_frame():
+    """start="track": each segment's first frame is fitted in full, every other frame by one
+    cold anneal of TRACK_SHARE of the schedule from the previous result; the same results
+    whatever the number of threads (segments are independent)."""
+    from kinematics.anneal import TRACK_SHARE
+
+    body, cams = plane_arm()
+    truth = np.linspace(-40.0, 40.0, 40)
+    frames = frames_of(body, cams, truth)
+    p = AnnealParams(start="track", segment_length=16, **FAST)
+    res = Fitter(body, cams, p).fit(frames)
+    theta = np.array([r.angles_deg[2] for r in res])
+    np.testing.assert_allclose(theta, truth, atol=1.0)
+    short = max(1, int(p.n_end * TRACK_SHARE))
+    for k, r in enumerate(res):
+        if k % 16 == 0:  # a segment's first frame: the full fit (runs until two agree)
+            assert r.runs >= 2
+        else:
+            assert r.runs == 1 and 0 < r.iterations <= short and r.status == "ok"
+    one = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        again = Fitter(body, cams, p).fit(frames)
+    finally:
+        numba.set_num_threads(one)
+    assert [r.angles_deg.tolist() for r in again] == [r.angles_deg.tolist() for r in res]
+
+
+def test_track_lost_by_a_jump_is_found_by_a_full_fit(monkeypatch):
+    """The arm jumps 60° between two frames: a cold run from the previous posture (here a
+    very short one, so that it surely cannot follow) leaves E jumping, and that frame is
+    fitted in full (reanalysed); tracking goes on from it. With threshold_mode auto the
+    threshold is measured on the tracked frames."""
+    from kinematics import anneal
+
+    monkeypatch.setattr(anneal, "TRACK_SHARE", 0.002)
+    body, cams = plane_arm()
+    truth = np.r_[np.linspace(-40.0, -30.0, 12), np.linspace(30.0, 40.0, 12)]
+    frames = frames_of(body, cams, truth)
+    p = AnnealParams(start="track", segment_length=32,
+                     **{**FAST, "threshold_mode": "auto"})
+    res = Fitter(body, cams, p).fit(frames)
+    np.testing.assert_allclose([r.angles_deg[2] for r in res], truth, atol=1.0)
+    assert res[12].status == "reanalysed" and res[12].runs >= 2
+    assert [r.status for r in res[13:]] == ["ok"] * 11
+    thresholds = {r.threshold for r in res}
+    assert len(thresholds) == 1 and np.isfinite(thresholds.pop())
