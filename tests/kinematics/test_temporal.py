@@ -493,13 +493,10 @@ def test_profiles(profile):
 
 
 def plane_arm() -> tuple[Body, dict]:
-    """A hinge seen square on: every angle projects differently (no mirror)."""
-    seg = Segment("arm", 50.0, markers=(Marker("M0", (-25.0, 0.0, 0.0)), Marker("M1")))
-    body = Body("arm", (Chain("arm", hinge("J", "theta", -70, 70, seg), Root("fixed")),),
-                units="px")
-    cam = OrthographicCamera.from_axes("side", 2.0, ("x", "y"), (150.0, 150.0),
-                                       size=(300, 300))
-    return body, {"side": cam}
+    """The mirror arm seen square on: every angle projects differently (no mirror)."""
+    body, _ = mirror_arm()
+    return body, {"side": OrthographicCamera.from_axes("side", 2.0, ("x", "y"),
+                                                       (150.0, 150.0), size=(300, 300))}
 
 
 def test_track_follows_the_movement_with_one_short_cold_run_per_frame():
