@@ -1398,7 +1398,7 @@ class Fitter:
                                    np.array([0, 1], np.int64), p)[0]
 
         out = [fit_full(lo)]
-        kept_e: list[float] = [out[0].error]
+        kept_e = [out[0].error] if np.isfinite(out[0].error) else []
         for i in range(lo + 1, hi):
             prev = out[-1]
             seed = Candidate(prev.angles_deg, prev.root_positions, prev.error, None, None,
@@ -1412,7 +1412,7 @@ class Fitter:
                 iterations=counted[0], pairs=0, candidates=(c,))
             images = int(marker_images(obs, idx[i:i + 1], len(self.body.marker_names))[0])
             jump = (TRACK_JUMP * float(np.median(kept_e[-TRACK_MEMORY:]))
-                    + TRACK_JUMP_PX * max(images, 1))
+                    + TRACK_JUMP_PX * max(images, 1)) if kept_e else np.inf
             if r is None or not r.error <= p.reanalysis_threshold or r.error > jump:
                 again = fit_full(i)
                 if r is None or not again.error >= r.error:
