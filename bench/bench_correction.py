@@ -64,7 +64,8 @@ import numpy as np
 from _report import in_out_folder, machine, print_table
 from bench_gui import make_project, run_loop_until
 
-import ui  # noqa: F401  (guards PySide6's reference counts before any Qt call)
+import ui  # noqa: F401  (before the QApplication: ui sets the shared OpenGL context)
+from kinematics.histograms import wrap_deg
 
 #: A posture is right when every free axis is within this many degrees of the truth.
 RIGHT_DEG = 10.0
@@ -108,8 +109,8 @@ class User:
             if r is None:
                 return np.full(len(self.free), np.inf)
             angles_deg = r.angles_deg
-        d = np.asarray(angles_deg, float)[self.free] - self.truth[frame, self.free]
-        return np.abs((d + 180.0) % 360.0 - 180.0)
+        return np.abs(wrap_deg(np.asarray(angles_deg, float)[self.free]
+                               - self.truth[frame, self.free]))
 
     def right(self, frame: int, angles_deg=None) -> bool:
         """Whether the frame's posture (or ``angles_deg`` there) is right."""

@@ -44,7 +44,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import numpy as np
 from _report import in_out_folder, machine, print_table
 
-import ui  # noqa: F401  (guards PySide6's reference counts before any Qt call)
+import ui  # noqa: F401  (before the QApplication: ui sets the shared OpenGL context)
 from videotrack.cli import main as cli
 
 

@@ -1359,8 +1359,8 @@ class Fitter:
                     found = [r for block in blocks for r in block]
                     p = replace(p, reanalysis_threshold=self._threshold_of(
                         obs, [r.frame for r in found], [r.error for r in found]))
-                    blocks = [[self._decided(obs, r, idx[lo + k], roots[lo + k],
-                                             rots[lo + k], p) for k, r in enumerate(block)]
+                    blocks = [[self._decided(obs, r, idx, roots, rots, lo + k, p)
+                               for k, r in enumerate(block)]
                               for (lo, _), block in zip(group, blocks, strict=True)]
                     measure = False
                 for block in blocks:
@@ -1369,20 +1369,32 @@ class Fitter:
             for pool in pools:
                 pool.shutdown()
 
-    def _decided(self, obs: Observations, r: FrameResult, position, root, rot,
+    def _decided(self, obs: Observations, r: FrameResult, idx, roots, rots, i: int,
                  p: AnnealParams) -> FrameResult:
         """A result of the frames the threshold was measured on, decided by it: above it,
         the frame is fitted in full too and the lower E kept (as :meth:`_track_segment`)."""
         if r.error <= p.reanalysis_threshold:
             return replace(r, threshold=float(p.reanalysis_threshold))
-        again = self._fit_block(obs, np.array([position]), np.array([position]),
-                                np.ascontiguousarray(root[None]),
-                                np.ascontiguousarray(rot[None]), self.problem.start,
-                                np.array([0, 1], np.int64), p)[0]
-        if not again.error >= r.error:
-            return replace(again, status="reanalysed" if again.status == "ok"
-                           else again.status)
-        return replace(r, status="failed", threshold=float(p.reanalysis_threshold))
+        again = self._fit_again(obs, idx, roots, rots, i, p, r)
+        return again if again is not r else replace(
+            r, status="failed", threshold=float(p.reanalysis_threshold))
+
+    def _fit_full(self, obs: Observations, idx, roots, rots, i: int,
+                  p: AnnealParams) -> FrameResult:
+        """Frame ``idx[i]`` fitted in full on its own (runs from the means)."""
+        return self._fit_block(obs, idx[i:i + 1], idx[i:i + 1],
+                               np.ascontiguousarray(roots[i:i + 1]),
+                               np.ascontiguousarray(rots[i:i + 1]), self.problem.start,
+                               np.array([0, 1], np.int64), p)[0]
+
+    def _fit_again(self, obs: Observations, idx, roots, rots, i: int, p: AnnealParams,
+                   tracked: FrameResult | None) -> FrameResult:
+        """A tracked frame fitted in full as well: the full fit (``reanalysed`` where it is
+        within the threshold) unless ``tracked`` has the lower E, then ``tracked`` itself."""
+        again = self._fit_full(obs, idx, roots, rots, i, p)
+        if tracked is not None and again.error >= tracked.error:
+            return tracked
+        return replace(again, status="reanalysed" if again.status == "ok" else again.status)
 
     def _track_segment(self, obs: Observations, idx, roots, rots, lo: int, hi: int,
                        p: AnnealParams) -> list[FrameResult]:
@@ -1391,13 +1403,7 @@ class Fitter:
         :data:`TRACK_JUMP` times the median of the last :data:`TRACK_MEMORY` kept, plus
         :data:`TRACK_JUMP_PX` per marker image) is fitted in full too, and the lower E of
         the two goes on."""
-        def fit_full(i: int) -> FrameResult:
-            return self._fit_block(obs, idx[i:i + 1], idx[i:i + 1],
-                                   np.ascontiguousarray(roots[i:i + 1]),
-                                   np.ascontiguousarray(rots[i:i + 1]), self.problem.start,
-                                   np.array([0, 1], np.int64), p)[0]
-
-        out = [fit_full(lo)]
+        out = [self._fit_full(obs, idx, roots, rots, lo, p)]
         kept_e = [out[0].error] if np.isfinite(out[0].error) else []
         for i in range(lo + 1, hi):
             prev = out[-1]
@@ -1414,10 +1420,7 @@ class Fitter:
             jump = (TRACK_JUMP * float(np.median(kept_e[-TRACK_MEMORY:]))
                     + TRACK_JUMP_PX * max(images, 1)) if kept_e else np.inf
             if r is None or not r.error <= p.reanalysis_threshold or r.error > jump:
-                again = fit_full(i)
-                if r is None or not again.error >= r.error:
-                    r = replace(again, status="reanalysed" if again.status == "ok"
-                                else again.status)
+                r = self._fit_again(obs, idx, roots, rots, i, p, r)
             out.append(r)
             if np.isfinite(r.error):
                 kept_e.append(r.error)

@@ -38,7 +38,7 @@ sys.path.insert(0, str(REPO / "tools"))
 import numpy as np  # noqa: E402
 from gui_screenshots import settle  # noqa: E402
 
-import ui  # noqa: F401,E402  (guards PySide6's reference counts before any Qt call)
+import ui  # noqa: F401,E402  (before the QApplication: ui sets the shared OpenGL context)
 
 #: The cluttered project: the correction bench's harder set-up.
 CLUTTER = ["--ghosts", "2", "--flicker-ghosts", "2", "--occlusions", "0.05",

@@ -70,11 +70,15 @@ print("|".join(map(str, (app.platformName(), opengl_renderer(), *opengl_choice()
 """
 
 
+def run_probe(display: str, **more: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-c", PROBE], env=on_display(display, **more),
+                          cwd=HERE.parents[1], capture_output=True, text=True, timeout=120)
+
+
 def probe(display: str, **more: str) -> list[str]:
     """Platform, OpenGL renderer, whether the 3D view uses OpenGL and why not, as a window
     on ``display`` sees them."""
-    run = subprocess.run([sys.executable, "-c", PROBE], env=on_display(display, **more),
-                         cwd=HERE.parents[1], capture_output=True, text=True, timeout=120)
+    run = run_probe(display, **more)
     assert run.returncode == 0, run.stderr[-3000:]
     return run.stdout.strip().splitlines()[-1].split("|")
 
@@ -83,8 +87,7 @@ def probe(display: str, **more: str) -> list[str]:
 def x_qt(x_display):
     """The display, once Qt is seen to open windows on it with OpenGL (else skipped: Qt's
     X libraries or Mesa missing)."""
-    run = subprocess.run([sys.executable, "-c", PROBE], env=on_display(x_display),
-                         cwd=HERE.parents[1], capture_output=True, text=True, timeout=120)
+    run = run_probe(x_display)
     if run.returncode != 0 or "|None|" in run.stdout:
         pytest.skip(f"Qt cannot open OpenGL windows on Xvfb here ({INSTALL}): "
                     + (run.stderr.strip().splitlines() or ["no OpenGL"])[-1])
