@@ -546,3 +546,79 @@ def test_track_lost_by_a_jump_is_found_by_a_full_fit(monkeypatch):
     assert [r.status for r in res[13:]] == ["ok"] * 11
     thresholds = {r.threshold for r in res}
     assert len(thresholds) == 1 and np.isfinite(thresholds.pop())
+
+
+def _bent(fitter, obs, r, p, axis: str, deg: float):
+    """Result ``r`` with one axis turned by ``deg`` (E and residuals made again)."""
+    a = np.array(r.angles_deg, float)
+    a[fitter.body.axis_labels.index(axis)] += deg
+    state, pos, rot = fitter.problem.state(a, r.root_positions)
+    return fitter._frame_result(obs, r.frame, r.frame, state, pos, rot, p, runs=r.runs,
+                                iterations=r.iterations, pairs=0)
+
+
+def test_a_merge_takes_each_limb_from_the_fit_that_explains_its_markers():
+    """A track that lost leg a and a full fit that lost leg b merge into a posture with
+    both right; where the other fit explains no limb better, there is no merge."""
+    body, cams, angles, frames = legs_walking(1, 0.0)
+    p = AnnealParams(**FAST)
+    fitter = Fitter(body, cams, p)
+    obs = fitter.observations(frames)
+    right = fitter.refine_frame(frames[0], 0, angles[0])
+    lost_a = _bent(fitter, obs, right, p, "a_knee.flex", 35.0)
+    lost_b = _bent(fitter, obs, right, p, "b_knee.flex", -35.0)
+    merged = fitter._merged(obs, 0, lost_a, lost_b, p)
+    assert merged.error < min(lost_a.error, lost_b.error)
+    np.testing.assert_allclose(merged.angles_deg, angles[0], atol=1.0)
+    assert fitter._merged(obs, 0, right, lost_b, p) is None
+    assert fitter._merged(obs, 0, lost_a, right, p) is not None
+
+
+def test_track_mends_a_segment_start_from_the_segment_before():
+    """A segment's first frame is fitted alone; where that fit lost a leg, the previous
+    segment's track, one step on, explains it better and takes it over."""
+    body, cams, angles, frames = legs_walking(24, 1.0)
+    p = AnnealParams(start="track", segment_length=12, **FAST)
+    full = Fitter._fit_full
+
+    def lost_at_12(self, obs, idx, roots, rots, i, q):
+        r = full(self, obs, idx, roots, rots, i, q)
+        return _bent(self, obs, r, q, "b_knee.flex", 35.0) if i == 12 else r
+    fitter = Fitter(body, cams, p)
+    with pytest.MonkeyPatch.context() as m:
+        m.setattr(Fitter, "_fit_full", lost_at_12)
+        res = fitter.fit(frames)
+        m.setattr(Fitter, "_mend", lambda *a: None)
+        unmended = fitter.fit(frames)
+    knee = body.axis_labels.index("b_knee.flex")
+    assert abs(unmended[12].angles_deg[knee] - angles[12, knee]) > 30  # what it mends
+    np.testing.assert_allclose(res[12].angles_deg, angles[12], atol=1.5)
+    assert res[12].status == "reanalysed"
+
+
+def test_track_cut_by_a_full_fit_mends_the_frames_that_led_to_it(monkeypatch):
+    """A track that crept off a leg over frames 5-8 (below the threshold) until frame 9
+    was fitted in full: the frames before it are tracked back from the full fit."""
+    from kinematics import anneal
+
+    monkeypatch.setattr(anneal, "TRACK_JUMP", 1e9)  # only the threshold cuts here
+    body, cams, angles, frames = legs_walking(16, 1.0)
+    # E: ~1 px right, 8-9 px with the leg 8° off, 46 px 60° off
+    p = AnnealParams(start="track", segment_length=32,
+                     **{**FAST, "reanalysis_threshold": 20.0})
+    step = Fitter._step
+
+    def creeping(self, obs, position, prev, q):
+        r = step(self, obs, position, prev, q)
+        if r is not None and position == prev.frame + 1 and 5 <= position <= 9:
+            return _bent(self, obs, r, q, "b_knee.flex", 8.0 if position < 9 else 60.0)
+        return r
+    monkeypatch.setattr(Fitter, "_step", creeping)
+    fitter = Fitter(body, cams, p)
+    res = fitter.fit(frames)
+    monkeypatch.setattr(Fitter, "_retrack", lambda *a: None)
+    unmended = fitter.fit(frames)
+    knee = body.axis_labels.index("b_knee.flex")
+    assert all(abs(unmended[k].angles_deg[knee] - angles[k, knee]) > 5 for k in range(5, 9))
+    assert [r.status for r in res[5:10]] == ["reanalysed"] * 5
+    np.testing.assert_allclose([r.angles_deg for r in res], angles, atol=2.0)
