@@ -36,7 +36,10 @@ depend on the thread count. Re-runs of a frame always start from the means.
 moves little from frame to frame (a fly at 330 frames/s): each segment's first frame is
 fitted in full, every next frame by one cold local anneal from the previous frame's result
 (:data:`TRACK_SHARE` of the schedule, as the path's re-fits), and a frame whose E is above the
-threshold or jumps (:data:`TRACK_JUMP`) is fitted in full again (``Fitter._track``).
+threshold or jumps (:data:`TRACK_JUMP`) is fitted in full again (``Fitter._track``). Limbs are
+merged between two fits by how well each explains its own markers, and neighbouring segments
+(and the frames before a full fit inside one) are mended by tracking across
+(``Fitter._mend``, ``Fitter._retrack``).
 """
 
 from __future__ import annotations
