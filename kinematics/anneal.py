@@ -1522,16 +1522,19 @@ class Fitter:
     def _retrack(self, obs: Observations, p: AnnealParams, results: list[FrameResult],
                  seed: FrameResult) -> None:
         """``results`` (consecutive frames, in the order to track them) tracked again from
-        ``seed``, the result of the frame before the first, while a step merges into a
-        lower E (in place)."""
+        ``seed``, the result of the frame before the first, while the step, or its merge
+        with the result there, has an E below :data:`TRACK_PREFER` times the result's (in
+        place)."""
         for k, result in enumerate(results):
             step = self._step(obs, int(result.frame), seed if k == 0 else results[k - 1], p)
-            merged = None if step is None else self._merged(obs, int(result.frame), result,
-                                                            step, p)
-            if merged is None or not merged.error < result.error:
+            if step is None:
                 return
-            results[k] = replace(merged, status="reanalysed" if merged.status == "ok"
-                                 else merged.status, runs=result.runs + 1)
+            merged = self._merged(obs, int(result.frame), result, step, p)
+            best = step if merged is None else min((merged, step), key=lambda r: r.error)
+            if not best.error < TRACK_PREFER * result.error:
+                return
+            results[k] = replace(best, status="reanalysed" if best.status == "ok"
+                                 else best.status, runs=result.runs + 1)
 
     def _marker_moves(self, chosen: Candidate, cands: Sequence[Candidate]) -> np.ndarray:
         """Per candidate, the largest distance of a model marker from where the chosen
