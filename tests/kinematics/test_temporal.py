@@ -585,15 +585,22 @@ def test_track_mends_a_segment_start_from_the_segment_before():
         r = full(self, obs, idx, roots, rots, i, q)
         return _bent(self, obs, r, q, "b_knee.flex", 35.0) if i == 12 else r
     fitter = Fitter(body, cams, p)
+    threads = numba.get_num_threads()
     with pytest.MonkeyPatch.context() as m:
         m.setattr(Fitter, "_fit_full", lost_at_12)
         res = fitter.fit(frames)
+        numba.set_num_threads(1)  # segments one after the other: mended the same
+        try:
+            alone = fitter.fit(frames)
+        finally:
+            numba.set_num_threads(threads)
         m.setattr(Fitter, "_mend", lambda *a: None)
         unmended = fitter.fit(frames)
     knee = body.axis_labels.index("b_knee.flex")
     assert abs(unmended[12].angles_deg[knee] - angles[12, knee]) > 30  # what it mends
     np.testing.assert_allclose(res[12].angles_deg, angles[12], atol=1.5)
     assert res[12].status == "reanalysed"
+    assert [r.angles_deg.tolist() for r in alone] == [r.angles_deg.tolist() for r in res]
 
 
 def test_track_cut_by_a_full_fit_mends_the_frames_that_led_to_it(monkeypatch):
