@@ -1336,6 +1336,12 @@ class Fitter:
 
     def _track(self, obs: Observations, idx: np.ndarray, roots, rots, p: AnnealParams,
                cancel: Callable[[], bool] | None) -> Iterator[FrameResult]:
+        """``start="track"``: :meth:`_track_frames`, E spikes flagged (:func:`flag_e_spikes`)."""
+        yield from flag_e_spikes(self._track_frames(obs, idx, roots, rots, p, cancel))
+
+    def _track_frames(self, obs: Observations, idx: np.ndarray, roots, rots,
+                      p: AnnealParams, cancel: Callable[[], bool] | None
+                      ) -> Iterator[FrameResult]:
         """``start="track"``: frames in segments of at most ``segment_length`` consecutive
         frame numbers, one segment per thread at once; results in the order of ``idx``.
         With ``threshold_mode="auto"`` the threshold is measured on the first segments'
@@ -1621,6 +1627,42 @@ class Fitter:
         return out, unexplained
 
 
+def flag_e_spikes(results: Iterable[FrameResult], ratio: float | None = None,
+                  half: int | None = None) -> Iterator[FrameResult]:
+    """``results`` (frames in order), each ``ok`` or ``reanalysed`` one whose E is above
+    ``ratio`` (:data:`TRACK_SPIKE`) times the median E of the ``half``
+    (:data:`TRACK_SPIKE_HALF`) frames on either side and itself, plus
+    :data:`TRACK_JUMP_PX` per marker image, made ``ambiguous``; a result is yielded once
+    ``half`` later ones are known. A tracked frame has no candidates to compare; a wrong
+    one stands out from its neighbours by E (fly 0:660: 16 flagged of 660, 11 of them off
+    by > 0.2 mm; 9 of the 10 frames off by > 0.3 mm)."""
+    ratio = TRACK_SPIKE if ratio is None else ratio
+    half = TRACK_SPIKE_HALF if half is None else half
+    window: list[FrameResult] = []  # up to ``half`` yielded results, then those waiting
+    done = 0  # how many of ``window`` are yielded
+
+    def flagged(k: int) -> FrameResult:
+        r = window[k]
+        around = [w.error for w in window[max(0, k - half): k + half + 1]
+                  if np.isfinite(w.error)]
+        images = 0 if r.marker_residuals is None else r.marker_residuals.size
+        if (r.status in ("ok", "reanalysed") and np.isfinite(r.error) and len(around) > half
+                and r.error > ratio * float(np.median(around)) + TRACK_JUMP_PX * images):
+            return replace(r, status="ambiguous")
+        return r
+
+    for r in results:
+        window.append(r)
+        while len(window) - done > half:
+            yield flagged(done)
+            done += 1
+            if done > half:
+                window.pop(0)
+                done -= 1
+    for k in range(done, len(window)):
+        yield flagged(k)
+
+
 def concurrent_fits() -> bool:
     """Whether kernels may run from several Python threads at once: numba's OpenMP and TBB
     threading layers take parallel kernels from several threads, its workqueue layer aborts
@@ -1661,6 +1703,12 @@ TRACK_JUMP_PX = 0.05
 #: neighbour's points (0:660 with the mending below: 87.3 % within 0.2 mm at 1.0, 91.1 % at
 #: 0.9, 90.3 % at 0.8).
 TRACK_PREFER = 0.9
+#: A tracked frame whose E is above this times the median E of the TRACK_SPIKE_HALF frames
+#: on either side (and itself), plus TRACK_JUMP_PX per marker image, is ``ambiguous`` (fly
+#: 0:660, 32 frames off by > 0.2 mm: 1.2 flagged 35 frames, 13 of them off; 1.3 16 with 11;
+#: with no TRACK_JUMP_PX 1.3 flagged 38 with 13, and noise on a clean video).
+TRACK_SPIKE = 1.3
+TRACK_SPIKE_HALF = 8
 #: A limb (partition) is taken from another fit where its own markers lie this much closer
 #: (px per marker image, :meth:`Fitter._part_scores`) to their detections (fly 0:660: 0.25
 #: and 0.5 gave 90.6 %, 1.0 89.4 %).

@@ -629,3 +629,24 @@ def test_track_cut_by_a_full_fit_mends_the_frames_that_led_to_it(monkeypatch):
     assert all(abs(unmended[k].angles_deg[knee] - angles[k, knee]) > 5 for k in range(5, 9))
     assert [r.status for r in res[5:10]] == ["reanalysed"] * 5
     np.testing.assert_allclose([r.angles_deg for r in res], angles, atol=2.0)
+
+
+def test_a_tracked_frame_whose_e_spikes_above_its_neighbours_is_ambiguous():
+    """A tracked frame has no candidates to compare: one whose E stands out from the frames
+    around it is flagged; noise on a clean video is not."""
+    from dataclasses import replace
+
+    from kinematics.anneal import TRACK_JUMP_PX, TRACK_SPIKE, flag_e_spikes
+
+    body, cams = plane_arm()
+    truth = np.linspace(-40.0, 40.0, 30)
+    res = Fitter(body, cams, AnnealParams(start="track", segment_length=32, **FAST)).fit(
+        frames_of(body, cams, truth))
+    assert not [r.frame for r in res if r.status == "ambiguous"]
+    bar = (TRACK_SPIKE * np.median([r.error for r in res])
+           + TRACK_JUMP_PX * res[0].marker_residuals.size)
+    spiked = [replace(r, error=2 * bar) if k in (0, 12, 29) else
+              replace(r, error=0.9 * bar) if k == 20 else r for k, r in enumerate(res)]
+    out = list(flag_e_spikes(spiked))
+    assert [r.frame for r in out] == [r.frame for r in res]
+    assert [k for k, r in enumerate(out) if r.status == "ambiguous"] == [0, 12, 29]
