@@ -1357,10 +1357,11 @@ class Fitter:
             p = replace(p, reanalysis_threshold=1e9)  # (the largest allowed): none yet
         pools: list[ThreadPoolExecutor] = []
         held: list[FrameResult] = []  # the last segment, until its next one mended it
+        limbs = self._limbs(p)  # mending merges limbs: a body of several partitions
         try:
             for a in range(0, len(segments), numba.get_num_threads()):
                 if cancel is not None and cancel():
-                    return
+                    break  # what is fitted is still yielded
                 group = segments[a:a + numba.get_num_threads()]
                 blocks = self._each(self._track_segment,
                                     [(obs, idx, roots, rots, lo, hi, p) for lo, hi in group],
@@ -1374,7 +1375,7 @@ class Fitter:
                               for (lo, _), block in zip(group, blocks, strict=True)]
                     measure = False
                 for (lo, _), block in zip(group, blocks, strict=True):
-                    if held and lo > 0 and idx[lo] == idx[lo - 1] + 1:
+                    if limbs and held and idx[lo] == idx[lo - 1] + 1:
                         self._mend(obs, p, held, block)
                     if held:
                         yield from held
@@ -1388,7 +1389,8 @@ class Fitter:
     def _decided(self, obs: Observations, r: FrameResult, idx, roots, rots, i: int,
                  p: AnnealParams) -> FrameResult:
         """A result of the frames the threshold was measured on, decided by it: above it,
-        the frame is fitted in full too and the lower E kept (as :meth:`_track_segment`)."""
+        the frame is fitted in full too (:meth:`_fit_again`; no re-track back from it, as
+        :meth:`_track_segment` makes, since the frames before are already decided)."""
         if r.error <= p.reanalysis_threshold:
             return replace(r, threshold=float(p.reanalysis_threshold))
         again = self._fit_again(obs, idx, roots, rots, i, p, r)
@@ -1406,22 +1408,27 @@ class Fitter:
     def _fit_again(self, obs: Observations, idx, roots, rots, i: int, p: AnnealParams,
                    tracked: FrameResult | None) -> FrameResult:
         """A tracked frame fitted in full as well: of the full fit and — with several
-        partitions — its merge with ``tracked`` (:meth:`_merged`), the lower E, unless
-        ``tracked`` stays (its E not :data:`TRACK_PREFER` times higher, or within the
-        threshold where the other is not); a new result is ``reanalysed`` where it is
-        within the threshold."""
+        partitions — its merge with ``tracked`` (:meth:`_merged`), the one with the lower E
+        replaces ``tracked`` where its E is below :data:`TRACK_PREFER` times the tracked E,
+        or within the threshold where the tracked E is not (:meth:`_taken`)."""
         again = self._fit_full(obs, idx, roots, rots, i, p)
-        found = [again]
-        if tracked is not None:
-            merged = self._merged(obs, int(idx[i]), tracked, again, p)
-            if merged is not None:
-                found.append(merged)
-        best = min(found, key=lambda r: r.error if np.isfinite(r.error) else np.inf)
-        if tracked is not None and not (
-                best.error < TRACK_PREFER * tracked.error
+        if tracked is None:
+            return replace(again, status="reanalysed" if again.status == "ok"
+                           else again.status)
+        merged = self._merged(obs, int(idx[i]), tracked, again, p)
+        best = min((again, merged) if merged is not None else (again,),
+                   key=lambda r: r.error if np.isfinite(r.error) else np.inf)
+        if not (best.error < TRACK_PREFER * tracked.error
                 or best.error <= p.reanalysis_threshold < tracked.error):
             return tracked
-        return replace(best, status="reanalysed" if best.status == "ok" else best.status)
+        return self._taken(tracked, best)
+
+    @staticmethod
+    def _taken(old: FrameResult, new: FrameResult) -> FrameResult:
+        """``new`` in place of ``old``: ``reanalysed`` where it is ``ok``, its runs and
+        iterations added to ``old``'s (a result counts every run made for its frame)."""
+        return replace(new, status="reanalysed" if new.status == "ok" else new.status,
+                       runs=old.runs + new.runs, iterations=old.iterations + new.iterations)
 
     def _part_scores(self, r: FrameResult, p: AnnealParams) -> np.ndarray | None:
         """Per partition, the mean over its own markers' images of the distance to the
@@ -1442,7 +1449,8 @@ class Fitter:
         place; ``other`` where every partition is; None where none is. A track that lost
         one leg and a full fit that put another leg on a neighbour's points (fly frames 367,
         480: the lower E of the two was still off) merge into a posture with every leg
-        right. Only limbs are swapped: a trunk or a free root stays, the limbs hang off it."""
+        right. Only limbs are swapped: a trunk or a free root stays, the limbs hang off it.
+        The merge's runs and iterations are ``other``'s (the work beyond ``base``)."""
         a, b = self._part_scores(base, p), self._part_scores(other, p)
         if a is None or b is None or not (np.all(np.isfinite(base.angles_deg))
                                           and np.all(np.isfinite(other.angles_deg))):
@@ -1454,9 +1462,11 @@ class Fitter:
         free = set(self.problem.root_axes.ravel().tolist())
         angles = np.array(base.angles_deg, float)
         swapped = 0
+        tops = parts.bounds[:, 0]
         for k in better:
             dofs = parts.dofs[parts.dof_off[k]: parts.dof_off[k + 1]]
-            if (parts.bounds[k, 3] > parts.bounds[k, 4] or np.any(dofs >= self.problem.n_axes)
+            j0, j1 = parts.bounds[k, :2]
+            if (np.any((tops > j0) & (tops < j1)) or np.any(dofs >= self.problem.n_axes)
                     or free.intersection(dofs.tolist())):
                 continue  # a trunk (limbs below it) or a free root: the limbs hang off it
             angles[dofs] = other.angles_deg[dofs]
@@ -1468,8 +1478,7 @@ class Fitter:
         if c is None:
             return None
         return self._frame_result(obs, position, position, c.state, c.seed_pos, c.seed_rot,
-                                  p, runs=other.runs + base.runs,
-                                  iterations=other.iterations + base.iterations, pairs=0,
+                                  p, runs=other.runs, iterations=other.iterations, pairs=0,
                                   candidates=(c,))
 
     def _track_segment(self, obs: Observations, idx, roots, rots, lo: int, hi: int,
@@ -1478,10 +1487,12 @@ class Fitter:
         cold from the previous result; one above the threshold or whose E jumps (above
         :data:`TRACK_JUMP` times the median of the last :data:`TRACK_MEMORY` kept, plus
         :data:`TRACK_JUMP_PX` per marker image) is fitted in full too (:meth:`_fit_again`).
-        Where that replaces the track, the frames before are tracked back from it
-        (:meth:`_retrack`): a track that crept off a leg until E jumped gets it back."""
+        Where that replaces the track of a body of several partitions, the frames before
+        are tracked back from it (:meth:`_retrack`): a track that crept off a leg until E
+        jumped gets it back."""
         out = [self._fit_full(obs, idx, roots, rots, lo, p)]
         kept_e = [out[0].error] if np.isfinite(out[0].error) else []
+        limbs = self._limbs(p)
         for i in range(lo + 1, hi):
             r = self._step(obs, int(idx[i]), out[-1], p)
             images = int(marker_images(obs, idx[i:i + 1], len(self.body.marker_names))[0])
@@ -1489,10 +1500,9 @@ class Fitter:
                     + TRACK_JUMP_PX * max(images, 1)) if kept_e else np.inf
             if r is None or not r.error <= p.reanalysis_threshold or r.error > jump:
                 tracked, r = r, self._fit_again(obs, idx, roots, rots, i, p, r)
-                if r is not tracked:  # a cut in the track: mend the frames that led to it
-                    back = out[::-1]
-                    self._retrack(obs, p, back, r)
-                    out[:] = back[::-1]
+                if r is not tracked and limbs:  # a cut: mend the frames that led to it
+                    self._retrack_back(obs, p, out, r)
+                    kept_e = [q.error for q in out if np.isfinite(q.error)]
             out.append(r)
             if np.isfinite(r.error):
                 kept_e.append(r.error)
@@ -1514,16 +1524,21 @@ class Fitter:
     def _mend(self, obs: Observations, p: AnnealParams, before: list[FrameResult],
               after: list[FrameResult]) -> None:
         """Two segments tracked apart, ``after`` starting on the frame after ``before``'s
-        last: each side's last (first) result is tracked one frame across, and where the
-        step explains some limb better than the result there (:meth:`_merged`), that side
-        is tracked again from the merge, frame by frame, until no limb changes (in place).
-        A segment's first frame is fitted alone and can put a leg on a neighbour's points
-        (fly frame 480), and a track that lost a leg keeps it lost to its segment's end
+        last, re-tracked across their boundary (:meth:`_retrack`, in place): ``after`` from
+        ``before``'s last result, then ``before`` backwards from ``after``'s first. A
+        segment's first frame is fitted alone and can put a leg on a neighbour's points (fly
+        frame 480), and a track that lost a leg keeps it lost to its segment's end
         (367-383): the neighbouring segment's track finds both."""
         self._retrack(obs, p, after, before[-1])
-        back = before[::-1]
-        self._retrack(obs, p, back, after[0])
-        before[:] = back[::-1]
+        self._retrack_back(obs, p, before, after[0])
+
+    def _retrack_back(self, obs: Observations, p: AnnealParams, results: list[FrameResult],
+                      seed: FrameResult) -> None:
+        """:meth:`_retrack` backwards: ``results`` from their last, ``seed`` the result of
+        the frame after it."""
+        back = results[::-1]
+        self._retrack(obs, p, back, seed)
+        results[:] = back[::-1]
 
     def _retrack(self, obs: Observations, p: AnnealParams, results: list[FrameResult],
                  seed: FrameResult) -> None:
@@ -1539,8 +1554,7 @@ class Fitter:
             best = step if merged is None else min((merged, step), key=lambda r: r.error)
             if not best.error < TRACK_PREFER * result.error:
                 return
-            results[k] = replace(best, status="reanalysed" if best.status == "ok"
-                                 else best.status, runs=result.runs + 1)
+            results[k] = self._taken(result, best)
 
     def _marker_moves(self, chosen: Candidate, cands: Sequence[Candidate]) -> np.ndarray:
         """Per candidate, the largest distance of a model marker from where the chosen
@@ -1565,6 +1579,7 @@ class Fitter:
         would draw even a cold anneal into (a ghost in an occluded marker's place) stays
         where the movement has it. ``share``: the part of the schedule the cold anneal
         runs; ``counted``, if given, gets the iterations it ran appended."""
+        state, pos, rot = self.problem.state(neighbour.angles_deg, neighbour.root_positions)
         if polish:
             local = replace(p, candidates=1, max_runs=1, tau0=p.tau0 * 1e-6, l0=p.l0 * 1e-6,
                             n_end=1, n_l=1, n_tau=1, start="mean")
@@ -1572,31 +1587,21 @@ class Fitter:
             local = replace(p, candidates=1, max_runs=1, tau0=p.tau0 * 0.01, l0=p.l0 * 0.1,
                             n_end=max(1, int(p.n_end * share)), n_l=max(1, int(p.n_l * share)),
                             n_tau=max(1, int(p.n_tau * share)), start="mean")
-        # no start search: the neighbour's posture is the start; keyed by frame +
-        # 1_000_003: a random stream apart from the frames' own runs
-        return self._anneal_from(obs, position, neighbour, local,
-                                 self._partitions(p, search=False), 1_000_003, counted)
-
-    def _anneal_from(self, obs: Observations, position: int, start: Candidate,
-                     p: AnnealParams, parts, stream: int, counted: list | None = None
-                     ) -> Candidate | None:
-        """One run of ``parts`` on frame ``position`` from ``start``'s posture (the entries
-        of other partitions stay there), on the random stream of frame + ``stream``; its
-        result, or None. ``counted``, if given, gets the iterations it ran appended."""
-        state, pos, rot = self.problem.state(start.angles_deg, start.root_positions)
         cams, arrays = self._kernel_inputs(obs.arrays(np.array([position], np.int64)))
-        out = FitOutputs.empty(1, self.problem.n_state, len(cams.kind), max(1, p.max_runs))
-        _ak.fit_frames(np.array([0, 1], np.int64), np.array([position + stream], np.int64),
+        out = FitOutputs.empty(1, self.problem.n_state, len(cams.kind), 1)
+        # no start search: the neighbour's posture is the start
+        parts = self._partitions(p, search=False)
+        # keyed by frame + 1_000_003: a random stream apart from the frames' own runs
+        _ak.fit_frames(np.array([0, 1], np.int64), np.array([position + 1_000_003], np.int64),
                        np.ascontiguousarray(pos[None]), np.ascontiguousarray(rot[None]),
                        state, self.problem.folded, cams, self.problem.dofs,
-                       schedule_of(p), self._error_args(p, arrays.objective), arrays,
+                       schedule_of(local), self._error_args(p, arrays.objective), arrays,
                        parts, out)
         if counted is not None:
             counted.append(int(out.iterations[0]))
         if not out.runs[0]:
             return None
-        return self._candidates(out.angles[:1], out.error[:1], pos, rot,
-                                replace(p, candidates=1))[0]
+        return self._candidates(out.run_angles[0], out.run_error[0], pos, rot, local)[0]
 
     def _residuals(self, obs: Observations, state, root_pos, root_rot, arrays,
                    gate: float) -> tuple[np.ndarray, int]:
@@ -1631,11 +1636,12 @@ def flag_e_spikes(results: Iterable[FrameResult], ratio: float | None = None,
                   half: int | None = None) -> Iterator[FrameResult]:
     """``results`` (frames in order), each ``ok`` or ``reanalysed`` one whose E is above
     ``ratio`` (:data:`TRACK_SPIKE`) times the median E of the ``half``
-    (:data:`TRACK_SPIKE_HALF`) frames on either side and itself, plus
-    :data:`TRACK_JUMP_PX` per marker image, made ``ambiguous``; a result is yielded once
-    ``half`` later ones are known. A tracked frame has no candidates to compare; a wrong
-    one stands out from its neighbours by E (fly 0:660: 16 flagged of 660, 11 of them off
-    by > 0.2 mm; 9 of the 10 frames off by > 0.3 mm)."""
+    (:data:`TRACK_SPIKE_HALF`) consecutive frames on either side and itself, plus
+    :data:`TRACK_JUMP_PX` per marker image with a residual, made ``ambiguous``; a result is
+    yielded once ``half`` later ones are known. A frame with fewer than ``half`` + 1 such
+    frames around it (a run of frames that short) is not flagged. A tracked frame has no
+    candidates to compare; a wrong one stands out from its neighbours by E (fly 0:660: 16
+    flagged of 660, 11 of them off by > 0.2 mm; 9 of the 10 frames off by > 0.3 mm)."""
     ratio = TRACK_SPIKE if ratio is None else ratio
     half = TRACK_SPIKE_HALF if half is None else half
     window: list[FrameResult] = []  # up to ``half`` yielded results, then those waiting
@@ -1643,9 +1649,11 @@ def flag_e_spikes(results: Iterable[FrameResult], ratio: float | None = None,
 
     def flagged(k: int) -> FrameResult:
         r = window[k]
-        around = [w.error for w in window[max(0, k - half): k + half + 1]
-                  if np.isfinite(w.error)]
-        images = 0 if r.marker_residuals is None else r.marker_residuals.size
+        lo = max(0, k - half)  # the same run of consecutive frames only
+        around = [w.error for j, w in enumerate(window[lo: k + half + 1], lo)
+                  if np.isfinite(w.error) and w.frame - r.frame == j - k]
+        images = (0 if r.marker_residuals is None
+                  else int(np.isfinite(r.marker_residuals).sum()))
         if (r.status in ("ok", "reanalysed") and np.isfinite(r.error) and len(around) > half
                 and r.error > ratio * float(np.median(around)) + TRACK_JUMP_PX * images):
             return replace(r, status="ambiguous")
