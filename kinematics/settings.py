@@ -162,7 +162,9 @@ class AnnealParams:
     start: str = setting("mean", "Start posture of a frame's first run: the histogram means "
                          "(frames independent), the previous frame's result, or 'track': "
                          "a short cold anneal from the previous frame's result, a full fit "
-                         "where E is high or jumps (video filmed fast; see docs/fitting.md).",
+                         "where E is high or jumps, limbs merged and segments mended across "
+                         "their edges, a frame whose E spikes ambiguous (video filmed fast; "
+                         "see docs/fitting.md).",
                          choices=START_MODES)
     segment_length: int = setting(32, "Frames per independent segment with start = "
                                   "'previous' or 'track' (each segment starts from the "
