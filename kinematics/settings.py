@@ -163,7 +163,7 @@ class AnnealParams:
                          "(frames independent), the previous frame's result, or 'track': "
                          "a short cold anneal from the previous frame's result, a full fit "
                          "where E is high or jumps, limbs merged and segments mended across "
-                         "their edges, a frame whose E spikes ambiguous (video filmed fast; "
+                         "their edges; a frame whose E spikes is ambiguous (video filmed fast; "
                          "see docs/fitting.md).",
                          choices=START_MODES)
     segment_length: int = setting(32, "Frames per independent segment with start = "
