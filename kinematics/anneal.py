@@ -428,7 +428,7 @@ class Fitter:
 
     def _limbs(self, p: AnnealParams) -> bool:
         """Whether the body is annealed in several partitions (many limbs)."""
-        return partitions_of(self.problem, p.partitions).bounds.shape[0] > 1
+        return self._partitions(p, search=False).bounds.shape[0] > 1
 
     def _partitions(self, p: AnnealParams, search: bool = True):
         """The fit's partitions; the start search as ``start_samples`` says (None: 64 for
@@ -1346,7 +1346,9 @@ class Fitter:
         frame numbers, one segment per thread at once; results in the order of ``idx``.
         With ``threshold_mode="auto"`` the threshold is measured on the first segments'
         tracked E (a tracked frame costs a tenth of the sample of full fits that measure it
-        otherwise), and their frames above it are then fitted in full."""
+        otherwise), and their frames above it are then fitted in full. With several
+        partitions each segment is mended with the one before (:meth:`_mend`) before it is
+        yielded, so the last one done is held back until its next one is."""
         cut = np.flatnonzero(np.diff(idx) != 1) + 1  # a gap in the frames starts a segment
         bounds = sorted({0, len(idx), *cut.tolist(),
                          *range(0, len(idx), max(1, p.segment_length))})
@@ -1413,8 +1415,7 @@ class Fitter:
         or within the threshold where the tracked E is not (:meth:`_taken`)."""
         again = self._fit_full(obs, idx, roots, rots, i, p)
         if tracked is None:
-            return replace(again, status="reanalysed" if again.status == "ok"
-                           else again.status)
+            return _reanalysed(again)
         merged = self._merged(obs, int(idx[i]), tracked, again, p)
         best = min((again, merged) if merged is not None else (again,),
                    key=lambda r: r.error if np.isfinite(r.error) else np.inf)
@@ -1427,8 +1428,8 @@ class Fitter:
     def _taken(old: FrameResult, new: FrameResult) -> FrameResult:
         """``new`` in place of ``old``: ``reanalysed`` where it is ``ok``, its runs and
         iterations added to ``old``'s (a result counts every run made for its frame)."""
-        return replace(new, status="reanalysed" if new.status == "ok" else new.status,
-                       runs=old.runs + new.runs, iterations=old.iterations + new.iterations)
+        return replace(_reanalysed(new), runs=old.runs + new.runs,
+                       iterations=old.iterations + new.iterations)
 
     def _part_scores(self, r: FrameResult, p: AnnealParams) -> np.ndarray | None:
         """Per partition, the mean over its own markers' images of the distance to the
@@ -1475,11 +1476,8 @@ class Fitter:
             return None
         seed = Candidate(angles, base.root_positions, np.nan, None, None, None)
         c = self._refit_from(obs, position, seed, p, polish=True)
-        if c is None:
-            return None
-        return self._frame_result(obs, position, position, c.state, c.seed_pos, c.seed_rot,
-                                  p, runs=other.runs, iterations=other.iterations, pairs=0,
-                                  candidates=(c,))
+        return None if c is None else self._result_of(obs, position, c, p, other.runs,
+                                                      other.iterations)
 
     def _track_segment(self, obs: Observations, idx, roots, rots, lo: int, hi: int,
                        p: AnnealParams) -> list[FrameResult]:
@@ -1517,9 +1515,14 @@ class Fitter:
         seed = Candidate(prev.angles_deg, prev.root_positions, prev.error, None, None, None)
         counted: list[int] = []
         c = self._refit_from(obs, position, seed, p, share=TRACK_SHARE, counted=counted)
-        return None if c is None else self._frame_result(
-            obs, position, position, c.state, c.seed_pos, c.seed_rot, p, runs=1,
-            iterations=counted[0], pairs=0, candidates=(c,))
+        return None if c is None else self._result_of(obs, position, c, p, 1, counted[0])
+
+    def _result_of(self, obs: Observations, position: int, c: Candidate, p: AnnealParams,
+                   runs: int, iterations: int) -> FrameResult:
+        """The :class:`FrameResult` of frame ``position`` fitted to candidate ``c``."""
+        return self._frame_result(obs, position, position, c.state, c.seed_pos, c.seed_rot,
+                                  p, runs=runs, iterations=iterations, pairs=0,
+                                  candidates=(c,))
 
     def _mend(self, obs: Observations, p: AnnealParams, before: list[FrameResult],
               after: list[FrameResult]) -> None:
@@ -1630,6 +1633,11 @@ class Fitter:
         if obs.kind == "cloud":
             unexplained = int(_ak.count_unexplained_cloud(mk, arrays.points3d[0], gate))
         return out, unexplained
+
+
+def _reanalysed(r: FrameResult) -> FrameResult:
+    """``r`` made ``reanalysed`` where it is ``ok`` (a result that replaced another)."""
+    return replace(r, status="reanalysed" if r.status == "ok" else r.status)
 
 
 def flag_e_spikes(results: Iterable[FrameResult], ratio: float | None = None,
