@@ -47,7 +47,7 @@ lane's own ``ndet`` (nv, L). The supported problems are those ``Fitter._use_lane
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import cfunc, njit, prange, types
 
 from kinematics._anneal_kernels import (
     NAN_MARKER_COST,
@@ -55,6 +55,7 @@ from kinematics._anneal_kernels import (
     clear_frame,
     evaluate,
     finish_run,
+    hist_at,
     keeps,
     mul33,
     next_uniform,
@@ -75,6 +76,18 @@ LANES = 64
 PAD = 1.0e30
 
 _OPTS = {"cache": True, "nogil": True, "error_model": "numpy"}
+
+#: A kernel generated for one body (:mod:`kinematics._lane_codegen`): every lane's E of its
+#: candidate, ``evaluate(cand, rot, pos, dx, dy, ndet, e)``. Called through a function
+#: pointer, so the lane loops are compiled once for every generated kernel.
+FUSED_SIGNATURE = types.void(types.float64[:, ::1], types.float64[:, :, ::1],
+                             types.float64[:, :, ::1], types.float64[:, :, ::1],
+                             types.float64[:, :, ::1], types.int64[:, ::1], types.float64[::1])
+
+
+@cfunc(FUSED_SIGNATURE, cache=True, nopython=True)
+def no_fused(cand, rot, pos, dx, dy, ndet, e):
+    """The ``fused`` argument where no kernel was generated (never called)."""
 
 
 @njit(**_OPTS)
@@ -324,10 +337,12 @@ def iterate_lanes(n_iter, free_idx, n_hist, step, hist, nbins, th, dof_kind, lo,
                   max_redraws, n_end, n_l, n_tau, c_l, c_tau, eps, active, rs, it, tau,
                   length, to_tau, to_l, e_cur, e_best, cur, cand, best, cs, sn, body, cams, dx,
                   dy, ndet, cmax, bidirectional, weight, cap, penalty_cap, rot, pos, mk, proj,
-                  nearest, e):
+                  nearest, e, fused, use_fused):
     """Anneal every lane (scalar ``anneal_chain``'s iteration, per lane) until an active lane
     has finished (``it >= n_end`` or best E below ``eps``) or ``n_iter`` iterations passed.
-    Inactive lanes compute but change nothing that is read back."""
+    Inactive lanes compute but change nothing that is read back. With ``use_fused`` the
+    candidates' E comes from ``fused``, a kernel generated for the body
+    (:mod:`kinematics._lane_codegen`), instead of the general loops."""
     (parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index, joint_flags,
      marker_joint, marker_local, slide_index) = body
     kind, P, K, dist, R, t = cams
@@ -341,15 +356,10 @@ def iterate_lanes(n_iter, free_idx, n_hist, step, hist, nbins, th, dof_kind, lo,
     near = np.empty((4, nl))
     xs = np.empty(nl)
     ok = np.empty(nl, np.bool_)
-    pending = np.empty(nl, np.bool_)
     accept = np.empty(nl, np.bool_)
     better = np.empty(nl, np.bool_)
-    drawn_state = np.empty(nl, np.uint64)
-    drawn = np.empty(nl)
     bin_of = np.empty(nl, np.int64)
-    good_bin = np.empty(nl, np.bool_)
     xs_bits = xs.view(np.uint64)  # the same memory: taking a draw copies its bits
-    drawn_bits = drawn.view(np.uint64)
     cur_bits = cur.view(np.uint64)
     cand_bits = cand.view(np.uint64)
     best_bits = best.view(np.uint64)
@@ -367,55 +377,54 @@ def iterate_lanes(n_iter, free_idx, n_hist, step, hist, nbins, th, dof_kind, lo,
             s_i = step[i]
             lo_i = lo[i]
             hi_i = hi[i]
+            # every lane's first draw, in three loops: with the histogram's lookup (a
+            # gather) in the loop that draws, LLVM kept the whole draw scalar and branchy
             for ln in range(nl):
-                xs[ln] = cur[i, ln]
-                ok[ln] = False
-                pending[ln] = True
-            tries = 0
-            any_pending = True
-            while any_pending and tries <= max_redraws:
-                any_pending = False
-                # a draw for every lane, then each lane still waiting takes its own. Three
-                # loops, where one did all: with the histogram's lookup (a gather) in the
-                # loop that draws, LLVM kept the whole draw scalar and branchy, 40 % of an
-                # iteration on the paper's protocol
+                st, u = next_uniform(rs[ln])
+                x = cur[i, ln] + (length[ln] * s_i) * (2.0 * u - 1.0)
+                rs[ln] = st
+                xs[ln] = x
+                # hist_at without a branch: the bin index wrapped by a float modulo
+                kf = np.floor(x * (nf * (0.5 / np.pi)) + 0.5 * nf)
+                inside = (kf >= 0.0) & (kf < nf)
+                kf = kf if inside else kf - nf * np.floor(kf / nf)
+                bin_of[ln] = int(kf) if use_hist else 0
+                ok[ln] = (lo_i <= x) & (x <= hi_i)
+            if use_hist:
                 for ln in range(nl):
-                    st, u = next_uniform(rs[ln])
-                    x = cur[i, ln] + (length[ln] * s_i) * (2.0 * u - 1.0)
-                    drawn_state[ln] = st
-                    drawn[ln] = x
-                    # hist_at without a branch: the bin index wrapped by a float modulo
-                    kf = np.floor(x * (nf * (0.5 / np.pi)) + 0.5 * nf)
-                    inside = (kf >= 0.0) & (kf < nf)
-                    kf = kf if inside else kf - nf * np.floor(kf / nf)
-                    bin_of[ln] = int(kf) if use_hist else 0
-                    good_bin[ln] = (lo_i <= x) & (x <= hi_i)
-                if use_hist:
-                    for ln in range(nl):
-                        good_bin[ln] = hist[i, bin_of[ln]] >= th
-                # taking a draw is a bit mask, not a select: LLVM turned the selects of two
-                # loads into a load from a selected address, which it does not vectorise
-                for ln in range(nl):
-                    take = pending[ln]
-                    good = good_bin[ln]
-                    m = np.uint64(0) - np.uint64(take)  # all ones where the lane takes it
-                    rs[ln] = rs[ln] ^ ((rs[ln] ^ drawn_state[ln]) & m)
-                    xs_bits[ln] = xs_bits[ln] ^ ((xs_bits[ln] ^ drawn_bits[ln]) & m)
-                    ok[ln] = (take & good) | (ok[ln] & (not take))
-                    pending[ln] = take & (not good)
-                for ln in range(nl):
-                    any_pending = any_pending | pending[ln]
-                tries += 1
+                    ok[ln] = hist[i, bin_of[ln]] >= th
+            # the lanes whose first draw was refused redraw as the scalar kernel does, one
+            # lane at a time: they are few, and a loop over all lanes per redraw (while any
+            # lane waited) cost every lane as many rounds as its unluckiest neighbour
+            for ln in range(nl):
+                if not ok[ln]:
+                    st = rs[ln]
+                    x = xs[ln]
+                    good = False
+                    tries = 1
+                    while not good and tries <= max_redraws:
+                        st, u = next_uniform(st)
+                        x = cur[i, ln] + (length[ln] * s_i) * (2.0 * u - 1.0)
+                        good = hist_at(hist, nbins, i, x) >= th if use_hist else \
+                            (lo_i <= x) & (x <= hi_i)
+                        tries += 1
+                    rs[ln] = st
+                    xs[ln] = x
+                    ok[ln] = good
             for ln in range(nl):
                 m = np.uint64(0) - np.uint64(ok[ln])
                 cand_bits[i, ln] = cur_bits[i, ln] ^ ((cur_bits[i, ln] ^ xs_bits[ln]) & m)
-            for ln in range(nl):
-                sn[i, ln], cs[i, ln] = sincos(cand[i, ln])
-        project_lanes(cand, cs, sn, parent, chain, pre_rot, pre_trans, post_trans,
-                      elem_axis, elem_index, joint_flags, marker_joint, marker_local,
-                      slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj)
-        error_lanes(proj, dx, dy, ndet, cmax, bidirectional, weight, cap, penalty_cap,
-                    nearest, ev, dmin, arg, matched, near, e)
+            if not use_fused:  # the generated kernel takes its sines and cosines itself
+                for ln in range(nl):
+                    sn[i, ln], cs[i, ln] = sincos(cand[i, ln])
+        if use_fused:
+            fused(cand, rot, pos, dx, dy, ndet, e)
+        else:
+            project_lanes(cand, cs, sn, parent, chain, pre_rot, pre_trans, post_trans,
+                          elem_axis, elem_index, joint_flags, marker_joint, marker_local,
+                          slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj)
+            error_lanes(proj, dx, dy, ndet, cmax, bidirectional, weight, cap, penalty_cap,
+                        nearest, ev, dmin, arg, matched, near, e)
         for ln in range(nl):
             acc = (e[ln] <= e_cur[ln]) | (e[ln] < e_acc[ln])
             accept[ln] = acc
@@ -520,21 +529,24 @@ def _kept_lanes(active, queue_empty):
 # -- the frame procedure (fit_frames' runs, re-analysis and candidates) ----------------------
 @njit(parallel=True, **_OPTS)
 def fit_frames_lanes(group_off, frame_ids, root_pos, root_rot, start, body, cams, dofs,
-                     schedule, error, obs, claim_gate, n_lanes, out):
+                     schedule, error, obs, claim_gate, n_lanes, fused, use_fused, n_fused, out):
     """Fit many frames, their runs packed into lanes: the scalar ``fit_frames`` for
     independent frames (``start_previous`` false, one partition, unlabelled points), with the
     same outputs to the last bit. Frames ``group_off[g]:group_off[g + 1]`` are fitted by one
     thread (``prange`` over groups) with ``n_lanes`` lanes; ``claim_gate`` is the
     partitions' (detections farther from every marker are unexplained); every other argument
-    is ``fit_frames``'."""
+    is ``fit_frames``'. With ``use_fused``, ``fused`` is the body's generated kernel
+    (:func:`iterate_lanes`) and ``n_fused`` the detections per view it scans (at least every
+    frame's)."""
     for g in prange(group_off.shape[0] - 1):
         _fit_group(group_off[g], group_off[g + 1], frame_ids, root_pos, root_rot, start, body,
-                   cams, dofs, schedule, error, obs, claim_gate, n_lanes, out)
+                   cams, dofs, schedule, error, obs, claim_gate, n_lanes, fused, use_fused,
+                   n_fused, out)
 
 
 @njit(**_OPTS)
 def _fit_group(f0, f1, frame_ids, root_pos, root_rot, start, body, cams, dofs, schedule,
-               error, obs, claim_gate, nl, out):
+               error, obs, claim_gate, nl, fused, use_fused, n_fused, out):
     (parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index, joint_flags,
      marker_joint, marker_local, slide_index) = body
     kind, P, K, dist, R, t = cams
@@ -552,7 +564,7 @@ def _fit_group(f0, f1, frame_ids, root_pos, root_rot, start, body, cams, dofs, s
     n_hist = 0
     while n_hist < free_idx.shape[0] and dof_kind[free_idx[n_hist]] == 0:
         n_hist += 1
-    c_cap = 1
+    c_cap = max(1, n_fused)
     for f in range(f0, f1):
         for v in range(nv):
             c_cap = max(c_cap, det_off[f * nv + v + 1] - det_off[f * nv + v])
@@ -741,4 +753,4 @@ def _fit_group(f0, f1, frame_ids, root_pos, root_rot, start, body, cams, dofs, s
                       max_redraws, n_end, n_l, n_tau, c_l, c_tau, eps, active, rs, it, tau,
                       length, to_tau, to_l, e_cur, e_best, cur, cand, best, cs, sn, body,
                       cams, dx, dy, ndet, cmax, bidirectional, weight, cap,
-                      penalty_cap, rot, pos, mk, proj, nearest, e)
+                      penalty_cap, rot, pos, mk, proj, nearest, e, fused, use_fused)

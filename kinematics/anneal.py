@@ -47,6 +47,7 @@ from __future__ import annotations
 import copy
 import itertools
 import math
+import os
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
@@ -56,6 +57,7 @@ import numba
 import numpy as np
 
 from kinematics import _anneal_kernels as _ak
+from kinematics import _lane_codegen as _codegen
 from kinematics import _lane_kernels as _lk
 from kinematics import placement, temporal
 from kinematics.cameras import CameraArrays
@@ -871,10 +873,12 @@ class Fitter:
                            hidden=obs.hidden is not None or obs.unseen is not None):
             threads = numba.get_num_threads()
             groups = np.unique(np.linspace(0, n, min(threads, n) + 1).astype(np.int64))
+            error = self._error_args(p, arrays.objective)
+            fused, n_fused = self._fused_kernel(arrays, error)
             _lk.fit_frames_lanes(groups, frame_ids, roots, rots, start, pr.folded, pr.cams,
-                                 pr.dofs, schedule_of(p), self._error_args(p, arrays.objective),
-                                 arrays,
-                                 float(p.claim_gate_px), _lk.LANES, out)
+                                 pr.dofs, schedule_of(p), error, arrays,
+                                 float(p.claim_gate_px), _lk.LANES, fused, n_fused > 0,
+                                 n_fused, out)
         else:
             _ak.fit_frames(seg_off, frame_ids, roots, rots, start, pr.folded, cams,
                            pr.dofs, schedule_of(p), self._error_args(p, arrays.objective),
@@ -905,6 +909,20 @@ class Fitter:
         cams = CameraArrays(*(np.ascontiguousarray(a[:0]) for a in self.problem.cams))
         return cams, arrays._replace(points=np.empty((0, 2)), conf=np.empty(0),
                                      offsets=np.zeros(1, np.int64))
+
+    def _fused_kernel(self, arrays: ObservationArrays, error: ErrorArgs):
+        """The lane kernel generated for this body, its views and the block's detections
+        per view (:mod:`kinematics._lane_codegen`) and the detections it scans; the general
+        loops (``no_fused``, 0) where none is made."""
+        counts = np.diff(arrays.offsets)
+        c_cap = int(counts.max()) if counts.size else 0
+        if os.environ.get("VIDEOTRACK_NO_CODEGEN") or not _codegen.fits(
+                self.problem.folded, self.problem.cams, c_cap):
+            return _lk.no_fused, 0
+        fn = _codegen.fused_kernel(self.problem.folded, self.problem.cams, self.problem.n_state,
+                                   c_cap, (error.bidirectional, error.weight, error.cap,
+                                           error.penalty_cap))
+        return fn, _codegen.padded_detections(c_cap)
 
     def lane_frames(self) -> int:
         """Frames a block needs for backend 'auto' to fit it in lanes (where they are

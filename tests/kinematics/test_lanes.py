@@ -96,32 +96,35 @@ def test_free_root_and_distorted_pinholes_identical():
     assert_same(scalar, lanes)
 
 
-def _kernel_outputs(fitter, dets, n_lanes, groups):
+def _kernel_outputs(fitter, dets, n_lanes, groups, generated=True):
     p = fitter.params
     pr = fitter.problem
     obs = fitter.observations(dets)
     idx = np.arange(len(dets))
     roots, rots = fitter._place(obs, idx)
     out = FitOutputs.empty(len(idx), pr.n_state, fitter.n_views, max(p.max_runs, p.candidates))
+    arrays, error = obs.arrays(idx), error_args(p.error)
+    fused, n_fused = fitter._fused_kernel(arrays, error) if generated else (_lk.no_fused, 0)
     _lk.fit_frames_lanes(np.asarray(groups, np.int64), idx, roots, rots, pr.start, pr.folded,
-                         pr.cams, pr.dofs, schedule_of(p), error_args(p.error),
-                         obs.arrays(idx), float(p.claim_gate_px), n_lanes, out)
+                         pr.cams, pr.dofs, schedule_of(p), error, arrays,
+                         float(p.claim_gate_px), n_lanes, fused, n_fused > 0, n_fused, out)
     return out
 
 
-def test_same_results_for_any_lane_and_thread_count(locust):
+@pytest.mark.parametrize("generated", [True, False])
+def test_same_results_for_any_lane_and_thread_count(locust, generated):
     truth = smooth_random_motion(locust, 12, 1, seed=6)
     dets = planted(locust, locust_cameras(), truth, ghosts=1)
     fitter = Fitter(locust, locust_cameras(), AnnealParams(threshold_mode="absolute",
                                                            reanalysis_threshold=2.0
                                                            ).with_schedule(1000))
-    ref = _kernel_outputs(fitter, dets, 32, [0, 12])
+    ref = _kernel_outputs(fitter, dets, 32, [0, 12], generated)
     before = numba.get_num_threads()
     try:
         for n_lanes, groups, threads in ((8, [0, 5, 12], 2), (3, [0, 1, 2, 12], 1),
                                          (64, [0, 12], 1)):
             numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
-            other = _kernel_outputs(fitter, dets, n_lanes, groups)
+            other = _kernel_outputs(fitter, dets, n_lanes, groups, generated)
             for name in ref._fields:
                 np.testing.assert_array_equal(getattr(ref, name), getattr(other, name),
                                               err_msg=f"{name}, {n_lanes} lanes")

@@ -1,0 +1,320 @@
+"""Lane kernels generated for one body and its views (private; used by
+:mod:`kinematics._lane_kernels` through ``Fitter``'s lane backend).
+
+The general lane kernel walks joints, markers, views and detections in loops over arrays,
+with a loop over the lanes innermost: every stage stores its results for all lanes (A'_j,
+joint centres, marker images) and the next stage loads them back. Generated code instead
+computes one lane's whole E in straight-line code — sines and cosines, forward kinematics,
+projection and Eq. 5 with its variants — inside a single loop over the lanes, so every
+intermediate value stays in a vector register and the only stores are the lanes' E.
+
+The body's and cameras' constants are written into the source as literals, and a product
+with a literal 0 or 1 is left out (folded joints have many: identity rotations, offsets
+along one axis, orthographic views that drop a coordinate). Leaving out ``x · 0`` and
+``x + 0`` changes nothing for finite values but the sign of a zero, so E and the angles
+are the general kernel's to the last bit (tests/kinematics/test_lane_codegen.py).
+
+The number of detections per view is a constant of the generated code too (the lanes'
+detections padded with :data:`kinematics._lane_kernels.PAD`), so the scan over them is
+unrolled; :func:`fused_kernel` generates a kernel per padded count and caches it, in memory
+and as a source file beside numba's cache, where numba caches its machine code.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import os
+import sys
+import threading
+from pathlib import Path
+
+import numpy as np
+from numba.core import config
+
+from kinematics._anneal_kernels import G_IDENTITY, H_ZERO, NAN_MARKER_COST, ROOT_POSE
+from kinematics._camera_kernels import ORTHOGRAPHIC
+
+#: Generated code is only worth its compile time (and stays of a size LLVM handles) up to
+#: this many marker images (markers × views).
+MAX_IMAGES = 256
+
+#: ... and up to this many detections in a view (beyond, the general loops' cost is the
+#: scan over detections, which generated code does not shorten).
+MAX_DETECTIONS = 32
+
+_lock = threading.Lock()
+_loaded: dict[str, object] = {}
+
+
+class _Code:
+    """Straight-line source with literals folded: a value is a float (a literal) or the
+    name of a local variable."""
+
+    def __init__(self):
+        self.lines: list[str] = []
+        self.n = 0
+
+    def let(self, expr: str) -> str:
+        self.n += 1
+        name = f"t{self.n}"
+        self.lines.append(f"{name} = {expr}")
+        return name
+
+    @staticmethod
+    def lit(x: float) -> str:
+        return repr(float(x)) if np.isfinite(x) else ("np.inf" if x > 0 else "-np.inf")
+
+    def term(self, a) -> str:
+        return self.lit(a) if isinstance(a, float) else a
+
+    def mul(self, a, b):
+        if isinstance(a, float) and isinstance(b, float):
+            return float(np.float64(a) * np.float64(b))
+        if a == 0.0 or b == 0.0:
+            return 0.0
+        if a == 1.0:
+            return b
+        if b == 1.0:
+            return a
+        if a == -1.0:
+            return self.neg(b)
+        if b == -1.0:
+            return self.neg(a)
+        return self.let(f"{self.term(a)} * {self.term(b)}")
+
+    def neg(self, a):
+        return -a if isinstance(a, float) else self.let(f"-{a}")
+
+    def add(self, a, b):
+        if isinstance(a, float) and isinstance(b, float):
+            return float(np.float64(a) + np.float64(b))
+        if b == 0.0:
+            return a
+        if a == 0.0:
+            return b
+        return self.let(f"{self.term(a)} + {self.term(b)}")
+
+    def sub(self, a, b):
+        if isinstance(a, float) and isinstance(b, float):
+            return float(np.float64(a) - np.float64(b))
+        if b == 0.0:
+            return a
+        if a == 0.0:
+            return self.neg(b)
+        return self.let(f"{self.term(a)} - {self.term(b)}")
+
+    def div(self, a, b):
+        if isinstance(a, float) and isinstance(b, float):
+            return float(np.float64(a) / np.float64(b))
+        if b == 1.0:
+            return a
+        return self.let(f"{self.term(a)} / {self.term(b)}")
+
+    def dot(self, terms, start=None):
+        """``start + a0·b0 + a1·b1 + ...`` summed left to right, as the scalar kernel."""
+        acc = start
+        for a, b in terms:
+            t = self.mul(a, b)
+            acc = t if acc is None else self.add(acc, t)
+        return acc
+
+
+def _mul33(code: _Code, q, m):
+    return [code.dot([(q[3 * r], m[c]), (q[3 * r + 1], m[3 + c]), (q[3 * r + 2], m[6 + c])])
+            for r in range(3) for c in range(3)]
+
+
+# the two columns a rotation about world axis x, y, z mixes (the scalar kernel's order)
+_MIXED = {0: (1, 2), 1: (2, 0), 2: (0, 1)}
+
+
+def _kinematics(code: _Code, folded, n_axes: int):
+    """Joint frames and markers of one lane: the scalar ``_project_cs``, folded."""
+    (parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index, joint_flags,
+     marker_joint, marker_local, slide_index) = folded
+    nj = parent.shape[0]
+    used = sorted({int(elem_index[j, e]) for j in range(nj) for e in range(3)
+                   if elem_axis[j, e] >= 0})
+    sin, cos = {}, {}
+    for i in used:
+        sin[i], cos[i] = f"s{i}", f"c{i}"
+        code.lines.append(f"s{i}, c{i} = sincos(cand[{i}, ln])")
+    rot, pos = [], []
+    for j in range(nj):
+        p = int(parent[j])
+        m = [float(x) for x in pre_rot[j].ravel()]
+        if p < 0:
+            c = int(chain[j])
+            px, py, pz = (code.let(f"pos[{nj + c}, {k}, ln]") for k in range(3))
+            b = m
+            if joint_flags[j] & ROOT_POSE:
+                q = [code.let(f"rot[{nj + c}, {k}, ln]") for k in range(9)]
+                b = _mul33(code, q, m)
+                k = int(slide_index[j])
+                px, py, pz = (code.add(v, code.let(f"cand[{k + d}, ln]"))
+                              for d, v in enumerate((px, py, pz)))
+        else:
+            q = rot[p]
+            g = [float(x) for x in pre_trans[j]]
+            px, py, pz = (code.dot([(q[3 * r + k], g[k]) for k in range(3)], pos[p][r])
+                          for r in range(3))
+            b = list(q) if joint_flags[j] & G_IDENTITY else _mul33(code, q, m)
+        for e in range(3):
+            a = int(elem_axis[j, e])
+            if a < 0:
+                continue
+            i = int(elem_index[j, e])
+            u, w = _MIXED[a]
+            for r in range(3):
+                bu, bw = b[3 * r + u], b[3 * r + w]
+                b[3 * r + u] = code.add(code.mul(cos[i], bu), code.mul(sin[i], bw))
+                b[3 * r + w] = code.sub(code.mul(cos[i], bw), code.mul(sin[i], bu))
+        if not joint_flags[j] & H_ZERO:
+            h = [float(x) for x in post_trans[j]]
+            # px += (b00·h0 + b01·h1 + b02·h2): the sum first, as the scalar kernel
+            px, py, pz = (code.add(v, code.dot([(b[3 * r + k], h[k]) for k in range(3)]))
+                          for r, v in enumerate((px, py, pz)))
+        rot.append(b)
+        pos.append((px, py, pz))
+    markers = []
+    for mi in range(marker_joint.shape[0]):
+        j = int(marker_joint[mi])
+        a = [float(x) for x in marker_local[mi]]
+        markers.append([code.dot([(rot[j][3 * r + k], a[k]) for k in range(3)], pos[j][r])
+                        for r in range(3)])
+    return markers
+
+
+def _project(code: _Code, cams, v: int, x):
+    """Marker ``x`` in view ``v`` (``project_point``): (u, w), NaN behind a pinhole camera."""
+    kind, P, K, dist, R, t = cams
+    if kind[v] == ORTHOGRAPHIC:
+        return tuple(code.dot([(float(P[v, r, k]), x[k]) for k in range(3)] +
+                              [(float(P[v, r, 3]), 1.0)]) for r in range(2))
+    xc, yc, zc = (code.dot([(float(R[v, r, k]), x[k]) for k in range(3)] +
+                           [(float(t[v, r]), 1.0)]) for r in range(3))
+    xn, yn = code.div(xc, zc), code.div(yc, zc)
+    k1, k2, p1, p2, k3, k4, k5, k6 = (float(d) for d in dist[v])
+    mul, add = code.mul, code.add
+    r2 = add(mul(xn, xn), mul(yn, yn))
+    num = add(1.0, mul(r2, add(k1, mul(r2, add(k2, mul(r2, k3))))))
+    den = add(1.0, mul(r2, add(k4, mul(r2, add(k5, mul(r2, k6))))))
+    radial = code.div(num, den)
+    xd = add(add(mul(xn, radial), mul(mul(mul(2.0, p1), xn), yn)),
+             mul(p2, add(r2, mul(mul(2.0, xn), xn))))
+    yd = add(add(mul(yn, radial), mul(p1, add(r2, mul(mul(2.0, yn), yn)))),
+             mul(mul(mul(2.0, p2), xn), yn))
+    front = code.let(f"{code.term(zc)} > 0.0")
+    u = add(mul(float(K[v, 0, 0]), xd), float(K[v, 0, 2]))
+    w = add(mul(float(K[v, 1, 1]), yd), float(K[v, 1, 2]))
+    return (code.let(f"{code.term(u)} if {front} else np.nan"),
+            code.let(f"{code.term(w)} if {front} else np.nan"))
+
+
+def _error(code: _Code, images, n_det: int, error) -> str:
+    """E of one lane (the scalar ``projection_error`` without one-to-one and hidden marks)
+    from ``images[v][m]``, the marker images, against ``n_det`` detections per view (the
+    lane's own, then padding). The scans over detections are loops of a constant count in
+    the source, which LLVM unrolls: written out, the source of a few thousand lines took
+    numba 8-120 s to compile."""
+    bidirectional, weight, cap, penalty_cap = error
+    lit = code.lit
+    missing = lit(cap if cap < np.inf else NAN_MARKER_COST)
+    out = code.lines
+    total = "0.0"
+    for v, view in enumerate(images):
+        ev = f"ev{v}"
+        out.append(f"{ev} = 0.0")
+        for m, (pu, pw) in enumerate(view):
+            b, a = f"b{v}_{m}", f"a{v}_{m}"
+            out += [f"{b} = np.inf", f"{a} = -1",
+                    f"for c in range({n_det}):",
+                    f"    ex = {code.term(pu)} - dx[{v}, c, ln]",
+                    f"    ey = {code.term(pw)} - dy[{v}, c, ln]",
+                    "    d2 = ex * ex + ey * ey",
+                    f"    closer = d2 < {b}",
+                    f"    {b} = d2 if closer else {b}",
+                    f"    {a} = c if closer else {a}",
+                    f"d = np.sqrt({b}) if {a} >= 0 else {missing}",
+                    f"{ev} = {ev} + min(d, {lit(cap)})"]
+        if bidirectional:
+            out += [f"for c in range({n_det}):", "    near = np.inf"]
+            for pu, pw in view:
+                out += [f"    ex = {code.term(pu)} - dx[{v}, c, ln]",
+                        f"    ey = {code.term(pw)} - dy[{v}, c, ln]",
+                        "    near = min(near, ex * ex + ey * ey)"]
+            matched = " | ".join(f"({f'a{v}_{m}'} == c)" for m in range(len(view)))
+            out += [f"    add = (not ({matched})) & (c < ndet[{v}, ln])",
+                    f"    d = np.sqrt(near) if near < np.inf else {missing}",
+                    f"    {ev} = {ev} + {lit(weight)} * min(d, {lit(penalty_cap)}) "
+                    f"if add else {ev}"]
+        total = code.let(f"{total} + ({ev} if ndet[{v}, ln] > 0 else 0.0)")
+    return total
+
+
+def fused_source(folded, cams, n_axes: int, n_det: int, error) -> str:
+    """Source of a module whose ``evaluate`` (a numba ``cfunc`` of
+    :data:`kinematics._lane_kernels.FUSED_SIGNATURE`) writes every lane's E of the
+    candidates ``cand`` into ``e``, against ``n_det`` detections per view.
+    ``error``: (bidirectional, weight, cap, penalty_cap)."""
+    code = _Code()
+    markers = _kinematics(code, folded, n_axes)
+    images = [[_project(code, cams, v, x) for x in markers] for v in range(len(cams[0]))]
+    total = _error(code, images, n_det, tuple(error))
+    body = "\n".join("        " + line for line in code.lines)
+    return f'''"""Generated by kinematics._lane_codegen for one body, its views and {n_det}
+detections per view: every lane's E in one loop (do not edit)."""
+import numpy as np
+from numba import cfunc
+
+from kinematics._anneal_kernels import sincos
+from kinematics._lane_kernels import FUSED_SIGNATURE
+
+
+@cfunc(FUSED_SIGNATURE, cache=True, nopython=True, error_model="numpy")
+def evaluate(cand, rot, pos, dx, dy, ndet, e):
+    for ln in range(e.shape[0]):
+{body}
+        e[ln] = {total}
+'''
+
+
+def padded_detections(c_cap: int) -> int:
+    """Detections per view a kernel scans for a block with at most ``c_cap``: the count
+    itself up to 8, then rounded up to a multiple of 4, so blocks share kernels."""
+    return max(1, c_cap) if c_cap <= 8 else -(-c_cap // 4) * 4
+
+
+def fits(folded, cams, c_cap: int) -> bool:
+    """Whether a generated kernel is worth making for this body, views and detections."""
+    return folded[8].shape[0] * len(cams[0]) <= MAX_IMAGES and c_cap <= MAX_DETECTIONS
+
+
+def generated_dir() -> Path:
+    return Path(config.CACHE_DIR or Path.home() / ".cache" / "videotrack" / "numba") / "lanes"
+
+
+def fused_kernel(folded, cams, n_axes: int, c_cap: int, error):
+    """The generated ``evaluate`` cfunc for this body, views, detections and error, made
+    (and compiled) on first use; the source is kept in :func:`generated_dir`, named by its
+    hash, so numba's cache of the machine code outlives the process."""
+    src = fused_source(folded, cams, n_axes, padded_detections(c_cap), error)
+    key = hashlib.sha256(src.encode()).hexdigest()[:20]
+    with _lock:
+        if key in _loaded:
+            return _loaded[key]
+        folder = generated_dir()
+        folder.mkdir(parents=True, exist_ok=True)
+        path = folder / f"lanes_{key}.py"
+        if not path.exists() or path.read_text() != src:
+            tmp = path.with_suffix(f".{os.getpid()}.tmp")
+            tmp.write_text(src)
+            os.replace(tmp, path)  # other processes see the whole file or none
+        name = f"_videotrack_lanes_{key}"
+        spec = importlib.util.spec_from_file_location(name, path)
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[name] = module
+        spec.loader.exec_module(module)
+        _loaded[key] = module.evaluate
+        return module.evaluate
