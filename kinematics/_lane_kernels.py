@@ -57,6 +57,7 @@ from kinematics._anneal_kernels import (
     finish_run,
     hist_at,
     keeps,
+    log_unit,
     mul33,
     next_uniform,
     project_posture,
@@ -71,6 +72,8 @@ from kinematics._camera_kernels import ORTHOGRAPHIC
 #: each loop's fixed cost (bench/bench_lanes.py: 32 and 128 were slower); fewer than 16
 #: leave LLVM's vector loop unused.
 LANES = 64
+
+_ALL_OK = np.uint64(0x0101010101010101)  # eight True bools read as one word
 
 #: Coordinate of a padding detection: farther than any real one, finite when squared.
 PAD = 1.0e30
@@ -332,8 +335,39 @@ def error_lanes(proj, dx, dy, ndet, cmax, bidirectional, weight, cap, penalty_ca
 
 
 # -- the annealing iterations of all lanes ---------------------------------------------------
+#: A histogram whose bins above the threshold form at most this many runs is tested by
+#: comparing the bin with the runs' ends (vectorised) instead of looking the bin up (a
+#: gather, which LLVM leaves scalar: 5 ns of the paper protocol's 36 ns per iteration).
+MAX_RUNS = 4
+
+
 @njit(**_OPTS)
-def iterate_lanes(n_iter, free_idx, n_hist, step, hist, nbins, th, dof_kind, lo, hi,
+def allowed_runs(hist, nbins, th):
+    """The runs of bins with ``hist[i, bin] >= th`` per axis: ``runs`` (n_axes, MAX_RUNS, 2)
+    of [first, end) bins (as floats, to compare with a draw's bin), and their count per axis
+    (-1 for more than MAX_RUNS)."""
+    na = hist.shape[0]
+    runs = np.zeros((na, MAX_RUNS, 2))
+    n_runs = np.zeros(na, np.int64)
+    for i in range(na):
+        inside = False
+        for k in range(nbins[i] + 1):
+            good = k < nbins[i] and hist[i, k] >= th
+            if good and not inside:
+                if n_runs[i] == MAX_RUNS:
+                    n_runs[i] = -1
+                    break
+                runs[i, n_runs[i], 0] = k
+            elif inside and not good:
+                runs[i, n_runs[i], 1] = k
+                n_runs[i] += 1
+            inside = good
+    return runs, n_runs
+
+
+
+@njit(**_OPTS)
+def iterate_lanes(n_iter, free_idx, n_hist, step, hist, nbins, th, runs, n_runs, dof_kind, lo, hi,
                   max_redraws, n_end, n_l, n_tau, c_l, c_tau, eps, active, rs, it, tau,
                   length, to_tau, to_l, e_cur, e_best, cur, cand, best, cs, sn, body, cams, dx,
                   dy, ndet, cmax, bidirectional, weight, cap, penalty_cap, rot, pos, mk, proj,
@@ -355,10 +389,11 @@ def iterate_lanes(n_iter, free_idx, n_hist, step, hist, nbins, th, dof_kind, lo,
     matched = np.empty((4, nl), np.bool_)
     near = np.empty((4, nl))
     xs = np.empty(nl)
-    ok = np.empty(nl, np.bool_)
+    ok = np.empty(-(-nl // 8) * 8, np.bool_)
+    ok_words = ok.view(np.uint64)
     accept = np.empty(nl, np.bool_)
     better = np.empty(nl, np.bool_)
-    bin_of = np.empty(nl, np.int64)
+    bin_of = np.empty(nl)
     xs_bits = xs.view(np.uint64)  # the same memory: taking a draw copies its bits
     cur_bits = cur.view(np.uint64)
     cand_bits = cand.view(np.uint64)
@@ -368,7 +403,7 @@ def iterate_lanes(n_iter, free_idx, n_hist, step, hist, nbins, th, dof_kind, lo,
     while n < n_iter and not done:
         for ln in range(nl):
             rs[ln], u = next_uniform(rs[ln])
-            e_acc[ln] = e_cur[ln] + tau[ln] * -np.log(u)
+            e_acc[ln] = e_cur[ln] + tau[ln] * -log_unit(u)
         for q in range(n_free):
             i = free_idx[q]
             use_hist = q < n_hist
@@ -388,15 +423,26 @@ def iterate_lanes(n_iter, free_idx, n_hist, step, hist, nbins, th, dof_kind, lo,
                 kf = np.floor(x * (nf * (0.5 / np.pi)) + 0.5 * nf)
                 inside = (kf >= 0.0) & (kf < nf)
                 kf = kf if inside else kf - nf * np.floor(kf / nf)
-                bin_of[ln] = int(kf) if use_hist else 0
+                bin_of[ln] = kf
                 ok[ln] = (lo_i <= x) & (x <= hi_i)
-            if use_hist:
+            if use_hist and n_runs[i] >= 0:  # (allowed_runs)
                 for ln in range(nl):
-                    ok[ln] = hist[i, bin_of[ln]] >= th
+                    ok[ln] = False
+                for r in range(n_runs[i]):
+                    first, end = runs[i, r, 0], runs[i, r, 1]
+                    for ln in range(nl):
+                        ok[ln] = ok[ln] | ((bin_of[ln] >= first) & (bin_of[ln] < end))
+            elif use_hist:
+                for ln in range(nl):
+                    ok[ln] = hist[i, int(bin_of[ln])] >= th
             # the lanes whose first draw was refused redraw as the scalar kernel does, one
             # lane at a time: they are few, and a loop over all lanes per redraw (while any
             # lane waited) cost every lane as many rounds as its unluckiest neighbour
-            for ln in range(nl):
+            ln = 0
+            while ln < nl:
+                if ln & 7 == 0 and ln + 8 <= nl and ok_words[ln >> 3] == _ALL_OK:
+                    ln += 8  # eight lanes at once, as one word of their bools
+                    continue
                 if not ok[ln]:
                     st = rs[ln]
                     x = xs[ln]
@@ -411,6 +457,7 @@ def iterate_lanes(n_iter, free_idx, n_hist, step, hist, nbins, th, dof_kind, lo,
                     rs[ln] = st
                     xs[ln] = x
                     ok[ln] = good
+                ln += 1
             for ln in range(nl):
                 m = np.uint64(0) - np.uint64(ok[ln])
                 cand_bits[i, ln] = cur_bits[i, ln] ^ ((cur_bits[i, ln] ^ xs_bits[ln]) & m)
@@ -564,6 +611,7 @@ def _fit_group(f0, f1, frame_ids, root_pos, root_rot, start, body, cams, dofs, s
     n_hist = 0
     while n_hist < free_idx.shape[0] and dof_kind[free_idx[n_hist]] == 0:
         n_hist += 1
+    runs, n_runs = allowed_runs(hist, nbins, th)
     c_cap = max(1, n_fused)
     for f in range(f0, f1):
         for v in range(nv):
@@ -749,8 +797,8 @@ def _fit_group(f0, f1, frame_ids, root_pos, root_rot, start, body, cams, dofs, s
             e_cur, e_best = _take1(e_cur, keep), _take1(e_best, keep)
             lane_frame, lane_run = _take1(lane_frame, keep), _take1(lane_run, keep)
             nl = keep.shape[0]
-        iterate_lanes(1 << 30, free_idx, n_hist, step, hist, nbins, th, dof_kind, lo, hi,
-                      max_redraws, n_end, n_l, n_tau, c_l, c_tau, eps, active, rs, it, tau,
+        iterate_lanes(1 << 30, free_idx, n_hist, step, hist, nbins, th, runs, n_runs, dof_kind,
+                      lo, hi, max_redraws, n_end, n_l, n_tau, c_l, c_tau, eps, active, rs, it, tau,
                       length, to_tau, to_l, e_cur, e_best, cur, cand, best, cs, sn, body,
                       cams, dx, dy, ndet, cmax, bidirectional, weight, cap,
                       penalty_cap, rot, pos, mk, proj, nearest, e, fused, use_fused)
