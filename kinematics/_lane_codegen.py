@@ -295,26 +295,30 @@ def generated_dir() -> Path:
     return Path(config.CACHE_DIR or Path.home() / ".cache" / "videotrack" / "numba") / "lanes"
 
 
+def source_path(src: str) -> Path:
+    """Where generated source ``src`` is kept: named by its hash."""
+    return generated_dir() / f"lanes_{hashlib.sha256(src.encode()).hexdigest()[:20]}.py"
+
+
 def fused_kernel(folded, cams, n_axes: int, c_cap: int, error):
     """The generated ``evaluate`` cfunc for this body, views, detections and error, made
     (and compiled) on first use; the source is kept in :func:`generated_dir`, named by its
     hash, so numba's cache of the machine code outlives the process."""
     src = fused_source(folded, cams, n_axes, padded_detections(c_cap), error)
-    key = hashlib.sha256(src.encode()).hexdigest()[:20]
+    path = source_path(src)
+    key = path.stem
     with _lock:
         if key in _loaded:
             return _loaded[key]
-        folder = generated_dir()
-        folder.mkdir(parents=True, exist_ok=True)
-        path = folder / f"lanes_{key}.py"
+        path.parent.mkdir(parents=True, exist_ok=True)
         if not path.exists() or path.read_text() != src:
             tmp = path.with_suffix(f".{os.getpid()}.tmp")
             tmp.write_text(src)
             os.replace(tmp, path)  # other processes see the whole file or none
-        name = f"_videotrack_lanes_{key}"
+        name = f"_videotrack_{key}"
         spec = importlib.util.spec_from_file_location(name, path)
         module = importlib.util.module_from_spec(spec)
-        sys.modules[name] = module
+        sys.modules[name] = module  # numba's cache finds the module by this name
         spec.loader.exec_module(module)
         _loaded[key] = module.evaluate
         return module.evaluate

@@ -1,0 +1,131 @@
+"""The lane kernels generated per body (kinematics/_lane_codegen.py): the same E as the
+scalar kernel to the last bit, literal folding, kernels shared and cached."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from kinematics import _anneal_kernels as _ak
+from kinematics import _lane_codegen as cg
+from kinematics._lane_kernels import PAD
+from kinematics.anneal import AnnealParams, Fitter
+from kinematics.chain_xml import load_body
+from kinematics.rotations import euler_yxz
+from videotrack.paper_setup import bundled_chain, locust_cameras
+
+from .test_free_root import mouse_like, three_pinholes
+
+
+def _problem(kind):
+    if kind == "free root, distorted pinholes":
+        body = mouse_like(translation_window=4.0, rotation_window_deg=30.0)
+        return Fitter(body, three_pinholes(), AnnealParams()).problem
+    with bundled_chain("locust_hindleg.xml") as p:
+        pr = Fitter(load_body(p), locust_cameras(), AnnealParams()).problem
+    if kind == "locust, offsets after the joints":
+        # no shipped chain has them: a constant rotation before joint 1 and offsets after
+        # the joints (the kernels' G_j and h_j), so those paths are compared too
+        f = pr.folded
+        pre_rot, post_trans, flags = f.pre_rot.copy(), f.post_trans.copy(), f.joint_flags.copy()
+        pre_rot[1] = euler_yxz(0.3, -0.2, 0.1)
+        post_trans[1:] = [[2.0, -1.5, 0.7], [0.3, 4.0, -2.0]]
+        flags[1:] &= ~(_ak.G_IDENTITY | _ak.H_ZERO)
+        pr = replace(pr, folded=f._replace(pre_rot=pre_rot, post_trans=post_trans,
+                                           joint_flags=flags))
+    return pr
+
+
+def _lanes(pr, n_lanes, c_cap, rng):
+    """Random postures, roots and detections (0 to c_cap per view, some near the markers)
+    of n_lanes lanes: the generated kernel's inputs and each lane's scalar inputs."""
+    folded, cams = pr.folded, pr.cams
+    nj, nv, nc = folded.parent.shape[0], len(cams.kind), int(folded.chain.max()) + 1
+    n_det = cg.padded_detections(c_cap)
+    free = pr.dofs.free_idx
+    cand = np.repeat(pr.start[:, None], n_lanes, axis=1)
+    cand[free] += rng.normal(0.0, 0.3, (free.size, n_lanes))
+    rot = np.zeros((nj + nc, 9, n_lanes))
+    pos = np.zeros((nj + nc, 3, n_lanes))
+    dx = np.full((nv, n_det, n_lanes), PAD)
+    dy = np.full((nv, n_det, n_lanes), PAD)
+    ndet = np.zeros((nv, n_lanes), np.int64)
+    scalar = []
+    for ln in range(n_lanes):
+        root_pos = rng.normal(0.0, 5.0, (nc, 3))
+        root_rot = np.stack([euler_yxz(*rng.uniform(-0.5, 0.5, 3)) for _ in range(nc)])
+        rot[nj:, :, ln] = root_rot.reshape(nc, 9)
+        pos[nj:, :, ln] = root_pos
+        mk = np.empty((folded.marker_joint.size, 3))
+        proj = np.empty((nv, folded.marker_joint.size, 2))
+        _ak.project_posture(cand[:, ln].copy(), root_pos, root_rot, *folded, *cams,
+                            np.empty(cand.shape[0]), np.empty(cand.shape[0]),
+                            np.empty((nj, 3, 3)), np.empty((nj, 3)), mk, proj)
+        points, off = [], [0]
+        for v in range(nv):
+            k = int(rng.integers(0, c_cap + 1))
+            near = proj[v][rng.integers(0, proj.shape[1], k)] + rng.normal(0.0, 3.0, (k, 2))
+            pts = np.where(rng.random((k, 1)) < 0.7, near, rng.uniform(-200, 800, (k, 2)))
+            pts = pts[np.isfinite(pts).all(axis=1)]
+            ndet[v, ln] = len(pts)
+            dx[v, :len(pts), ln], dy[v, :len(pts), ln] = pts[:, 0], pts[:, 1]
+            points.append(pts)
+            off.append(off[-1] + len(pts))
+        scalar.append((root_pos, root_rot, np.concatenate(points).reshape(-1, 2),
+                       np.asarray(off, np.int64)))
+    return (cand, rot, pos, dx, dy, ndet), scalar
+
+
+@pytest.mark.parametrize("kind", ["locust", "locust, offsets after the joints",
+                                  "free root, distorted pinholes"])
+@pytest.mark.parametrize("error", [(False, 0.0, np.inf, np.inf), (True, 0.5, 10.0, 10.0),
+                                   (True, 1.0, np.inf, 20.0)])
+def test_generated_error_equals_the_scalar_kernel(kind, error):
+    pr = _problem(kind)
+    rng = np.random.default_rng(3)
+    c_cap = 9  # padded to 12: padding and lanes with fewer (or no) detections
+    args, scalar = _lanes(pr, 37, c_cap, rng)
+    e = np.empty(37)
+    cg.fused_kernel(pr.folded, pr.cams, pr.n_state, c_cap, error)(*args, e)
+    bidirectional, weight, cap, penalty_cap = error
+    for ln, (root_pos, root_rot, points, off) in enumerate(scalar):
+        ref = _ak.posture_error(args[0][:, ln].copy(), root_pos, root_rot, *pr.folded,
+                                *pr.cams, _ak.OBJ_NEAREST, points, np.empty(0), off,
+                                _ak.NO_HIDDEN, bidirectional, weight, cap, penalty_cap, False,
+                                np.empty(len(pr.cams.kind)))
+        assert e[ln] == ref, f"lane {ln}"
+
+
+def test_literals_are_folded_exactly():
+    code = cg._Code()
+    assert code.mul("a", 0.0) == 0.0 and code.mul(1.0, "a") == "a" and code.add(0.0, "a") == "a"
+    assert code.sub("a", 0.0) == "a" and code.mul(2.0, 3.0) == 6.0 and code.div("a", 1.0) == "a"
+    t = code.mul(-1.0, "a")
+    assert code.lines[-1] == f"{t} = -a"
+    # the scalar kernel's left-to-right sums, zero terms left out
+    s = code.dot([("p", 0.0), ("q", 2.0), ("r", 1.0)], "s0")
+    assert code.lines[-3:] == ["t2 = q * 2.0", "t3 = s0 + t2", "t4 = t3 + r"] and s == "t4"
+    assert cg._Code.lit(0.1) == "0.1" and cg._Code.lit(np.inf) == "np.inf"
+
+
+def test_detections_are_padded_to_few_counts():
+    assert [cg.padded_detections(c) for c in (0, 1, 5, 8, 9, 12, 13, 30)] == \
+        [1, 1, 5, 8, 12, 12, 16, 32]
+    pr = _problem("locust")
+    assert cg.fits(pr.folded, pr.cams, cg.MAX_DETECTIONS)
+    assert not cg.fits(pr.folded, pr.cams, cg.MAX_DETECTIONS + 1)
+
+
+def test_kernels_are_shared_and_a_damaged_source_is_rewritten(monkeypatch):
+    pr = _problem("locust")
+    error = (True, 0.5, 10.0, 10.0)
+    first = cg.fused_kernel(pr.folded, pr.cams, pr.n_state, 6, error)
+    assert cg.fused_kernel(pr.folded, pr.cams, pr.n_state, 6, error) is first
+    path = cg.source_path(cg.fused_source(pr.folded, pr.cams, pr.n_state, 6, error))
+    path.write_text("torn")  # e.g. a process killed while writing, by an older version
+    monkeypatch.setattr(cg, "_loaded", {})
+    again = cg.fused_kernel(pr.folded, pr.cams, pr.n_state, 6, error)
+    assert "do not edit" in path.read_text() and again is not first
+    assert not list(cg.generated_dir().glob("*.tmp"))
