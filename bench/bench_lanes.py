@@ -11,7 +11,8 @@ points per view):
 
 * the paper's protocol: the locust leg in its two orthographic views, Table 1 schedule run
   to the end (ε = 0), one run per frame, Eq. 5 — ns per chain-iteration of each backend on
-  ``--threads`` numba threads (time × threads / iterations);
+  ``--threads`` numba threads (time × threads / iterations); again with the lanes' general
+  loops instead of the kernel generated for the body (``VIDEOTRACK_NO_CODEGEN``);
 * the defaults (refinement, the bounded error, two candidates, the threshold measured on the
   video), the paper's Table 1 schedule with re-analysis, and the short schedule that keeps
   Table 2's accuracy (refinement, N_end 5000, 1-px threshold) on a longer video: fitted
@@ -28,6 +29,7 @@ table says so again for the frames timed here.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from dataclasses import replace
@@ -134,6 +136,13 @@ def main(argv=None) -> int:
     rows.append((f"paper protocol, locust 2 views: ns per chain-iteration ({args.threads} "
                  "thread)", f"{s:.0f}", f"{lane:.1f}", f"{s / lane:.2f}x",
                  "same" if ok else "DIFFERENT", "lanes <= 25"))
+    os.environ["VIDEOTRACK_NO_CODEGEN"] = "1"  # the lanes' general loops, for comparison
+    try:
+        s, lane, ok = per_iteration(locust, cams, dets, paper, args.repeats, args.threads)
+    finally:
+        del os.environ["VIDEOTRACK_NO_CODEGEN"]
+    rows.append(("the same, lanes without the generated kernel (general loops)", f"{s:.0f}",
+                 f"{lane:.1f}", f"{s / lane:.2f}x", "same" if ok else "DIFFERENT", ""))
     numba.set_num_threads(min(2, numba.config.NUMBA_NUM_THREADS))
     fps = {}
     results = {}
