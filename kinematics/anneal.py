@@ -913,15 +913,21 @@ class Fitter:
     def _fused_kernel(self, arrays: ObservationArrays, error: ErrorArgs):
         """The lane kernel generated for this body, its views and the block's detections
         per view (:mod:`kinematics._lane_codegen`) and the detections it scans; the general
-        loops (``no_fused``, 0) where none is made."""
+        loops (``no_fused``, 0) where none is made: for a body too large, with
+        ``VIDEOTRACK_NO_CODEGEN`` set, or where the source cannot be written (a read-only
+        cache folder: the same results, only slower)."""
         counts = np.diff(arrays.offsets)
         c_cap = int(counts.max()) if counts.size else 0
         if os.environ.get("VIDEOTRACK_NO_CODEGEN") or not _codegen.fits(
                 self.problem.folded, self.problem.cams, c_cap):
             return _lk.no_fused, 0
-        fn = _codegen.fused_kernel(self.problem.folded, self.problem.cams, self.problem.n_state,
-                                   c_cap, (error.bidirectional, error.weight, error.cap,
-                                           error.penalty_cap))
+        try:
+            fn = _codegen.fused_kernel(self.problem.folded, self.problem.cams,
+                                       self.problem.n_state, c_cap,
+                                       (error.bidirectional, error.weight, error.cap,
+                                        error.penalty_cap))
+        except OSError:
+            return _lk.no_fused, 0
         return fn, _codegen.padded_detections(c_cap)
 
     def lane_frames(self) -> int:

@@ -10,12 +10,15 @@ import pytest
 
 from kinematics import _anneal_kernels as _ak
 from kinematics import _lane_codegen as cg
+from kinematics import _lane_kernels as _lk
 from kinematics._lane_kernels import PAD
 from kinematics.anneal import AnnealParams, Fitter
 from kinematics.chain_xml import load_body
 from kinematics.rotations import euler_yxz
+from videotrack.motion import smooth_random_motion
 from videotrack.paper_setup import bundled_chain, locust_cameras
 
+from .test_anneal import planted
 from .test_free_root import mouse_like, three_pinholes
 
 
@@ -111,8 +114,8 @@ def test_literals_are_folded_exactly():
 
 
 def test_detections_are_padded_to_few_counts():
-    assert [cg.padded_detections(c) for c in (0, 1, 5, 8, 9, 12, 13, 30)] == \
-        [1, 1, 5, 8, 12, 12, 16, 32]
+    assert [cg.padded_detections(c) for c in (0, 1, 5, 8, 9, 12, 13, 16)] == \
+        [1, 1, 5, 8, 12, 12, 16, 16]
     pr = _problem("locust")
     assert cg.fits(pr.folded, pr.cams, cg.MAX_DETECTIONS)
     assert not cg.fits(pr.folded, pr.cams, cg.MAX_DETECTIONS + 1)
@@ -129,3 +132,17 @@ def test_kernels_are_shared_and_a_damaged_source_is_rewritten(monkeypatch):
     again = cg.fused_kernel(pr.folded, pr.cams, pr.n_state, 6, error)
     assert "do not edit" in path.read_text() and again is not first
     assert not list(cg.generated_dir().glob("*.tmp"))
+
+
+def test_an_unwritable_cache_falls_back_to_the_general_loops(monkeypatch, tmp_path):
+    with bundled_chain("locust_hindleg.xml") as p:
+        body = load_body(p)
+    blocked = tmp_path / "file"
+    blocked.write_text("")  # a file where the folder should be: mkdir fails
+    monkeypatch.setattr(cg, "generated_dir", lambda: blocked / "lanes")
+    monkeypatch.setattr(cg, "_loaded", {})
+    fitter = Fitter(body, locust_cameras(), AnnealParams(backend="lanes").with_schedule(300))
+    views = planted(body, locust_cameras(), smooth_random_motion(body, 4, 1, seed=1))
+    assert fitter._fused_kernel(fitter.observations(views).arrays(np.arange(4)),
+                                fitter._error_args(fitter.params, 0)) == (_lk.no_fused, 0)
+    assert all(r.status != "failed" for r in fitter.fit(views))
