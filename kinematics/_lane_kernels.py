@@ -365,7 +365,6 @@ def allowed_runs(hist, nbins, th):
     return runs, n_runs
 
 
-
 @njit(**_OPTS)
 def iterate_lanes(n_iter, free_idx, n_hist, step, hist, nbins, th, runs, n_runs, dof_kind, lo, hi,
                   max_redraws, n_end, n_l, n_tau, c_l, c_tau, eps, active, rs, it, tau,
@@ -412,8 +411,8 @@ def iterate_lanes(n_iter, free_idx, n_hist, step, hist, nbins, th, runs, n_runs,
             s_i = step[i]
             lo_i = lo[i]
             hi_i = hi[i]
-            # every lane's first draw, in three loops: with the histogram's lookup (a
-            # gather) in the loop that draws, LLVM kept the whole draw scalar and branchy
+            # every lane's first draw, then its test: with the histogram's lookup (a gather)
+            # in the loop that draws, LLVM kept the whole draw scalar and branchy
             for ln in range(nl):
                 st, u = next_uniform(rs[ln])
                 x = cur[i, ln] + (length[ln] * s_i) * (2.0 * u - 1.0)

@@ -48,6 +48,7 @@ import copy
 import itertools
 import math
 import os
+import warnings
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
@@ -913,20 +914,21 @@ class Fitter:
     def _fused_kernel(self, arrays: ObservationArrays, error: ErrorArgs):
         """The lane kernel generated for this body, its views and the block's detections
         per view (:mod:`kinematics._lane_codegen`) and the detections it scans; the general
-        loops (``no_fused``, 0) where none is made: for a body too large, with
-        ``VIDEOTRACK_NO_CODEGEN`` set, or where the source cannot be written (a read-only
-        cache folder: the same results, only slower)."""
+        loops (``no_fused``, 0) where none is made: for a body too large or a view of the
+        block with too many detections, with ``VIDEOTRACK_NO_CODEGEN`` set, or where the
+        kernel cannot be made (a read-only cache folder: a warning, the same results)."""
         counts = np.diff(arrays.offsets)
         c_cap = int(counts.max()) if counts.size else 0
         if os.environ.get("VIDEOTRACK_NO_CODEGEN") or not _codegen.fits(
                 self.problem.folded, self.problem.cams, c_cap):
             return _lk.no_fused, 0
         try:
-            fn = _codegen.fused_kernel(self.problem.folded, self.problem.cams,
-                                       self.problem.n_state, c_cap,
+            fn = _codegen.fused_kernel(self.problem.folded, self.problem.cams, c_cap,
                                        (error.bidirectional, error.weight, error.cap,
                                         error.penalty_cap))
-        except OSError:
+        except Exception as exc:  # any failure: the general loops give the same results
+            warnings.warn(f"lanes: no kernel generated for this body ({exc}); using the "
+                          "general loops (the same results, slower)", stacklevel=2)
             return _lk.no_fused, 0
         return fn, _codegen.padded_detections(c_cap)
 

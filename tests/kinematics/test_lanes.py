@@ -111,6 +111,16 @@ def _kernel_outputs(fitter, dets, n_lanes, groups, generated=True):
     return out
 
 
+def test_general_loops_equal_the_generated_kernel(locust):
+    truth = smooth_random_motion(locust, 12, 1, seed=6)
+    dets = planted(locust, locust_cameras(), truth, ghosts=1)
+    fitter = Fitter(locust, locust_cameras(), AnnealParams().with_schedule(800))
+    generated = _kernel_outputs(fitter, dets, 16, [0, 12], True)
+    general = _kernel_outputs(fitter, dets, 16, [0, 12], False)
+    for name in generated._fields:
+        np.testing.assert_array_equal(getattr(generated, name), getattr(general, name))
+
+
 @pytest.mark.parametrize("generated", [True, False])
 def test_same_results_for_any_lane_and_thread_count(locust, generated):
     truth = smooth_random_motion(locust, 12, 1, seed=6)
