@@ -35,6 +35,8 @@ last bit — whatever the number of lanes or threads. What a lane cannot do chea
 run, its starting E, refinement, deciding on re-runs) calls the scalar kernels.
 
 A group's last runs, once no run waits, are moved into fewer lanes (:func:`_kept_lanes`).
+Where a kernel was generated for the body (:mod:`kinematics._lane_codegen`), it computes the
+candidates' E instead of :func:`project_lanes` and :func:`error_lanes`, with the same result.
 
 Layout (``L = LANES``): state ``cur``, ``cand``, ``best``, ``cs``, ``sn`` (n_state, L);
 ``rot`` (nj + n_chains, 9, L) row-major A'_j and the roots' seed rotations; ``pos``
@@ -575,24 +577,23 @@ def _kept_lanes(active, queue_empty):
 # -- the frame procedure (fit_frames' runs, re-analysis and candidates) ----------------------
 @njit(parallel=True, **_OPTS)
 def fit_frames_lanes(group_off, frame_ids, root_pos, root_rot, start, body, cams, dofs,
-                     schedule, error, obs, claim_gate, n_lanes, fused, use_fused, n_fused, out):
+                     schedule, error, obs, claim_gate, n_lanes, fused, n_fused, out):
     """Fit many frames, their runs packed into lanes: the scalar ``fit_frames`` for
     independent frames (``start_previous`` false, one partition, unlabelled points), with the
     same outputs to the last bit. Frames ``group_off[g]:group_off[g + 1]`` are fitted by one
     thread (``prange`` over groups) with ``n_lanes`` lanes; ``claim_gate`` is the
     partitions' (detections farther from every marker are unexplained); every other argument
-    is ``fit_frames``'. With ``use_fused``, ``fused`` is the body's generated kernel
-    (:func:`iterate_lanes`) and ``n_fused`` the detections per view it scans (at least every
-    frame's)."""
+    is ``fit_frames``'. ``fused`` is the body's generated kernel (:func:`iterate_lanes`) and
+    ``n_fused`` the detections per view it scans (at least every frame's), or ``no_fused``
+    and 0 for the general loops."""
     for g in prange(group_off.shape[0] - 1):
         _fit_group(group_off[g], group_off[g + 1], frame_ids, root_pos, root_rot, start, body,
-                   cams, dofs, schedule, error, obs, claim_gate, n_lanes, fused, use_fused,
-                   n_fused, out)
+                   cams, dofs, schedule, error, obs, claim_gate, n_lanes, fused, n_fused, out)
 
 
 @njit(**_OPTS)
 def _fit_group(f0, f1, frame_ids, root_pos, root_rot, start, body, cams, dofs, schedule,
-               error, obs, claim_gate, nl, fused, use_fused, n_fused, out):
+               error, obs, claim_gate, nl, fused, n_fused, out):
     (parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index, joint_flags,
      marker_joint, marker_local, slide_index) = body
     kind, P, K, dist, R, t = cams
@@ -800,4 +801,4 @@ def _fit_group(f0, f1, frame_ids, root_pos, root_rot, start, body, cams, dofs, s
                       lo, hi, max_redraws, n_end, n_l, n_tau, c_l, c_tau, eps, active, rs, it, tau,
                       length, to_tau, to_l, e_cur, e_best, cur, cand, best, cs, sn, body,
                       cams, dx, dy, ndet, cmax, bidirectional, weight, cap,
-                      penalty_cap, rot, pos, mk, proj, nearest, e, fused, use_fused)
+                      penalty_cap, rot, pos, mk, proj, nearest, e, fused, n_fused > 0)

@@ -878,8 +878,7 @@ class Fitter:
             fused, n_fused = self._fused_kernel(arrays, error)
             _lk.fit_frames_lanes(groups, frame_ids, roots, rots, start, pr.folded, pr.cams,
                                  pr.dofs, schedule_of(p), error, arrays,
-                                 float(p.claim_gate_px), _lk.LANES, fused, n_fused > 0,
-                                 n_fused, out)
+                                 float(p.claim_gate_px), _lk.LANES, fused, n_fused, out)
         else:
             _ak.fit_frames(seg_off, frame_ids, roots, rots, start, pr.folded, cams,
                            pr.dofs, schedule_of(p), self._error_args(p, arrays.objective),

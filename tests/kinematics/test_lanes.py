@@ -107,7 +107,7 @@ def _kernel_outputs(fitter, dets, n_lanes, groups, generated=True):
     fused, n_fused = fitter._fused_kernel(arrays, error) if generated else (_lk.no_fused, 0)
     _lk.fit_frames_lanes(np.asarray(groups, np.int64), idx, roots, rots, pr.start, pr.folded,
                          pr.cams, pr.dofs, schedule_of(p), error, arrays,
-                         float(p.claim_gate_px), n_lanes, fused, n_fused > 0, n_fused, out)
+                         float(p.claim_gate_px), n_lanes, fused, n_fused, out)
     return out
 
 
