@@ -348,7 +348,7 @@ class Fitter:
         self.unseen = unseen_markers(view_markers, self.view_names, body.marker_names)
         self._locked = body.locked_mask()
         self._mean_deg = self.problem.mean_deg
-        self._ranges_deg = body.ranges_deg()
+        self._range_centres_deg = body.ranges_deg().mean(axis=1)  # (per result: 8 µs each)
         self._roots = body.root_positions()
         self._tracked = [k for k, c in enumerate(body.chains) if c.root.mode == "marker"]
         names = body.marker_names
@@ -500,8 +500,7 @@ class Fitter:
     def _to_range_deg(self, angles_rad: np.ndarray) -> np.ndarray:
         """Degrees, each angle moved by whole turns to lie nearest its range centre."""
         deg = np.rad2deg(angles_rad)
-        centre = self._ranges_deg.mean(axis=1)
-        return deg + 360.0 * np.round((centre - deg) / 360.0)
+        return deg + 360.0 * np.round((self._range_centres_deg - deg) / 360.0)
 
     # -- single evaluations ---------------------------------------------------------------
     def project(self, angles_deg, root_positions=None) -> np.ndarray:
@@ -968,7 +967,7 @@ class Fitter:
         pr, nv = self.problem, self.n_views
         if arrays is None:
             arrays = obs.arrays(np.array([position], np.int64))
-        counts = np.diff(arrays.offsets)
+        counts = arrays.offsets[1:] - arrays.offsets[:-1]  # (np.diff: 4 µs a frame)
         missing = tuple(self.view_names[v] for v in range(len(counts)) if counts[v] == 0)
         angles, fitted_roots = pr.posture(state, root_pos, root_rot)
         residuals = np.full((nv, pr.folded.marker_joint.size), np.nan)
@@ -1005,8 +1004,7 @@ class Fitter:
             marker_residuals=residuals,
             matched=int((residuals <= p.claim_gate_px).sum()),
             unexplained=int(unexplained),
-            worst_px=float(np.nanmax(residuals)) if np.isfinite(residuals).any()
-            else float("nan"),
+            worst_px=float(np.fmax.reduce(residuals, axis=None, initial=np.nan)),  # NaN: none
             candidates=candidates,
             threshold=float(p.reanalysis_threshold),
         )
