@@ -38,13 +38,22 @@ from kinematics._anneal_kernels import G_IDENTITY, H_ZERO, NAN_MARKER_COST, ROOT
 from kinematics._camera_kernels import ORTHOGRAPHIC
 from kinematics._numba_cache import default_cache_dir
 
-#: The kernels a generated module imports (and numba inlines into it): numba's cache keys a
-#: module by its own file only, so their source goes into the hash of every generated file,
-#: and an upgrade that changes them makes new files instead of reusing stale machine code.
-_INLINED = hashlib.sha256(b"".join(
-    (Path(__file__).parent / name).read_bytes()
-    for name in ("_anneal_kernels.py", "_camera_kernels.py", "_lane_kernels.py",
-                 "_lane_codegen.py"))).hexdigest()[:16]
+
+def _kernels_digest() -> str:
+    """A digest of the kernels a generated module imports (and numba inlines into it):
+    numba's cache keys a module by its own file only, so this goes into every generated
+    file, and an upgrade that changes them makes new files instead of reusing stale
+    machine code."""
+    try:
+        return hashlib.sha256(b"".join(
+            (Path(__file__).parent / name).read_bytes()
+            for name in ("_anneal_kernels.py", "_camera_kernels.py", "_lane_kernels.py",
+                         "_lane_codegen.py"))).hexdigest()[:16]
+    except OSError:  # sources not shipped (a frozen app): numba cannot cache them either
+        return "unknown"
+
+
+_INLINED = _kernels_digest()
 
 #: Generated code is only worth its compile time (and stays of a size LLVM handles) up to
 #: this many marker images (markers × views).
