@@ -25,9 +25,7 @@ from __future__ import annotations
 
 import hashlib
 import importlib.util
-import os
 import sys
-import tempfile
 import threading
 from pathlib import Path
 
@@ -37,6 +35,7 @@ from numba.core import config
 from kinematics._anneal_kernels import G_IDENTITY, H_ZERO, NAN_MARKER_COST, ROOT_POSE
 from kinematics._camera_kernels import ORTHOGRAPHIC
 from kinematics._numba_cache import default_cache_dir
+from kinematics.fileio import atomic_write_text
 
 
 def _kernels_digest() -> str:
@@ -337,15 +336,8 @@ def fused_kernel(folded, cams, c_cap: int, error):
         if key in _loaded:
             return _loaded[key]
         path.parent.mkdir(parents=True, exist_ok=True)
-        if not path.exists() or path.read_text() != src:
-            fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
-            try:
-                with os.fdopen(fd, "w") as f:
-                    f.write(src)
-                os.replace(tmp, path)  # other processes see the whole file or none
-            finally:
-                if os.path.exists(tmp):
-                    os.unlink(tmp)
+        if not path.exists() or path.read_text(encoding="utf-8") != src:
+            atomic_write_text(path, src)  # other processes see the whole file or none
         name = f"_videotrack_{key}"
         spec = importlib.util.spec_from_file_location(name, path)
         module = importlib.util.module_from_spec(spec)

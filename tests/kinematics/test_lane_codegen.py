@@ -138,7 +138,7 @@ def test_kernels_are_shared_and_a_damaged_source_is_rewritten(monkeypatch, tmp_p
     monkeypatch.setattr(cg, "_loaded", {})
     again = cg.fused_kernel(pr.folded, pr.cams, 6, error)
     assert "do not edit" in path.read_text() and again is not first
-    assert not list(tmp_path.glob("*.tmp"))
+    assert not [p for p in tmp_path.rglob("*") if p.name.endswith(".tmp")]
 
 
 def test_an_unwritable_cache_falls_back_to_the_general_loops(monkeypatch, tmp_path):

@@ -115,6 +115,9 @@ def test_general_loops_equal_the_generated_kernel(locust):
     truth = smooth_random_motion(locust, 12, 1, seed=6)
     dets = planted(locust, locust_cameras(), truth, ghosts=1)
     fitter = Fitter(locust, locust_cameras(), AnnealParams().with_schedule(800))
+    fused, n_fused = fitter._fused_kernel(fitter.observations(dets).arrays(np.arange(12)),
+                                          error_args(fitter.params.error))
+    assert fused is not _lk.no_fused and n_fused == 5  # 4 markers per view + 1 ghost
     generated = _kernel_outputs(fitter, dets, 16, [0, 12], True)
     general = _kernel_outputs(fitter, dets, 16, [0, 12], False)
     for name in generated._fields:
