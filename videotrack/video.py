@@ -49,6 +49,15 @@ INTRA_CODECS = frozenset(
 #: Pixel formats (OpenCV's CAP_PROP_CODEC_PIXEL_FORMAT FOURCC) decoded straight to grey.
 _GREY_PIXEL_FORMATS = frozenset({"Y800", "GREY", "Y8  ", "GRAY"})
 
+#: Codecs (FOURCC, lower case) whose packets are whole JPEG images: their frames are decoded
+#: from the packets by OpenCV's libjpeg-turbo (:meth:`_Capture._use_packets`).
+JPEG_CODECS = frozenset({"mjpg", "jpeg"})
+
+#: A packet's decode may differ from FFmpeg's by rounding (the colour conversion, in grey
+#: the BGR round trip): at most this mean absolute difference in grey levels on the first
+#: frame, else the packets are not taken for the frames.
+_PACKET_TOLERANCE = 3.0
+
 #: Highest frame index used to check that seeking is exact on codecs with inter frames.
 _SEEK_PROBE_MAX = 50
 
@@ -122,9 +131,15 @@ def _fourcc(value: float) -> str:
 
 
 class _Capture:
-    """OpenCV VideoCapture backend; positions are indices of the next frame returned."""
+    """OpenCV VideoCapture backend; positions are indices of the next frame returned.
 
-    def __init__(self, path: Path, threads: int) -> None:
+    MJPEG is decoded from its packets (:meth:`_use_packets`): FFmpeg only demuxes, and
+    libjpeg-turbo decodes a grey frame from the JPEG's luma alone, skipping the chroma, the
+    YUV→BGR conversion and the BGR→grey one (3x faster, docs/benchmarks.md "End to end",
+    and without their rounding: the grey levels are the encoded ones).
+    """
+
+    def __init__(self, path: Path, threads: int, colour: bool = False) -> None:
         self.path = path
         self.threads = threads
         self.cap = self._open()
@@ -132,6 +147,9 @@ class _Capture:
         pixel_format = _fourcc(self.cap.get(cv2.CAP_PROP_CODEC_PIXEL_FORMAT))
         # Grey sources decode straight to one channel, skipping a BGR round trip.
         self.raw_grey = pixel_format in _GREY_PIXEL_FORMATS
+        self.jpeg_flag: int | None = None  # imdecode's flag when decoding packets
+        if self.codec in JPEG_CODECS:
+            self._use_packets(colour)
         self._apply_format()
         self.intra = self.codec in INTRA_CODECS
         count = self.cap.get(cv2.CAP_PROP_FRAME_COUNT)
@@ -155,8 +173,44 @@ class _Capture:
             )
         return cap
 
+    def _use_packets(self, colour: bool) -> None:
+        """Decode frames from the packets if the first packet decodes to FFmpeg's first
+        frame, within rounding; else keep FFmpeg's decoder. A packet that is not one
+        whole image (two interlaced fields, a codec variant) fails this check."""
+        ok, reference = self.cap.read()
+        self.cap.release()
+        self.cap = self._open()
+        if not ok or not self.cap.set(cv2.CAP_PROP_FORMAT, -1):
+            self.cap.release()
+            self.cap = self._open()
+            return
+        flag = (cv2.IMREAD_COLOR if colour else cv2.IMREAD_GRAYSCALE) | \
+            cv2.IMREAD_IGNORE_ORIENTATION  # as FFmpeg: no EXIF rotation
+        image = self._decode(flag)
+        if colour or reference.ndim == 2:
+            expected = reference
+        else:
+            expected = cv2.cvtColor(reference, cv2.COLOR_BGR2GRAY)
+        self.cap.release()
+        self.cap = self._open()
+        if (image is not None and image.shape == expected.shape and
+                cv2.absdiff(image, expected).mean() <= _PACKET_TOLERANCE):
+            self.jpeg_flag = flag
+
+    def _decode(self, flag: int):
+        """The next packet decoded as a JPEG image, None at the end or for a damaged one."""
+        ok, packet = self.cap.read()
+        if not ok or packet is None or packet.size == 0:
+            return None
+        try:
+            return cv2.imdecode(packet, flag)
+        except cv2.error:
+            return None
+
     def _apply_format(self) -> None:
-        if self.raw_grey:
+        if self.jpeg_flag is not None:
+            self.cap.set(cv2.CAP_PROP_FORMAT, -1)  # packets, not decoded frames
+        elif self.raw_grey:
             self.cap.set(cv2.CAP_PROP_CONVERT_RGB, 0)
 
     def reopen(self) -> None:
@@ -165,6 +219,8 @@ class _Capture:
         self._apply_format()
 
     def read(self, out=None):
+        if self.jpeg_flag is not None:
+            return self._decode(self.jpeg_flag)
         ok, frame = self.cap.read(out) if out is not None else self.cap.read()
         return frame if ok else None
 
@@ -173,7 +229,13 @@ class _Capture:
 
     def seek(self, index: int) -> bool:
         """Seek by the container; True if OpenCV reports the position as reached."""
-        self.cap.set(cv2.CAP_PROP_POS_FRAMES, index)
+        if index == 1 and self.jpeg_flag is not None:
+            # OpenCV 5.0 lands one packet late seeking to packet 1 (frame 2 next): go to 0
+            # and step over it (tests/videotrack/test_video.py reads every frame by seeking)
+            self.cap.set(cv2.CAP_PROP_POS_FRAMES, 0)
+            self.cap.grab()
+        else:
+            self.cap.set(cv2.CAP_PROP_POS_FRAMES, index)
         return int(self.cap.get(cv2.CAP_PROP_POS_FRAMES)) == index
 
     def close(self) -> None:
@@ -248,7 +310,8 @@ class VideoSource:
     fps : float, optional
         Frame rate overriding the container's (image sequences default to 25).
     threads : int
-        FFmpeg decoding threads; 0 lets FFmpeg choose.
+        FFmpeg decoding threads; 0 lets FFmpeg choose (MJPEG is decoded from its packets, in
+        the reading thread).
 
     Raises
     ------
@@ -264,7 +327,7 @@ class VideoSource:
             raise VideoTrackError("no such file or folder", file=self.path)
         self.is_sequence = self.path.is_dir()
         self._backend = (_Sequence(self.path, self.colour) if self.is_sequence
-                         else _Capture(self.path, threads))
+                         else _Capture(self.path, threads, self.colour))
         self.broken_at: int | None = None
         self._seek_exact: bool | None = True if self._backend.intra else None
         self._pos = 0

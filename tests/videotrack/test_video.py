@@ -74,6 +74,71 @@ def test_colour_mode_and_grey_conversion(tmp_path, video_writer):
         assert f.shape == (16, 24, 3) and np.array_equal(f[..., 0], f[..., 2])
 
 
+def smooth_colour_frames(n, shape=(48, 64), seed=3):
+    """Colour frames a camera might record: smooth shading, bright blobs, sensor noise."""
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[: shape[0], : shape[1]]
+    frames = []
+    for i in range(n):
+        f = 40 + 0.5 * xx + 0.3 * yy + 150 * (np.hypot(xx - 10 - i, yy - 20) < 4)
+        f = f[..., None] * np.array([1.0, 0.9, 0.8]) + rng.normal(0, 2, (*shape, 3))
+        frames.append(np.clip(f, 0, 255).astype(np.uint8))
+    return frames
+
+
+def ffmpeg_grey(path):
+    """Every frame as FFmpeg decodes it, converted to grey (the path packets replace)."""
+    cap = cv2.VideoCapture(str(path), cv2.CAP_FFMPEG)
+    frames = []
+    while (got := cap.read())[0]:
+        frames.append(cv2.cvtColor(got[1], cv2.COLOR_BGR2GRAY))
+    return frames
+
+
+def test_mjpeg_is_decoded_from_its_packets_with_exact_seeking(tmp_path, video_writer):
+    frames = smooth_colour_frames(24)
+    path = video_writer(tmp_path / "m.avi", frames, fourcc="MJPG")
+    truth = [cv2.cvtColor(f, cv2.COLOR_BGR2GRAY).astype(float) for f in frames]
+    reference = ffmpeg_grey(path)
+    with VideoSource(path) as v:
+        got = [f.copy() for _, f in v.frames()]
+        order = np.random.default_rng(0).permutation(24)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", VideoTrackWarning)
+            assert all(np.array_equal(v.read(i), got[i]) for i in [1, *order, 1, 0, 2, 1])
+    assert len(got) == 24
+    # the JPEG's own luma: no rounding bias, unlike FFmpeg's BGR round trip
+    bias = np.mean([(g - t).mean() for g, t in zip(got, truth, strict=True)])
+    ffmpeg_bias = np.mean([(r - t).mean() for r, t in zip(reference, truth, strict=True)])
+    assert abs(bias) < 0.3 < abs(ffmpeg_bias)
+    assert max(cv2.absdiff(g, r).mean() for g, r in zip(got, reference, strict=True)) < 1.5
+    with VideoSource(path, colour=True) as v:
+        colour = v.read(5)
+        assert colour.shape == (48, 64, 3)
+        assert np.abs(colour.astype(float) - frames[5]).mean() < 3
+
+
+def test_mjpeg_packets_refused_fall_back_to_ffmpeg(tmp_path, video_writer, monkeypatch):
+    path = video_writer(tmp_path / "m.avi", smooth_colour_frames(6), fourcc="MJPG")
+    monkeypatch.setattr("videotrack.video._PACKET_TOLERANCE", -1.0)  # no packet matches
+    with VideoSource(path) as v:
+        got = [f.copy() for _, f in v.frames()]
+        assert np.array_equal(v.read(3), got[3])
+    assert all(np.array_equal(g, r) for g, r in zip(got, ffmpeg_grey(path), strict=True))
+
+
+def test_truncated_mjpeg_stops_before_the_damaged_frame(tmp_path, video_writer):
+    path = video_writer(tmp_path / "t.avi", smooth_colour_frames(30), fourcc="MJPG")
+    whole = [f.copy() for _, f in VideoSource(path).frames()]
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) * 2 // 3 + 101])  # cut inside a frame
+    v = VideoSource(path)
+    with pytest.warns(VideoTrackWarning, match="decoding stopped at frame"):
+        got = [(i, f.copy()) for i, f in v.frames()]
+    assert 5 < len(got) < 30 and v.broken_at == len(got)
+    assert all(np.array_equal(f, whole[i]) for i, f in got)  # no half-decoded frame
+
+
 @pytest.mark.parametrize("ext", [".png", ".tif", ".jpg"])
 def test_image_sequence_in_natural_order(tmp_path, sequence_writer, ext):
     frames = noise_frames(12)
