@@ -17,6 +17,7 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 from videotrack.deinterlace import Deinterlace
@@ -302,10 +303,25 @@ def iter_detect(source, settings: DetectSettings, frames=None) -> Iterator[Frame
     detect = FrameDetector(videos, settings)
     frame_range = resolve_frames(frames, videos.n_frames)
     record = 0
-    for index, frame_set in videos.frames(frame_range.start, frame_range.stop, reuse=True):
-        for parity, points, areas in detect(frame_set):
-            yield FrameDetections(record, index, parity, points, areas)
-            record += 1
+    with opencv_threads(1):
+        for index, frame_set in videos.frames(frame_range.start, frame_range.stop, reuse=True):
+            for parity, points, areas in detect(frame_set):
+                yield FrameDetections(record, index, parity, points, areas)
+                record += 1
+
+
+@contextlib.contextmanager
+def opencv_threads(n: int):
+    """OpenCV's own thread pool at ``n`` threads inside the block, restored after. A video's
+    frames are detected one after the other, and a frame's filters gain no wall time from
+    OpenCV's threads: its idle workers spun 0.65 ms of CPU per 720x576 frame, half a core,
+    which the fit running alongside needs (docs/benchmarks.md "End to end")."""
+    before = cv2.getNumThreads()
+    cv2.setNumThreads(n)
+    try:
+        yield
+    finally:
+        cv2.setNumThreads(before)
 
 
 class FrameDetector:
