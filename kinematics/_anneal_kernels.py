@@ -127,6 +127,37 @@ def sincos(x):
     return s1, c1
 
 
+# The same in float32 for the lanes' float32 kernels (kinematics._lane_codegen): π/2 in
+# three parts (the first two with few bits, so k·part is exact for |k| < 2^12) and Cephes'
+# single-precision polynomials; within 2 float32 ulp for |x| < 1000.
+_TWO_OVER_PI_F = np.float32(_TWO_OVER_PI)
+_PIO2_F1, _PIO2_F2 = np.float32(1.5703125), np.float32(4.837512969970703125e-4)
+_PIO2_F3 = np.float32(7.54978995489188216e-8)
+_SF1, _SF2, _SF3 = np.float32(-1.6666654611e-1), np.float32(8.3321608736e-3), \
+    np.float32(-1.9515295891e-4)
+_CF1, _CF2, _CF3 = np.float32(4.166664568298827e-2), np.float32(-1.388731625493765e-3), \
+    np.float32(2.443315711809948e-5)
+_HALF_F, _ONE_F = np.float32(0.5), np.float32(1.0)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def sincos32(x):
+    """``(sin x, cos x)`` in float32 of a float64 x, quadrant picked by selects as
+    :func:`sincos`."""
+    xf = np.float32(x)
+    k = np.rint(xf * _TWO_OVER_PI_F)
+    r = ((xf - k * _PIO2_F1) - k * _PIO2_F2) - k * _PIO2_F3
+    z = r * r
+    s = r + r * z * (_SF1 + z * (_SF2 + z * _SF3))
+    c = _ONE_F - _HALF_F * z + z * z * (_CF1 + z * (_CF2 + z * _CF3))
+    q = np.int32(k) & 3
+    s1 = c if q & 1 else s
+    c1 = s if q & 1 else c
+    s1 = -s1 if q >= 2 else s1
+    c1 = -c1 if q == 1 or q == 2 else c1
+    return s1, c1
+
+
 # -- logarithm of a uniform draw ---------------------------------------------------------
 # fdlibm's log (e_log.c): x = 2^k·m with m in [√2/2, √2), log(1 + f) by its degree-14
 # polynomial in s = f / (2 + f); within 1 ulp. Written without branches (the exponent and

@@ -69,11 +69,24 @@ _loaded: dict[str, object] = {}
 
 class _Code:
     """Straight-line source with literals folded: a value is a float (a literal) or the
-    name of a local variable."""
+    name of a local variable. ``single``: the code computes in float32; its literals are
+    float32 constants named before the loop (a bare literal is a float64 in numba, and one
+    would turn every value it touches into float64), and folding rounds to float32."""
 
-    def __init__(self):
+    def __init__(self, single: bool = False):
         self.lines: list[str] = []
         self.n = 0
+        self.single = single
+        self.real = np.float32 if single else np.float64
+        self.consts: dict[str, str] = {}  # float32 mode: a literal's text -> its name
+
+    def constants(self) -> list[str]:
+        """The float32 constants' definitions (before the loop over lanes)."""
+        return [f"{name} = np.float32({text})" for text, name in self.consts.items()]
+
+    def load(self, expr: str) -> str:
+        """A float64 array element as a value of the code's precision."""
+        return self.let(f"np.float32({expr})" if self.single else expr)
 
     def let(self, expr: str) -> str:
         self.n += 1
@@ -81,18 +94,22 @@ class _Code:
         self.lines.append(f"{name} = {expr}")
         return name
 
-    @staticmethod
-    def lit(x: float) -> str:
-        if np.isnan(x):
+    def lit(self, x: float, nan: bool = False) -> str:
+        """The literal ``x`` (``nan``: NaN, which is never folded)."""
+        if np.isnan(x) and not nan:
             raise ValueError("a NaN constant cannot be folded into generated code")
-        return repr(float(x)) if np.isfinite(x) else ("np.inf" if x > 0 else "-np.inf")
+        text = ("np.nan" if np.isnan(x) else repr(float(x)) if np.isfinite(x)
+                else "np.inf" if x > 0 else "-np.inf")
+        if not self.single:
+            return text
+        return self.consts.setdefault(text, f"k{len(self.consts)}")
 
     def term(self, a) -> str:
         return self.lit(a) if isinstance(a, float) else a
 
     def mul(self, a, b):
         if isinstance(a, float) and isinstance(b, float):
-            return float(np.float64(a) * np.float64(b))
+            return float(self.real(a) * self.real(b))
         if a == 0.0 or b == 0.0:
             return 0.0
         if a == 1.0:
@@ -110,7 +127,7 @@ class _Code:
 
     def add(self, a, b):
         if isinstance(a, float) and isinstance(b, float):
-            return float(np.float64(a) + np.float64(b))
+            return float(self.real(a) + self.real(b))
         if b == 0.0:
             return a
         if a == 0.0:
@@ -119,7 +136,7 @@ class _Code:
 
     def sub(self, a, b):
         if isinstance(a, float) and isinstance(b, float):
-            return float(np.float64(a) - np.float64(b))
+            return float(self.real(a) - self.real(b))
         if b == 0.0:
             return a
         if a == 0.0:
@@ -128,7 +145,7 @@ class _Code:
 
     def div(self, a, b):
         if isinstance(a, float) and isinstance(b, float):
-            return float(np.float64(a) / np.float64(b))
+            return float(self.real(a) / self.real(b))
         if b == 1.0:
             return a
         return self.let(f"{self.term(a)} / {self.term(b)}")
@@ -161,20 +178,21 @@ def _kinematics(code: _Code, folded):
     sin, cos = {}, {}
     for i in used:
         sin[i], cos[i] = f"s{i}", f"c{i}"
-        code.lines.append(f"s{i}, c{i} = sincos(cand[{i}, ln])")
+        code.lines.append(f"s{i}, c{i} = {'sincos32' if code.single else 'sincos'}"
+                          f"(cand[{i}, ln])")
     rot, pos = [], []
     for j in range(nj):
         p = int(parent[j])
         m = [float(x) for x in pre_rot[j].ravel()]
         if p < 0:
             c = int(chain[j])
-            px, py, pz = (code.let(f"pos[{nj + c}, {k}, ln]") for k in range(3))
+            px, py, pz = (code.load(f"pos[{nj + c}, {k}, ln]") for k in range(3))
             b = m
             if joint_flags[j] & ROOT_POSE:
-                q = [code.let(f"rot[{nj + c}, {k}, ln]") for k in range(9)]
+                q = [code.load(f"rot[{nj + c}, {k}, ln]") for k in range(9)]
                 b = _mul33(code, q, m)
                 k = int(slide_index[j])
-                px, py, pz = (code.add(v, code.let(f"cand[{k + d}, ln]"))
+                px, py, pz = (code.add(v, code.load(f"cand[{k + d}, ln]"))
                               for d, v in enumerate((px, py, pz)))
         else:
             q = rot[p]
@@ -227,11 +245,12 @@ def _project(code: _Code, cams, v: int, x):
              mul(p2, add(r2, mul(mul(2.0, xn), xn))))
     yd = add(add(mul(yn, radial), mul(p1, add(r2, mul(mul(2.0, yn), yn)))),
              mul(mul(mul(2.0, p2), xn), yn))
-    front = code.let(f"{code.term(zc)} > 0.0")
+    front = code.let(f"{code.term(zc)} > {code.lit(0.0)}")
     u = add(mul(float(K[v, 0, 0]), xd), float(K[v, 0, 2]))
     w = add(mul(float(K[v, 1, 1]), yd), float(K[v, 1, 2]))
-    return (code.let(f"{code.term(u)} if {front} else np.nan"),
-            code.let(f"{code.term(w)} if {front} else np.nan"))
+    nan = code.lit(np.nan, nan=True)
+    return (code.let(f"{code.term(u)} if {front} else {nan}"),
+            code.let(f"{code.term(w)} if {front} else {nan}"))
 
 
 def _error(code: _Code, images, n_det: int, error) -> str:
@@ -242,61 +261,71 @@ def _error(code: _Code, images, n_det: int, error) -> str:
     numba 8-120 s to compile."""
     bidirectional, weight, cap, penalty_cap = error
     lit = code.lit
+    zero, inf = lit(0.0), lit(np.inf)
     missing = lit(cap if cap < np.inf else NAN_MARKER_COST)
+    # float32: the detections' float32 copies and an int32 index, so every value of the
+    # loop has 32 bits and a vector holds 16 lanes
+    dx, dy = ("dx32", "dy32") if code.single else ("dx", "dy")
+    none, this = ("np.int32(-1)", "np.int32(c)") if code.single else ("-1", "c")
     out = code.lines
-    total = "0.0"
+    total = zero
     for v, view in enumerate(images):
         ev = f"ev{v}"
-        out.append(f"{ev} = 0.0")
+        out.append(f"{ev} = {zero}")
         for m, (pu, pw) in enumerate(view):
             b, a = f"b{v}_{m}", f"a{v}_{m}"
-            out += [f"{b} = np.inf", f"{a} = -1",
+            out += [f"{b} = {inf}", f"{a} = {none}",
                     f"for c in range({n_det}):",
-                    f"    ex = {code.term(pu)} - dx[{v}, c, ln]",
-                    f"    ey = {code.term(pw)} - dy[{v}, c, ln]",
+                    f"    ex = {code.term(pu)} - {dx}[{v}, c, ln]",
+                    f"    ey = {code.term(pw)} - {dy}[{v}, c, ln]",
                     "    d2 = ex * ex + ey * ey",
                     f"    closer = d2 < {b}",
                     f"    {b} = d2 if closer else {b}",
-                    f"    {a} = c if closer else {a}",
+                    f"    {a} = {this} if closer else {a}",
                     f"d = np.sqrt({b}) if {a} >= 0 else {missing}",
                     f"{ev} = {ev} + min(d, {lit(cap)})"]
         if bidirectional:
-            out += [f"for c in range({n_det}):", "    near = np.inf"]
+            out += [f"for c in range({n_det}):", f"    near = {inf}"]
             for pu, pw in view:
-                out += [f"    ex = {code.term(pu)} - dx[{v}, c, ln]",
-                        f"    ey = {code.term(pw)} - dy[{v}, c, ln]",
+                out += [f"    ex = {code.term(pu)} - {dx}[{v}, c, ln]",
+                        f"    ey = {code.term(pw)} - {dy}[{v}, c, ln]",
                         "    near = min(near, ex * ex + ey * ey)"]
             matched = " | ".join(f"({f'a{v}_{m}'} == c)" for m in range(len(view)))
             out += [f"    add = (not ({matched})) & (c < ndet[{v}, ln])",
-                    f"    d = np.sqrt(near) if near < np.inf else {missing}",
+                    f"    d = np.sqrt(near) if near < {inf} else {missing}",
                     f"    {ev} = {ev} + {lit(weight)} * min(d, {lit(penalty_cap)}) "
                     f"if add else {ev}"]
-        total = code.let(f"{total} + ({ev} if ndet[{v}, ln] > 0 else 0.0)")
+        total = code.let(f"{total} + ({ev} if ndet[{v}, ln] > 0 else {zero})")
     return total
 
 
-def fused_source(folded, cams, n_det: int, error) -> str:
+def fused_source(folded, cams, n_det: int, error, single: bool = False) -> str:
     """Source of a module whose ``evaluate`` (a numba ``cfunc`` of
     :data:`kinematics._lane_kernels.FUSED_SIGNATURE`) writes every lane's E of the
     candidates ``cand`` into ``e``, against ``n_det`` detections per view.
-    ``error``: (bidirectional, weight, cap, penalty_cap)."""
-    code = _Code()
+    ``error``: (bidirectional, weight, cap, penalty_cap). ``single``: computed in float32
+    from the detections' float32 copies ``dx32``, ``dy32`` (precision "float32"; E is
+    then within float32 rounding of the scalar kernel's, not equal to it)."""
+    code = _Code(single)
     markers = _kinematics(code, folded)
     images = [[_project(code, cams, v, x) for x in markers] for v in range(len(cams[0]))]
     total = _error(code, images, n_det, tuple(error))
+    consts = "".join("    " + line + "\n" for line in code.constants())
     body = "\n".join("        " + line for line in code.lines)
+    precision = "float32" if single else "float64"
     return f'''"""Generated by kinematics._lane_codegen for one body, its views and {n_det}
-detections per view: every lane's E in one loop (do not edit; kernels {_INLINED})."""
+detections per view, in {precision}: every lane's E in one loop (do not edit; kernels
+{_INLINED})."""
 import numpy as np
 from numba import cfunc
 
-from kinematics._anneal_kernels import sincos
+from kinematics._anneal_kernels import sincos, sincos32
 from kinematics._lane_kernels import FUSED_SIGNATURE
 
 
 @cfunc(FUSED_SIGNATURE, cache=True, nopython=True, error_model="numpy")
-def evaluate(cand, rot, pos, dx, dy, ndet, e):
-    for ln in range(e.shape[0]):
+def evaluate(cand, rot, pos, dx, dy, dx32, dy32, ndet, e):
+{consts}    for ln in range(e.shape[0]):
 {body}
         e[ln] = {total}
 '''
@@ -325,11 +354,12 @@ def source_path(src: str) -> Path:
     return generated_dir() / f"lanes_{hashlib.sha256(src.encode()).hexdigest()[:20]}.py"
 
 
-def fused_kernel(folded, cams, c_cap: int, error):
-    """The generated ``evaluate`` cfunc for this body, views, detections and error, made
-    (and compiled) on first use; the source is kept in :func:`generated_dir`, named by its
-    hash, so numba's cache of the machine code outlives the process."""
-    src = fused_source(folded, cams, padded_detections(c_cap), error)
+def fused_kernel(folded, cams, c_cap: int, error, single: bool = False):
+    """The generated ``evaluate`` cfunc for this body, views, detections, error and
+    precision, made (and compiled) on first use; the source is kept in
+    :func:`generated_dir`, named by its hash, so numba's cache of the machine code outlives
+    the process."""
+    src = fused_source(folded, cams, padded_detections(c_cap), error, single)
     path = source_path(src)
     key = path.stem
     with _lock:

@@ -83,16 +83,25 @@ PAD = 1.0e30
 _OPTS = {"cache": True, "nogil": True, "error_model": "numpy"}
 
 #: A kernel generated for one body (:mod:`kinematics._lane_codegen`): every lane's E of its
-#: candidate, ``evaluate(cand, rot, pos, dx, dy, ndet, e)``. Called through a function
-#: pointer, so the lane loops are compiled once for every generated kernel.
+#: candidate, ``evaluate(cand, rot, pos, dx, dy, dx32, dy32, ndet, e)`` (``dx32``, ``dy32``:
+#: the detections in float32, for a float32 kernel). Called through a function pointer, so
+#: the lane loops are compiled once for every generated kernel.
 FUSED_SIGNATURE = types.void(types.float64[:, ::1], types.float64[:, :, ::1],
                              types.float64[:, :, ::1], types.float64[:, :, ::1],
-                             types.float64[:, :, ::1], types.int64[:, ::1], types.float64[::1])
+                             types.float64[:, :, ::1], types.float32[:, :, ::1],
+                             types.float32[:, :, ::1], types.int64[:, ::1], types.float64[::1])
 
 
 @cfunc(FUSED_SIGNATURE, cache=True, nopython=True)
-def no_fused(cand, rot, pos, dx, dy, ndet, e):
+def no_fused(cand, rot, pos, dx, dy, dx32, dy32, ndet, e):
     """The ``fused`` argument where no kernel was generated (never called)."""
+
+
+@njit(**_OPTS)
+def call_fused(fused, cand, rot, pos, dx, dy, dx32, dy32, ndet, e):
+    """Run a generated kernel's machine code (for tests: calling a numba ``cfunc`` from
+    Python runs its Python source instead)."""
+    fused(cand, rot, pos, dx, dy, dx32, dy32, ndet, e)
 
 
 @njit(**_OPTS)
@@ -399,6 +408,12 @@ def iterate_lanes(n_iter, free_idx, n_hist, step, hist, nbins, th, runs, n_runs,
     cur_bits = cur.view(np.uint64)
     cand_bits = cand.view(np.uint64)
     best_bits = best.view(np.uint64)
+    # the detections in float32, for a float32 kernel: they change only between calls
+    dx32 = np.empty(dx.shape if use_fused else (0, 0, 0), np.float32)
+    dy32 = np.empty(dx32.shape, np.float32)
+    if use_fused:
+        dx32[:] = dx
+        dy32[:] = dy
     done = False
     n = 0
     while n < n_iter and not done:
@@ -466,7 +481,7 @@ def iterate_lanes(n_iter, free_idx, n_hist, step, hist, nbins, th, runs, n_runs,
                 for ln in range(nl):
                     sn[i, ln], cs[i, ln] = sincos(cand[i, ln])
         if use_fused:
-            fused(cand, rot, pos, dx, dy, ndet, e)
+            fused(cand, rot, pos, dx, dy, dx32, dy32, ndet, e)
         else:
             project_lanes(cand, cs, sn, parent, chain, pre_rot, pre_trans, post_trans,
                           elem_axis, elem_index, joint_flags, marker_joint, marker_local,

@@ -874,7 +874,7 @@ class Fitter:
             threads = numba.get_num_threads()
             groups = np.unique(np.linspace(0, n, min(threads, n) + 1).astype(np.int64))
             error = self._error_args(p, arrays.objective)
-            fused, n_fused = self._fused_kernel(arrays, error)
+            fused, n_fused = self._fused_kernel(arrays, error, p.precision == "float32")
             _lk.fit_frames_lanes(groups, frame_ids, roots, rots, start, pr.folded, pr.cams,
                                  pr.dofs, schedule_of(p), error, arrays,
                                  float(p.claim_gate_px), _lk.LANES, fused, n_fused, out)
@@ -909,12 +909,14 @@ class Fitter:
         return cams, arrays._replace(points=np.empty((0, 2)), conf=np.empty(0),
                                      offsets=np.zeros(1, np.int64))
 
-    def _fused_kernel(self, arrays: ObservationArrays, error: ErrorArgs):
+    def _fused_kernel(self, arrays: ObservationArrays, error: ErrorArgs,
+                      single: bool = False):
         """The lane kernel generated for this body, its views and the block's detections
         per view (:mod:`kinematics._lane_codegen`) and the detections it scans; the general
         loops (``no_fused``, 0) where none is made: for a body too large or a view of the
         block with too many detections, with ``VIDEOTRACK_NO_CODEGEN`` set, or where the
-        kernel cannot be made (a read-only cache folder: a warning, the same results)."""
+        kernel cannot be made (a read-only cache folder: a warning, the same results).
+        ``single``: a kernel computing in float32 (precision 'float32')."""
         counts = np.diff(arrays.offsets)
         c_cap = int(counts.max()) if counts.size else 0
         if os.environ.get("VIDEOTRACK_NO_CODEGEN") or not _codegen.fits(
@@ -923,7 +925,8 @@ class Fitter:
         try:
             fn = _codegen.fused_kernel(self.problem.folded, self.problem.cams, c_cap,
                                        (error.bidirectional, error.weight, error.cap,
-                                        error.penalty_cap))
+                                        error.penalty_cap),
+                                       single=single)
         except Exception as exc:  # any failure: the general loops give the same results
             warnings.warn(f"lanes: no kernel generated for this body ({exc}); using the "
                           "general loops (the same results, slower)", stacklevel=2)

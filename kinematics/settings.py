@@ -45,6 +45,7 @@ def setting(default, doc: str, *, min=None, max=None, choices=None, none=None):
 START_MODES = ("mean", "previous", "track")
 PARTITION_MODES = ("auto", "none")
 BACKENDS = ("auto", "scalar", "lanes")
+PRECISIONS = ("float64", "float32")
 MATCH_MODES = ("auto", "views", "3d")
 THRESHOLD_MODES = ("absolute", "auto")
 CONFIRM_MODES = ("auto", "on", "off")
@@ -275,6 +276,12 @@ class AnnealParams:
         "in SIMD lanes (the same results to the last bit; faster on many frames), 'auto' "
         "lanes where they are valid (unlabelled points, one partition, start 'mean') and "
         "there are enough runs to fill them, else scalar.", choices=BACKENDS)
+    precision: str = setting(
+        "float64", "What the lanes' generated kernels compute E in: 'float64' gives the "
+        "scalar kernel's results to the last bit; 'float32' is faster, but its results only "
+        "match to within float32 rounding (docs/fitting.md, 'Backends', gives both accuracy "
+        "tables). The scalar kernel and the lanes' general loops always use float64.",
+        choices=PRECISIONS)
 
     def __post_init__(self) -> None:
         self.validate()
@@ -331,7 +338,8 @@ class AnnealParams:
                                       field=name)
         for name, choices in (("threshold_mode", THRESHOLD_MODES),
                               ("partitions", PARTITION_MODES), ("match", MATCH_MODES),
-                              ("backend", BACKENDS), ("start", START_MODES),
+                              ("backend", BACKENDS), ("precision", PRECISIONS),
+                              ("start", START_MODES),
                               ("confirm_runs", CONFIRM_MODES)):
             value = getattr(self, name)
             if value not in choices:

@@ -398,9 +398,12 @@ def fit_project(
     return table
 
 
-#: Records handed to the fitting thread at a time while detecting; None: as many as fill the
-#: lanes of every thread (:meth:`Fitter.lane_frames`). 64 did not on 2 threads, so the
-#: streamed fit ran on the scalar kernel, 2-2.5x slower than the lanes.
+#: Records handed to the fitting thread at a time while detecting; None: four times as many
+#: as fill the lanes of every thread (:meth:`Fitter.lane_frames`). 64 did not fill them on 2
+#: threads, so the streamed fit ran on the scalar kernel, 2-2.5x slower than the lanes; 128
+#: filled them once, and each block's last runs and re-analyses ran in half-empty lanes
+#: (2 threads, docs/benchmarks.md "End to end": Table 1 schedule 576 frames/s with 128,
+#: 734 with 256, 696 with 512; short schedule 897, 1038, 1084).
 STREAM_CHUNK: int | None = None
 
 
@@ -423,11 +426,12 @@ def not_streamable(model: ProjectModel) -> str | None:
 class FitAlongside:
     """Fits records in a thread of its own while the caller detects the next ones.
 
-    Decoding (FFmpeg, in its own threads) and detection run in the caller's thread, annealing
-    (numba kernels that release the GIL) in this one, so the two overlap and the slower sets
-    the pace. Detection stays in the caller's thread because the warnings it records into the
-    detections file are caught with :func:`warnings.catch_warnings`, which is process-wide,
-    and because progress and cancel belong to the caller.
+    Decoding (in FFmpeg's threads, or threads decoding MJPEG packets) and detection run in
+    the caller's thread, annealing (numba kernels that release the GIL) in this one, so the
+    two overlap and the slower sets the pace. Detection stays in the caller's thread because
+    the warnings it records into the detections file are caught with
+    :func:`warnings.catch_warnings`, which is process-wide, and because progress and cancel
+    belong to the caller.
 
     Give it every record with :meth:`add` as it is detected, then take the results in record
     order with :meth:`results`; :meth:`close` (or leaving the ``with`` block) stops the thread
@@ -440,7 +444,7 @@ class FitAlongside:
 
         self.fitter = model.fitter()
         self.n_views = len(model.view_names)
-        self.chunk = chunk or STREAM_CHUNK or self.fitter.lane_frames()
+        self.chunk = chunk or STREAM_CHUNK or 4 * self.fitter.lane_frames()
         self.started = time.perf_counter()
         self._threads = numba.get_num_threads()  # numba's setting is per thread
         self._gathered: list[tuple[np.ndarray, ...]] = []

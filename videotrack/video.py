@@ -24,7 +24,9 @@ from __future__ import annotations
 import os
 import re
 import warnings
+from collections import deque
 from collections.abc import Iterator, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import cv2
@@ -57,6 +59,11 @@ JPEG_CODECS = frozenset({"mjpg", "jpeg"})
 #: the BGR round trip): at most this mean absolute difference in grey levels on the first
 #: frame, else the packets are not taken for the frames.
 _PACKET_TOLERANCE = 3.0
+
+#: Threads decoding MJPEG packets ahead of a sequential read (libjpeg-turbo releases the
+#: GIL), and packets each keeps in flight.
+DECODE_THREADS = max(1, min(4, os.cpu_count() or 1))
+_AHEAD_PER_THREAD = 2
 
 #: Highest frame index used to check that seeking is exact on codecs with inter frames.
 _SEEK_PROBE_MAX = 50
@@ -148,6 +155,9 @@ class _Capture:
         # Grey sources decode straight to one channel, skipping a BGR round trip.
         self.raw_grey = pixel_format in _GREY_PIXEL_FORMATS
         self.jpeg_flag: int | None = None  # imdecode's flag when decoding packets
+        self._pending: deque | None = None  # packets being decoded ahead (start_ahead)
+        self._ahead_left = 0
+        self._pool: ThreadPoolExecutor | None = None
         if self.codec in JPEG_CODECS:
             self._use_packets(colour)
         self._apply_format()
@@ -200,12 +210,37 @@ class _Capture:
     def _decode(self, flag: int):
         """The next packet decoded as a JPEG image, None at the end or for a damaged one."""
         ok, packet = self.cap.read()
-        if not ok or packet is None or packet.size == 0:
-            return None
-        try:
-            return cv2.imdecode(packet, flag)
-        except cv2.error:
-            return None
+        return _decode_jpeg(packet, flag) if ok else None
+
+    def start_ahead(self, count: int) -> None:
+        """Decode the next ``count`` frames ahead, in threads, for the reads that follow
+        (MJPEG packets only; other codecs decode in order, in FFmpeg's own threads). Until
+        :meth:`stop_ahead`, only :meth:`read` may be called."""
+        if self.jpeg_flag is None or count < 2 or DECODE_THREADS < 2:
+            return
+        self._pool = ThreadPoolExecutor(DECODE_THREADS, thread_name_prefix="videotrack-decode")
+        self._pending = deque()
+        self._ahead_left = count
+
+    def stop_ahead(self) -> int:
+        """End :meth:`start_ahead`; the number of frames read ahead but not returned (the
+        capture stands that many frames past the last one :meth:`read` returned)."""
+        if self._pending is None:
+            return 0
+        left = len(self._pending)
+        self._pool.shutdown(wait=True, cancel_futures=True)
+        self._pool = self._pending = None
+        return left
+
+    def _read_ahead(self):
+        while self._ahead_left > 0 and len(self._pending) < _AHEAD_PER_THREAD * DECODE_THREADS:
+            ok, packet = self.cap.read()  # demuxing only: cheap
+            if not ok:
+                self._ahead_left = 0
+                break
+            self._pending.append(self._pool.submit(_decode_jpeg, packet, self.jpeg_flag))
+            self._ahead_left -= 1
+        return self._pending.popleft().result() if self._pending else None
 
     def _apply_format(self) -> None:
         if self.jpeg_flag is not None:
@@ -219,6 +254,8 @@ class _Capture:
         self._apply_format()
 
     def read(self, out=None):
+        if self._pending is not None:
+            return self._read_ahead()
         if self.jpeg_flag is not None:
             return self._decode(self.jpeg_flag)
         ok, frame = self.cap.read(out) if out is not None else self.cap.read()
@@ -239,7 +276,18 @@ class _Capture:
         return int(self.cap.get(cv2.CAP_PROP_POS_FRAMES)) == index
 
     def close(self) -> None:
+        self.stop_ahead()
         self.cap.release()
+
+
+def _decode_jpeg(packet, flag: int):
+    """A packet decoded as a JPEG image; None for an empty or damaged one."""
+    if packet is None or packet.size == 0:
+        return None
+    try:
+        return cv2.imdecode(packet, flag)
+    except cv2.error:
+        return None
 
 
 class _Sequence:
@@ -293,6 +341,12 @@ class _Sequence:
 
     def reopen(self) -> None:
         self.pos = 0
+
+    def start_ahead(self, count: int) -> None:
+        pass
+
+    def stop_ahead(self) -> int:
+        return 0
 
     def close(self) -> None:
         pass
@@ -421,21 +475,29 @@ class VideoSource:
         stop = self.n_frames if stop is None else min(stop, self.n_frames)
         raw = out = None
         index = start
-        while index < stop:
-            if index == 0 and self._first is not None and self._pos != 0:
+        ahead = False
+        try:
+            while index < stop:
+                if index == 0 and self._first is not None and self._pos != 0:
+                    index += 1
+                    yield 0, self._first.copy()  # decoded at open: no seek back to the start
+                    continue
+                if index != self._pos:
+                    self._seek(index)
+                if not ahead:  # from here on every frame is read in order
+                    self._backend.start_ahead(stop - index)
+                    ahead = True
+                raw = self._backend.read(raw if reuse else None)
+                if raw is None:
+                    self._broken(index)
+                    return
+                self._pos = index + 1
+                out = self._convert(raw, out if reuse else None)
+                yield index, out
                 index += 1
-                yield 0, self._first.copy()  # decoded at open: no seek back to the start
-                continue
-            if index != self._pos:
-                self._seek(index)
-            raw = self._backend.read(raw if reuse else None)
-            if raw is None:
-                self._broken(index)
-                return
-            self._pos = index + 1
-            out = self._convert(raw, out if reuse else None)
-            yield index, out
-            index += 1
+        finally:
+            if self._backend.stop_ahead():
+                self._pos = -1  # frames read ahead and dropped: the next read seeks
         if stop == self.n_frames == self.container_frames and self.broken_at is None:
             self._check_end()
 

@@ -106,6 +106,12 @@ def test_mjpeg_is_decoded_from_its_packets_with_exact_seeking(tmp_path, video_wr
         with warnings.catch_warnings():
             warnings.simplefilter("error", VideoTrackWarning)
             assert all(np.array_equal(v.read(i), got[i]) for i in [1, *order, 1, 0, 2, 1])
+        for i, f in v.frames(3, 20):  # decoded ahead, in threads, then left early
+            assert np.array_equal(f, got[i])
+            if i == 9:
+                break
+        assert np.array_equal(v.read(10), got[10]) and np.array_equal(v.read(16), got[16])
+        assert all(np.array_equal(f, got[i]) for i, f in v.frames(reuse=True))
     assert len(got) == 24
     # the JPEG's own luma: no rounding bias, unlike FFmpeg's BGR round trip
     bias = np.mean([(g - t).mean() for g, t in zip(got, truth, strict=True)])
