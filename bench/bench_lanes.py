@@ -12,7 +12,8 @@ points per view):
 * the paper's protocol: the locust leg in its two orthographic views, Table 1 schedule run
   to the end (ε = 0), one run per frame, Eq. 5 — ns per chain-iteration of each backend on
   ``--threads`` numba threads (time × threads / iterations); again with the lanes' general
-  loops instead of the kernel generated for the body (``VIDEOTRACK_NO_CODEGEN``);
+  loops instead of the kernel generated for the body (``VIDEOTRACK_NO_CODEGEN``), and with
+  that kernel in float32 (``precision = "float32"``);
 * the defaults (refinement, the bounded error, two candidates, the threshold measured on the
   video), the paper's Table 1 schedule with re-analysis, and the short schedule that keeps
   Table 2's accuracy (refinement, N_end 5000, 1-px threshold) on a longer video: fitted
@@ -20,10 +21,12 @@ points per view):
 * the growth table: ns per chain-iteration against detections per view (locust) and against
   markers and views (the stick insect's leg and body with 2 or 4 pinhole views);
 * throughput against accuracy (``--sweep-frames``): the Table 1 schedule and shorter ones
-  with refinement, one or two runs per frame, each with its angle RMSE against the truth.
+  with refinement, one or two runs per frame, each with its angle RMSE against the truth;
+  the Table 1 schedule and N_end 2000 again with ``precision = "float32"``.
 
 Both backends give the same results to the last bit (tests/kinematics/test_lanes.py); the
-table says so again for the frames timed here.
+table says so again for the frames timed here. The float32 row (the lanes' generated kernel
+in float32) gives the largest angle difference from the scalar kernel instead.
 """
 
 from __future__ import annotations
@@ -88,13 +91,25 @@ def same(a, b) -> bool:
         for x, y in zip(a, b, strict=True))
 
 
-def per_iteration(body, cams, dets, params, repeats, threads):
-    """ns per chain-iteration of each backend, and whether they agree."""
+def per_iteration(body, cams, dets, params, repeats, threads, precision="float64"):
+    """ns per chain-iteration of each backend, and whether they agree (the lanes in
+    ``precision``; float32: the largest angle difference in degrees)."""
     out = {}
     for backend in ("scalar", "lanes"):
-        dt, res = timed_fit(body, cams, dets, replace(params, backend=backend), repeats)
+        dt, res = timed_fit(body, cams, dets, replace(params, backend=backend,
+                                                      precision=precision), repeats)
         out[backend] = (dt * threads / sum(r.iterations for r in res) * 1e9, res)
-    return out["scalar"][0], out["lanes"][0], same(out["scalar"][1], out["lanes"][1])
+    a, b = out["scalar"][1], out["lanes"][1]
+    agree = same(a, b) if precision == "float64" else float(np.max(np.abs(
+        np.array([r.angles_deg for r in a]) - np.array([r.angles_deg for r in b]))))
+    return out["scalar"][0], out["lanes"][0], agree
+
+
+def agreement(agree) -> str:
+    """The results column: same / DIFFERENT (float64), or float32's largest difference."""
+    if isinstance(agree, bool):
+        return "same" if agree else "DIFFERENT"
+    return f"within {agree:.2g}°"
 
 
 def pinholes(n: int) -> dict:
@@ -135,7 +150,11 @@ def main(argv=None) -> int:
     s, lane, ok = per_iteration(locust, cams, dets, paper, args.repeats, args.threads)
     rows.append((f"paper protocol, locust 2 views: ns per chain-iteration ({args.threads} "
                  "thread)", f"{s:.0f}", f"{lane:.1f}", f"{s / lane:.2f}x",
-                 "same" if ok else "DIFFERENT", "lanes <= 25"))
+                 agreement(ok), "lanes <= 25"))
+    s, lane, ok = per_iteration(locust, cams, dets, paper, args.repeats, args.threads,
+                                "float32")
+    rows.append(("the same, lanes in float32 (precision = \"float32\")", f"{s:.0f}",
+                 f"{lane:.1f}", f"{s / lane:.2f}x", agreement(ok), "lanes <= 15"))
     os.environ["VIDEOTRACK_NO_CODEGEN"] = "1"  # the lanes' general loops, for comparison
     try:
         s, lane, ok = per_iteration(locust, cams, dets, paper, args.repeats, args.threads)
@@ -215,6 +234,10 @@ def sweep(body, cams, n_frames: int, threshold: float) -> tuple[list, list]:
     settings += [(f"N_end {n}, {c} run{'s' if c > 1 else ''} per frame",
                   replace(short.with_schedule(n), candidates=c))
                  for n in (5000, 2000, 1000, 500) for c in (1, 2)]
+    # precision float32 on the two settings of the issue's figures: its accuracy table
+    settings += [(f"{name}, float32", replace(params, precision="float32"))
+                 for name, params in settings
+                 if name in ("paper (Table 1)", "N_end 2000, 1 run per frame")]
     rows = []
     for name, params in settings:
         dt, res = timed_fit(body, cams, video, params, 2)
