@@ -75,6 +75,15 @@ from kinematics._camera_kernels import ORTHOGRAPHIC
 #: leave LLVM's vector loop unused.
 LANES = 64
 
+#: Backend 'auto' anneals a block in lanes from this many runs per numba thread (64 filled
+#: them): half-empty lanes still beat the scalar kernel (the locust, single runs, 2 threads,
+#: scalar / lanes time with the generated kernel: 2 runs per thread 1.15, 4: 2.2, 8: 4.2,
+#: 16: 5.4, 32: 6.3, 64: 6.8; with the general loops 16: 1.0, 32: 2.1). Fewer runs stay
+#: scalar: each new body and detection count compiles a kernel (~2 s, once per machine),
+#: which a few frames (a GUI fit) should not wait for. 32 lets the 64 single runs that
+#: measure the 'auto' threshold run in lanes on 2 threads.
+MIN_RUNS_PER_THREAD = 32
+
 _ALL_OK = np.uint64(0x0101010101010101)  # eight True bools read as one word
 
 #: Coordinate of a padding detection: farther than any real one, finite when squared.

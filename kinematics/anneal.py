@@ -943,8 +943,9 @@ class Fitter:
                    hidden: bool = False) -> bool:
         """Whether the lane kernel fits this block: it does what the scalar kernel does for
         unlabelled points, one partition and independent frames, without markers marked
-        hidden (``hidden``); 'auto' also wants enough runs to fill the lanes of every
-        thread."""
+        hidden (``hidden``); 'auto' also wants a few runs per thread
+        (:data:`kinematics._lane_kernels.MIN_RUNS_PER_THREAD`: a single frame, as the GUI
+        fits, goes to the scalar kernel)."""
         valid = (objective == _ak.OBJ_NEAREST and parts.bounds.shape[0] == 1
                  and parts.samples == 0 and p.start == "mean" and not p.error.one_to_one
                  and parts.confirm == 0 and not hidden)
@@ -956,7 +957,8 @@ class Fitter:
                                   field="backend")
         runs = n_frames * max(1, p.candidates)
         return p.backend == "lanes" or (p.backend == "auto" and valid
-                                         and runs >= _lk.LANES * numba.get_num_threads())
+                                         and runs >= _lk.MIN_RUNS_PER_THREAD
+                                         * numba.get_num_threads())
 
     def _frame_result(self, obs: Observations, position: int, frame_id: int, state, root_pos,
                       root_rot, p: AnnealParams, *, runs: int, iterations: int, pairs: int,
@@ -1193,11 +1195,12 @@ class Fitter:
             if anchor is not None and choice[0] >= 0 and not breaks[0]:
                 jumps[0] = temporal.transition_costs(anchor[None], post[0, choice[0]][None],
                                                      scale, n_angles)[0, 0]
-            for i in range(1, len(window)):
-                if choice[i] >= 0 and choice[i - 1] >= 0 and not breaks[i]:
-                    jumps[i] = temporal.transition_costs(post[i - 1, choice[i - 1]][None],
-                                                         post[i, choice[i]][None], scale,
-                                                         n_angles)[0, 0]
+            if len(window) > 1:  # every step of the chosen path in one array operation
+                chosen = post[np.arange(len(window)), np.maximum(choice, 0)][:, None]
+                steps = temporal.transition_costs(chosen[:-1], chosen[1:], scale,
+                                                  n_angles)[:, 0, 0]
+                made = (choice[1:] >= 0) & (choice[:-1] >= 0) & ~breaks[1:]
+                jumps[1:] = np.where(made, steps, np.nan)
             typical = np.nanmedian(jumps) if np.isfinite(jumps).any() else 0.0
             limit = min(cap, max(REDO_JUMP_MIN, REDO_JUMP_RATIO * typical))
             at = [int(i) for i in np.flatnonzero(jumps > limit)]

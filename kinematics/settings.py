@@ -275,7 +275,8 @@ class AnnealParams:
         "auto", "Which kernel anneals: 'scalar' one run at a time, 'lanes' many runs at once "
         "in SIMD lanes (the same results to the last bit; faster on many frames), 'auto' "
         "lanes where they are valid (unlabelled points, one partition, start 'mean') and "
-        "there are enough runs to fill them, else scalar.", choices=BACKENDS)
+        "there are at least 32 runs per thread (half-empty lanes still beat the scalar kernel), "
+        "else scalar.", choices=BACKENDS)
     precision: str = setting(
         "float64", "What the lanes' generated kernels compute E in: 'float64' gives the "
         "scalar kernel's results to the last bit; 'float32' is faster, but its results only "

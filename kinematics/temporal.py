@@ -153,13 +153,10 @@ def kinks(postures, scale, n_angles: int, breaks=None) -> np.ndarray:
     n = postures.shape[0]
     cut = np.zeros(n, bool) if breaks is None else np.asarray(breaks, bool)
     kink = np.full(n, np.nan)
-    for t in range(1, n - 1):
-        if cut[t] or cut[t + 1]:
-            continue
-        mid = postures[t - 1] + angle_difference(postures[t + 1], postures[t - 1],
-                                                 n_angles) / 2.0
-        d = angle_difference(postures[t], mid, n_angles) / scale
-        kink[t] = np.sum(d * d)
+    if n > 2:  # every frame at once (a call per frame was most of this function's time)
+        mid = postures[:-2] + angle_difference(postures[2:], postures[:-2], n_angles) / 2.0
+        d = angle_difference(postures[1:-1], mid, n_angles) / scale
+        kink[1:-1] = np.where(cut[1:-1] | cut[2:], np.nan, np.sum(d * d, axis=-1))
     if not np.isfinite(kink).any():
         return np.zeros(n, bool)
     limit = max(KINK_MIN, KINK_RATIO * np.nanmedian(kink))

@@ -180,8 +180,9 @@ def test_locked_axes_untouched(locust):
 def test_auto_uses_lanes_only_where_valid(locust):
     f = Fitter(locust, locust_cameras(), AnnealParams())
     parts = partitions_of(f.problem)
-    many = _lk.LANES * numba.get_num_threads()
-    assert f._use_lanes(f.params, _ak.OBJ_NEAREST, parts, many)
+    many = _lk.MIN_RUNS_PER_THREAD * numba.get_num_threads()  # runs, 2 per frame
+    assert f._use_lanes(f.params, _ak.OBJ_NEAREST, parts, many // 2)
+    assert not f._use_lanes(f.params, _ak.OBJ_NEAREST, parts, many // 2 - 1)
     assert not f._use_lanes(f.params, _ak.OBJ_NEAREST, parts, 1)  # a single frame (GUI)
     assert not f._use_lanes(f.params, _ak.OBJ_LABELLED, parts, many)
     assert not f._use_lanes(replace(f.params, backend="scalar"), _ak.OBJ_NEAREST, parts, many)
