@@ -109,7 +109,7 @@ def agreement(agree) -> str:
     """The results column: same / DIFFERENT (float64), or float32's largest difference."""
     if isinstance(agree, bool):
         return "same" if agree else "DIFFERENT"
-    return f"within {agree:.2g}°"
+    return "same angles" if agree == 0 else f"within {agree:.2g}°"
 
 
 def pinholes(n: int) -> dict:
