@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import threading
 import warnings
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -303,25 +304,36 @@ def iter_detect(source, settings: DetectSettings, frames=None) -> Iterator[Frame
     detect = FrameDetector(videos, settings)
     frame_range = resolve_frames(frames, videos.n_frames)
     record = 0
-    with opencv_threads(1):
+    with opencv_one_thread():
         for index, frame_set in videos.frames(frame_range.start, frame_range.stop, reuse=True):
             for parity, points, areas in detect(frame_set):
                 yield FrameDetections(record, index, parity, points, areas)
                 record += 1
 
 
+_opencv_lock = threading.Lock()
+_opencv_users = [0, 0]  # detections running, OpenCV's thread count before the first
+
+
 @contextlib.contextmanager
-def opencv_threads(n: int):
-    """OpenCV's own thread pool at ``n`` threads inside the block, restored after. A video's
-    frames are detected one after the other, and a frame's filters gain no wall time from
-    OpenCV's threads: its idle workers spun 0.65 ms of CPU per 720x576 frame, half a core,
-    which the fit running alongside needs (docs/benchmarks.md "End to end")."""
-    before = cv2.getNumThreads()
-    cv2.setNumThreads(n)
+def opencv_one_thread():
+    """OpenCV's own thread pool at one thread inside the block. A video's frames are
+    detected one after the other, and a frame's filters gain no wall time from OpenCV's
+    threads: its idle workers spun 0.65 ms of CPU per 720x576 frame, half a core, which the
+    fit running alongside needs (docs/benchmarks.md "End to end"). The setting is the
+    process's: the first detection to start sets it, the last to end restores it."""
+    with _opencv_lock:
+        if _opencv_users[0] == 0:
+            _opencv_users[1] = cv2.getNumThreads()
+            cv2.setNumThreads(1)
+        _opencv_users[0] += 1
     try:
         yield
     finally:
-        cv2.setNumThreads(before)
+        with _opencv_lock:
+            _opencv_users[0] -= 1
+            if _opencv_users[0] == 0:
+                cv2.setNumThreads(_opencv_users[1])
 
 
 class FrameDetector:

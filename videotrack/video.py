@@ -53,7 +53,7 @@ _GREY_PIXEL_FORMATS = frozenset({"Y800", "GREY", "Y8  ", "GRAY"})
 
 #: Codecs (FOURCC, lower case) whose packets are whole JPEG images: their frames are decoded
 #: from the packets by OpenCV's libjpeg-turbo (:meth:`_Capture._use_packets`).
-JPEG_CODECS = frozenset({"mjpg", "jpeg"})
+JPEG_CODECS = frozenset({"mjpg"})  # OpenCV names MJPEG so in AVI, MOV and MP4 alike
 
 #: A packet's decode may differ from FFmpeg's by rounding (the colour conversion, in grey
 #: the BGR round trip): at most this mean absolute difference in grey levels on the first
@@ -138,15 +138,9 @@ def _fourcc(value: float) -> str:
 
 
 class _Capture:
-    """OpenCV VideoCapture backend; positions are indices of the next frame returned.
+    """OpenCV VideoCapture backend; positions are indices of the next frame returned."""
 
-    MJPEG is decoded from its packets (:meth:`_use_packets`): FFmpeg only demuxes, and
-    libjpeg-turbo decodes a grey frame from the JPEG's luma alone, skipping the chroma, the
-    YUV→BGR conversion and the BGR→grey one (3x faster, docs/benchmarks.md "End to end",
-    and without their rounding: the grey levels are the encoded ones).
-    """
-
-    def __init__(self, path: Path, threads: int, colour: bool = False) -> None:
+    def __init__(self, path: Path, threads: int) -> None:
         self.path = path
         self.threads = threads
         self.cap = self._open()
@@ -154,12 +148,6 @@ class _Capture:
         pixel_format = _fourcc(self.cap.get(cv2.CAP_PROP_CODEC_PIXEL_FORMAT))
         # Grey sources decode straight to one channel, skipping a BGR round trip.
         self.raw_grey = pixel_format in _GREY_PIXEL_FORMATS
-        self.jpeg_flag: int | None = None  # imdecode's flag when decoding packets
-        self._pending: deque | None = None  # packets being decoded ahead (start_ahead)
-        self._ahead_left = 0
-        self._pool: ThreadPoolExecutor | None = None
-        if self.codec in JPEG_CODECS:
-            self._use_packets(colour)
         self._apply_format()
         self.intra = self.codec in INTRA_CODECS
         count = self.cap.get(cv2.CAP_PROP_FRAME_COUNT)
@@ -183,40 +171,141 @@ class _Capture:
             )
         return cap
 
-    def _use_packets(self, colour: bool) -> None:
-        """Decode frames from the packets if the first packet decodes to FFmpeg's first
-        frame, within rounding; else keep FFmpeg's decoder. A packet that is not one
-        whole image (two interlaced fields, a codec variant) fails this check."""
-        ok, reference = self.cap.read()
-        self.cap.release()
-        self.cap = self._open()
-        if not ok or not self.cap.set(cv2.CAP_PROP_FORMAT, -1):
-            self.cap.release()
-            self.cap = self._open()
-            return
-        flag = (cv2.IMREAD_COLOR if colour else cv2.IMREAD_GRAYSCALE) | \
-            cv2.IMREAD_IGNORE_ORIENTATION  # as FFmpeg: no EXIF rotation
-        image = self._decode(flag)
-        if colour or reference.ndim == 2:
-            expected = reference
-        else:
-            expected = cv2.cvtColor(reference, cv2.COLOR_BGR2GRAY)
-        self.cap.release()
-        self.cap = self._open()
-        if (image is not None and image.shape == expected.shape and
-                cv2.absdiff(image, expected).mean() <= _PACKET_TOLERANCE):
-            self.jpeg_flag = flag
+    def _apply_format(self) -> None:
+        if self.raw_grey:
+            self.cap.set(cv2.CAP_PROP_CONVERT_RGB, 0)
 
-    def _decode(self, flag: int):
-        """The next packet decoded as a JPEG image, None at the end or for a damaged one."""
-        ok, packet = self.cap.read()
-        return _decode_jpeg(packet, flag) if ok else None
+    def reopen(self) -> None:
+        self.cap.release()
+        self.cap = self._open()
+        self._apply_format()
+
+    def read(self, out=None):
+        ok, frame = self.cap.read(out) if out is not None else self.cap.read()
+        return frame if ok else None
+
+    def grab(self) -> bool:
+        return bool(self.cap.grab())
+
+    def seek(self, index: int) -> bool:
+        """Seek by the container; True if OpenCV reports the position as reached."""
+        self.cap.set(cv2.CAP_PROP_POS_FRAMES, index)
+        return int(self.cap.get(cv2.CAP_PROP_POS_FRAMES)) == index
 
     def start_ahead(self, count: int) -> None:
-        """Decode the next ``count`` frames ahead, in threads, for the reads that follow
-        (MJPEG packets only; other codecs decode in order, in FFmpeg's own threads). Until
-        :meth:`stop_ahead`, only :meth:`read` may be called."""
-        if self.jpeg_flag is None or count < 2 or DECODE_THREADS < 2:
+        """FFmpeg decodes in order, in its own threads: nothing to start."""
+
+    def stop_ahead(self) -> int:
+        return 0
+
+    def close(self) -> None:
+        self.cap.release()
+
+
+class _Packets:
+    """MJPEG decoded from its packets: FFmpeg only demuxes (OpenCV's raw mode,
+    ``CAP_PROP_FORMAT = -1``), and libjpeg-turbo (``cv2.imdecode``) decodes a grey frame
+    from the JPEG's luma alone, skipping the chroma, the YUV→BGR conversion and the
+    BGR→grey one (3x faster, docs/benchmarks.md "End to end", and without their rounding:
+    the grey levels are the encoded ones). In a sequential read (:meth:`start_ahead`) the
+    next packets are decoded ahead in threads. A packet libjpeg refuses (damaged, cut off)
+    is decoded by FFmpeg, as before, through ``plain``, a capture of the same file.
+    Positions: :attr:`next` is the index of the next packet the capture reads."""
+
+    def __init__(self, plain: _Capture, colour: bool) -> None:
+        self.plain = plain
+        self.path, self.codec, self.intra = plain.path, plain.codec, plain.intra
+        self.raw_grey = False
+        self.container_frames, self.fps = plain.container_frames, plain.fps
+        self.flag = (cv2.IMREAD_COLOR if colour else cv2.IMREAD_GRAYSCALE) | \
+            cv2.IMREAD_IGNORE_ORIENTATION  # as FFmpeg: no EXIF rotation
+        self.cap: cv2.VideoCapture | None = None
+        self.next = 0
+        self._pending: deque | None = None  # (index, future) decoded ahead
+        self._ahead_left = 0
+        self._pool: ThreadPoolExecutor | None = None
+        self.usable = self._open_raw() and self._matches(colour)
+        if self.usable:
+            self.reopen()
+        elif self.cap is not None:
+            self.cap.release()
+
+    def _open_raw(self) -> bool:
+        self.cap = self.plain._open()
+        self.next = 0
+        return bool(self.cap.set(cv2.CAP_PROP_FORMAT, -1))
+
+    def _matches(self, colour: bool) -> bool:
+        """Whether packets are the frames: the first decodes to FFmpeg's first frame
+        within rounding (a packet of two interlaced fields, or a codec variant, does not),
+        and seeking lands on the packets read in order (OpenCV 5.0 seeks to packet 1 one
+        packet late: :meth:`seek` steps there; another version might err elsewhere)."""
+        reference = self.plain.read()
+        self.plain.seek(0)
+        packets = []
+        for _ in range(3):
+            ok, packet = self.cap.read()
+            if not ok:
+                break
+            packets.append(packet.tobytes())
+        if reference is None or not packets:
+            return False
+        image = _decode_jpeg(np.frombuffer(packets[0], np.uint8), self.flag)
+        expected = reference if colour or reference.ndim == 2 else \
+            cv2.cvtColor(reference, cv2.COLOR_BGR2GRAY)
+        if (image is None or image.shape != expected.shape
+                or cv2.absdiff(image, expected).mean() > _PACKET_TOLERANCE):
+            return False
+        for k in range(1, len(packets)):
+            self.seek(k)
+            ok, packet = self.cap.read()
+            if not ok or packet.tobytes() != packets[k]:
+                return False
+        return True
+
+    def _frame(self, index: int, image):
+        """Packet ``index`` as decoded, or by FFmpeg where libjpeg refused it."""
+        if image is not None:
+            return image
+        return self.plain.read() if self.plain.seek(index) else None
+
+    def read(self, out=None):
+        if self._pending is not None:
+            return self._next_ahead()
+        ok, packet = self.cap.read()
+        if not ok:
+            return None
+        self.next += 1
+        return self._frame(self.next - 1, _decode_jpeg(packet, self.flag))
+
+    def grab(self) -> bool:
+        if self._pending is not None:  # in order: take the next frame decoded ahead
+            return self._next_ahead() is not None
+        ok = bool(self.cap.grab())
+        self.next += ok
+        return ok
+
+    def seek(self, index: int) -> bool:
+        """Seek by the container; True if OpenCV reports the position as reached."""
+        self.stop_ahead()
+        if index == 1:  # OpenCV 5.0 lands on packet 2: go to 0 and step over one
+            self.cap.set(cv2.CAP_PROP_POS_FRAMES, 0)
+            self.cap.grab()
+        else:
+            self.cap.set(cv2.CAP_PROP_POS_FRAMES, index)
+        self.next = index
+        return int(self.cap.get(cv2.CAP_PROP_POS_FRAMES)) == index
+
+    def reopen(self) -> None:
+        self.stop_ahead()
+        self.cap.release()
+        self._open_raw()
+
+    def start_ahead(self, count: int) -> None:
+        """Decode the next ``count`` packets ahead, in threads, for the reads that follow
+        (``imdecode`` releases the GIL). Moving the capture (seek, reopen) drops them."""
+        self.stop_ahead()
+        if count < 2 or DECODE_THREADS < 2:
             return
         self._pool = ThreadPoolExecutor(DECODE_THREADS, thread_name_prefix="videotrack-decode")
         self._pending = deque()
@@ -232,52 +321,37 @@ class _Capture:
         self._pool = self._pending = None
         return left
 
-    def _read_ahead(self):
+    def _next_ahead(self):
         while self._ahead_left > 0 and len(self._pending) < _AHEAD_PER_THREAD * DECODE_THREADS:
             ok, packet = self.cap.read()  # demuxing only: cheap
             if not ok:
                 self._ahead_left = 0
                 break
-            self._pending.append(self._pool.submit(_decode_jpeg, packet, self.jpeg_flag))
+            future = self._pool.submit(_decode_jpeg, packet, self.flag)
+            self._pending.append((self.next, future))
+            self.next += 1
             self._ahead_left -= 1
-        return self._pending.popleft().result() if self._pending else None
-
-    def _apply_format(self) -> None:
-        if self.jpeg_flag is not None:
-            self.cap.set(cv2.CAP_PROP_FORMAT, -1)  # packets, not decoded frames
-        elif self.raw_grey:
-            self.cap.set(cv2.CAP_PROP_CONVERT_RGB, 0)
-
-    def reopen(self) -> None:
-        self.cap.release()
-        self.cap = self._open()
-        self._apply_format()
-
-    def read(self, out=None):
-        if self._pending is not None:
-            return self._read_ahead()
-        if self.jpeg_flag is not None:
-            return self._decode(self.jpeg_flag)
-        ok, frame = self.cap.read(out) if out is not None else self.cap.read()
-        return frame if ok else None
-
-    def grab(self) -> bool:
-        return bool(self.cap.grab())
-
-    def seek(self, index: int) -> bool:
-        """Seek by the container; True if OpenCV reports the position as reached."""
-        if index == 1 and self.jpeg_flag is not None:
-            # OpenCV 5.0 lands one packet late seeking to packet 1 (frame 2 next): go to 0
-            # and step over it (tests/videotrack/test_video.py reads every frame by seeking)
-            self.cap.set(cv2.CAP_PROP_POS_FRAMES, 0)
-            self.cap.grab()
-        else:
-            self.cap.set(cv2.CAP_PROP_POS_FRAMES, index)
-        return int(self.cap.get(cv2.CAP_PROP_POS_FRAMES)) == index
+        if not self._pending:
+            return None
+        index, future = self._pending.popleft()
+        return self._frame(index, future.result())
 
     def close(self) -> None:
         self.stop_ahead()
         self.cap.release()
+        self.plain.close()
+
+
+def _video_backend(path: Path, threads: int, colour: bool):
+    """The backend reading a video file: MJPEG from its packets where they are the frames,
+    else FFmpeg's decoder."""
+    plain = _Capture(path, threads)
+    if plain.codec in JPEG_CODECS:
+        packets = _Packets(plain, colour)
+        if packets.usable:
+            return packets
+        plain.reopen()
+    return plain
 
 
 def _decode_jpeg(packet, flag: int):
@@ -381,7 +455,7 @@ class VideoSource:
             raise VideoTrackError("no such file or folder", file=self.path)
         self.is_sequence = self.path.is_dir()
         self._backend = (_Sequence(self.path, self.colour) if self.is_sequence
-                         else _Capture(self.path, threads, self.colour))
+                         else _video_backend(self.path, threads, self.colour))
         self.broken_at: int | None = None
         self._seek_exact: bool | None = True if self._backend.intra else None
         self._pos = 0
@@ -482,8 +556,9 @@ class VideoSource:
                     index += 1
                     yield 0, self._first.copy()  # decoded at open: no seek back to the start
                     continue
-                if index != self._pos:
+                if index != self._pos:  # (also after a read elsewhere while paused)
                     self._seek(index)
+                    ahead = False  # a seek drops the frames decoded ahead
                 if not ahead:  # from here on every frame is read in order
                     self._backend.start_ahead(stop - index)
                     ahead = True
@@ -574,7 +649,7 @@ class VideoSource:
         return "image sequence" if self.is_sequence else self._backend.codec
 
     def _seek_sequential(self, index: int) -> None:
-        if index < self._pos:
+        if index < self._pos or self._pos < 0:  # behind, or position unknown
             self._backend.reopen()
             self._pos = 0
         while self._pos < index:

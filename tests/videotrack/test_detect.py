@@ -128,6 +128,27 @@ def test_generator_yields_per_record_and_can_be_closed(scene_video):
     gen.close()
 
 
+def test_opencv_runs_one_thread_while_detecting_and_gets_its_setting_back(scene_video):
+    import cv2
+
+    path, _, _ = scene_video
+    before = cv2.getNumThreads()
+    cv2.setNumThreads(3)
+    try:
+        settings = DetectSettings((LEFT,), THRESHOLD)
+        a = iter_detect(VideoSource(path), settings)
+        b = iter_detect(VideoSource(path), settings)
+        next(a)
+        next(b)  # two detections at once (the GUI's preview beside a run)
+        assert cv2.getNumThreads() == 1
+        a.close()
+        assert cv2.getNumThreads() == 1  # b still runs
+        list(b)
+        assert cv2.getNumThreads() == 3  # the last to end restores the setting
+    finally:
+        cv2.setNumThreads(before)
+
+
 def test_background_step_in_the_pipeline(tmp_path, video_writer):
     frames = [render_markers((40, 40), [(30.0, 30.0), (5 + 3 * i, 10.5)], 4.0)
               for i in range(9)]
