@@ -8,12 +8,12 @@ Video: ``videotrack synth`` renders the paper's locust hind leg (smooth random m
 sequences) in two orthographic views of 360 x 576 px side by side, 720 x 576 frames, pixel
 noise sigma = 2 grey levels. synth writes FFV1 (or PNG); the frames are re-encoded to MJPG at
 quality 95 by OpenCV's encoder as ``bench/bench_detection.py`` does (colour, as MJPG cameras
-record; FFmpeg decodes it). The project is the one synth writes (threshold 96, min_area 3).
+record). The project is the one synth writes (threshold 96, min_area 3).
 
 For each fitting setting, in one process after an untimed warm-up run (numba's cache loaded):
 
-- **decode**: every frame decoded (FFmpeg threads as the pipeline opens the video: FFmpeg
-  chooses) and converted to grey;
+- **decode**: every frame decoded to grey as the pipeline opens the video (MJPEG: its
+  packets decoded by libjpeg-turbo, ahead in threads; ``videotrack.video``);
 - **decode + detect**: ``detect_video`` over the whole video;
 - **fit**: ``Fitter.iter_fit`` over the detections, all numba threads;
 - **whole**: ``run_project(force=True)`` as ``videotrack run --force`` runs it: detect, save
