@@ -32,6 +32,8 @@ import itertools
 
 import numpy as np
 
+from kinematics._temporal_kernels import path_dp
+
 #: A transition costing more than this for every pair of candidates is a cut (5 spreads).
 BREAK_COST = 25.0
 #: The most one transition costs the path (2 spreads squared): beyond it a jump is a jump.
@@ -191,6 +193,33 @@ def _resumes(postures, t: int, back: int, size: float, scale, n_angles: int) -> 
     return any(a and b for a, b in itertools.pairwise(found))
 
 
+def _path_numpy(unary, trans, bounds, start0, use_start0, choice, cost) -> None:
+    """NumPy twin of :func:`kinematics._temporal_kernels.path_dp` (its test oracle): the
+    same arguments, the same outputs to the bit."""
+    for a, b in itertools.pairwise(bounds):
+        if not np.isfinite(unary[a]).any():
+            continue
+        # forward: least cost of a path ending at each candidate; backward: least cost of
+        # the rest of the stretch after it
+        ahead = [unary[a] + (start0 if a == 0 and use_start0 else 0.0)]
+        back = []
+        for t in range(a + 1, b):
+            step = ahead[-1][:, None] + trans[t]
+            arg = np.argmin(step, axis=0)
+            back.append(arg)
+            ahead.append(step[arg, np.arange(step.shape[1])] + unary[t])
+        rest = np.zeros(unary.shape[1])
+        for t in range(b - 1, a - 1, -1):
+            cost[t] = ahead[t - a] + rest
+            if t > a:
+                rest = np.min(trans[t] + (unary[t] + rest)[None, :], axis=1)
+        j = int(np.argmin(ahead[-1]))
+        choice[b - 1] = j
+        for t in range(b - 1, a, -1):
+            j = int(back[t - a - 1][j])
+            choice[t - 1] = j
+
+
 def choose_path(unary, postures, scale, n_angles: int, weight: float = 1.0,
                 breaks=None, anchor=None) -> np.ndarray:
     """One candidate per frame minimising the summed cost (module doc): the choice of
@@ -226,41 +255,25 @@ def solve_path(unary, postures, scale, n_angles: int, weight: float = 1.0,
     postures = np.asarray(postures, float)
     n = unary.shape[0]
     scale = np.asarray(scale, float)
-    choice = np.full(n, -1, np.int64)
-    cost = np.full(unary.shape, np.inf)
-    raw = [None, *transitions(postures, scale, n_angles)]
-    trans = [None] + [weight * np.minimum(c, JUMP_CAP) for c in raw[1:]]
+    raw = transitions(postures, scale, n_angles)  # (n - 1, K, K)
+    trans = np.zeros((n, *unary.shape[1:2] * 2))
+    trans[1:] = weight * np.minimum(raw, JUMP_CAP)
     cut = np.zeros(n, bool) if breaks is None else np.asarray(breaks, bool).copy()
     has = np.isfinite(unary).any(axis=1)
-    for t in range(n):
-        cut[t] |= (t == 0 or weight == 0 or not (has[t] and has[t - 1])
-                   or np.min(raw[t]) > BREAK_COST)
-    start0 = None
+    cut[:1] = True
+    if weight == 0:
+        cut[:] = True
+    elif n > 1:
+        cut[1:] |= ~(has[1:] & has[:-1]) | (raw.min(axis=(1, 2), initial=np.inf) > BREAK_COST)
+    start0 = np.zeros(unary.shape[1])
+    use_start0 = False
     if anchor is not None and weight > 0 and n and not (breaks is not None and breaks[0]):
         t0 = transition_costs(np.asarray(anchor, float)[None], postures[0], scale, n_angles)[0]
         if np.min(t0) <= BREAK_COST:
-            start0 = weight * np.minimum(t0, JUMP_CAP)
-    bounds = np.r_[np.flatnonzero(cut), n]
-    for a, b in itertools.pairwise(bounds):
-        if not has[a]:
-            continue
-        # forward: least cost of a path ending at each candidate; backward: least cost of
-        # the rest of the stretch after it
-        ahead = [unary[a] + (start0 if a == 0 and start0 is not None else 0.0)]
-        back = []
-        for t in range(a + 1, b):
-            step = ahead[-1][:, None] + trans[t]
-            arg = np.argmin(step, axis=0)
-            back.append(arg)
-            ahead.append(step[arg, np.arange(step.shape[1])] + unary[t])
-        rest = np.zeros(unary.shape[1])
-        for t in range(b - 1, a - 1, -1):
-            cost[t] = ahead[t - a] + rest
-            if t > a:
-                rest = np.min(trans[t] + (unary[t] + rest)[None, :], axis=1)
-        j = int(np.argmin(ahead[-1]))
-        choice[b - 1] = j
-        for t in range(b - 1, a, -1):
-            j = int(back[t - a - 1][j])
-            choice[t - 1] = j
+            start0, use_start0 = weight * np.minimum(t0, JUMP_CAP), True
+    bounds = np.r_[np.flatnonzero(cut), n].astype(np.int64)
+    choice = np.full(n, -1, np.int64)
+    cost = np.full(unary.shape, np.inf)
+    if unary.shape[1]:
+        path_dp(np.ascontiguousarray(unary), trans, bounds, start0, use_start0, choice, cost)
     return choice, np.where(np.isfinite(unary), cost, np.inf)

@@ -7,6 +7,7 @@ import threading
 import time
 
 import numpy as np
+import pytest
 
 from kinematics import _anneal_kernels as ak
 from kinematics.anneal import AnnealParams, Fitter
@@ -64,10 +65,12 @@ def test_main_thread_runs_while_one_annealing_run_goes_on(locust):
     assert gap < max(0.2, 0.3 * duration), (gap, duration)
 
 
-def test_main_thread_runs_while_a_video_is_fitted(locust):
+@pytest.mark.parametrize(("backend", "frames"), [("scalar", 120), ("lanes", 480)])
+def test_main_thread_runs_while_a_video_is_fitted(locust, backend, frames):
     cams = locust_cameras()
-    dets = planted(locust, cams, smooth_random_motion(locust, 120, 4, seed=3))
-    fitter = Fitter(locust, cams, AnnealParams.paper(epsilon=0.0, max_runs=1))
+    dets = planted(locust, cams, smooth_random_motion(locust, frames, 4, seed=3))
+    fitter = Fitter(locust, cams, AnnealParams.paper(epsilon=0.0, max_runs=1,
+                                                     backend=backend))
     fitter.fit(dets[:1])
     gap, duration = longest_stall(lambda: list(fitter.iter_fit(dets, chunk_size=len(dets))))
     assert duration > 0.3, "the fit was too short to tell"

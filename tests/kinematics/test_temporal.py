@@ -10,6 +10,7 @@ import numba
 import numpy as np
 import pytest
 
+from kinematics._temporal_kernels import path_dp
 from kinematics.anneal import AnnealParams, Candidate, Fitter
 from kinematics.cameras import OrthographicCamera
 from kinematics.fk import forward_kinematics
@@ -18,6 +19,7 @@ from kinematics.temporal import (
     BREAK_COST,
     JUMP_CAP,
     WRONG_STRETCH,
+    _path_numpy,
     choose_path,
     cuts,
     distinct,
@@ -698,3 +700,24 @@ def test_a_free_body_tracked_is_right_or_flagged():
              if np.abs(r.angles_deg - a).max() > 3.0]
     assert len(wrong) <= 12
     assert all(res[k].status in ("ambiguous", "failed") for k in wrong), wrong
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_path_kernel_equals_its_numpy_twin(seed):
+    """Frames without candidates, ties (integer costs), cuts and an anchor's start costs."""
+    rng = np.random.default_rng(seed)
+    n, k = int(rng.integers(1, 40)), int(rng.integers(1, 5))
+    unary = rng.integers(0, 4, (n, k)).astype(float)
+    unary[rng.random((n, k)) < 0.25] = np.inf
+    unary[rng.random(n) < 0.1] = np.inf  # whole frames without a candidate
+    trans = rng.integers(0, 5, (n, k, k)).astype(float)
+    cut = rng.random(n) < 0.15
+    cut[0] = True
+    bounds = np.r_[np.flatnonzero(cut), n].astype(np.int64)
+    start0, use = rng.integers(0, 3, k).astype(float), bool(seed % 2)
+    got = (np.full(n, -1, np.int64), np.full((n, k), np.inf))
+    want = (np.full(n, -1, np.int64), np.full((n, k), np.inf))
+    path_dp(unary, trans, bounds, start0, use, *got)
+    _path_numpy(unary, trans, bounds, start0, use, *want)
+    np.testing.assert_array_equal(got[0], want[0])
+    np.testing.assert_array_equal(got[1], want[1])
