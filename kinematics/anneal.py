@@ -1195,7 +1195,7 @@ class Fitter:
             if anchor is not None and choice[0] >= 0 and not breaks[0]:
                 jumps[0] = temporal.transition_costs(anchor[None], post[0, choice[0]][None],
                                                      scale, n_angles)[0, 0]
-            if len(window) > 1:  # every step of the chosen path in one array operation
+            if len(window) > 1 and post.shape[1]:  # every step of the path at once
                 chosen = post[np.arange(len(window)), np.maximum(choice, 0)][:, None]
                 steps = temporal.transition_costs(chosen[:-1], chosen[1:], scale,
                                                   n_angles)[:, 0, 0]

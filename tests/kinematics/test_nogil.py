@@ -65,7 +65,7 @@ def test_main_thread_runs_while_one_annealing_run_goes_on(locust):
     assert gap < max(0.2, 0.3 * duration), (gap, duration)
 
 
-@pytest.mark.parametrize(("backend", "frames"), [("scalar", 120), ("lanes", 480)])
+@pytest.mark.parametrize(("backend", "frames"), [("scalar", 120), ("lanes", 1200)])
 def test_main_thread_runs_while_a_video_is_fitted(locust, backend, frames):
     cams = locust_cameras()
     dets = planted(locust, cams, smooth_random_motion(locust, frames, 4, seed=3))
