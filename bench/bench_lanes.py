@@ -193,7 +193,7 @@ def main(argv=None) -> int:
                      goal))
     numba.set_num_threads(args.threads)
     short = paper.with_schedule(5000)
-    for ghosts in (10, 30, 100):  # enough frames to fill every lane
+    for ghosts in (10, 20, 30, 100):  # enough frames to fill every lane
         d = detections(locust, cams, truth, ghosts - 4, seed=1)
         s, lane, ok = per_iteration(locust, cams, d, short, 1, args.threads)
         rows.append((f"locust, 2 views, {ghosts} detections per view: ns per iteration",

@@ -58,10 +58,12 @@ _INLINED = _kernels_digest()
 #: this many marker images (markers × views).
 MAX_IMAGES = 256
 
-#: ... and up to this many detections in a view: beyond, LLVM no longer unrolls the scan
-#: over them, and a loop inside the loop over lanes keeps that loop scalar (the locust, one
-#: thread, ns per iteration generated / general: 16 detections 73 / 112, 20: 270 / 113).
-MAX_DETECTIONS = 16
+#: ... and up to this many detections in a view: beyond, LLVM no longer unrolls the scans
+#: over them (:data:`SCAN_CHUNK`), and a loop inside the loop over lanes keeps that loop
+#: scalar (the locust, one thread, ns per iteration generated / general: 16 detections
+#: 64 / 102, 20: 66 / 112, 24: 72 / 121, 28: 79 / 129, 32: 376 / 138; in one loop of 20
+#: detections, as before the chunks: 270 / 113).
+MAX_DETECTIONS = 28
 
 _lock = threading.Lock()
 _loaded: dict[str, object] = {}
@@ -253,6 +255,18 @@ def _project(code: _Code, cams, v: int, x):
             code.let(f"{code.term(w)} if {front} else {nan}"))
 
 
+#: The scan over a view's detections is written as loops of at most this many detections:
+#: LLVM unrolls a loop of a constant count up to about 16, and keeps a longer one a loop,
+#: which keeps the loop over lanes around it scalar. (Chunks of 8 did worse: 24 detections
+#: as three loops of 8 stayed scalar, 273 ns, as 16 + 8 not, 72 ns; why, not found.)
+SCAN_CHUNK = 16
+
+
+def _scans(n_det: int) -> list[tuple[int, int]]:
+    """[first, end) of each loop scanning ``n_det`` detections, in order."""
+    return [(c, min(c + SCAN_CHUNK, n_det)) for c in range(0, n_det, SCAN_CHUNK)]
+
+
 def _error(code: _Code, images, n_det: int, error) -> str:
     """E of one lane (the scalar ``projection_error`` without one-to-one and hidden marks)
     from ``images[v][m]``, the marker images, against ``n_det`` detections per view (the
@@ -274,27 +288,29 @@ def _error(code: _Code, images, n_det: int, error) -> str:
         out.append(f"{ev} = {zero}")
         for m, (pu, pw) in enumerate(view):
             b, a = f"b{v}_{m}", f"a{v}_{m}"
-            out += [f"{b} = {inf}", f"{a} = {none}",
-                    f"for c in range({n_det}):",
-                    f"    ex = {code.term(pu)} - {dx}[{v}, c, ln]",
-                    f"    ey = {code.term(pw)} - {dy}[{v}, c, ln]",
-                    "    d2 = ex * ex + ey * ey",
-                    f"    closer = d2 < {b}",
-                    f"    {b} = d2 if closer else {b}",
-                    f"    {a} = {this} if closer else {a}",
-                    f"d = np.sqrt({b}) if {a} >= 0 else {missing}",
+            out += [f"{b} = {inf}", f"{a} = {none}"]
+            for first, end in _scans(n_det):
+                out += [f"for c in range({first}, {end}):",
+                        f"    ex = {code.term(pu)} - {dx}[{v}, c, ln]",
+                        f"    ey = {code.term(pw)} - {dy}[{v}, c, ln]",
+                        "    d2 = ex * ex + ey * ey",
+                        f"    closer = d2 < {b}",
+                        f"    {b} = d2 if closer else {b}",
+                        f"    {a} = {this} if closer else {a}"]
+            out += [f"d = np.sqrt({b}) if {a} >= 0 else {missing}",
                     f"{ev} = {ev} + min(d, {lit(cap)})"]
         if bidirectional:
-            out += [f"for c in range({n_det}):", f"    near = {inf}"]
-            for pu, pw in view:
-                out += [f"    ex = {code.term(pu)} - {dx}[{v}, c, ln]",
-                        f"    ey = {code.term(pw)} - {dy}[{v}, c, ln]",
-                        "    near = min(near, ex * ex + ey * ey)"]
             matched = " | ".join(f"({f'a{v}_{m}'} == c)" for m in range(len(view)))
-            out += [f"    add = (not ({matched})) & (c < ndet[{v}, ln])",
-                    f"    d = np.sqrt(near) if near < {inf} else {missing}",
-                    f"    {ev} = {ev} + {lit(weight)} * min(d, {lit(penalty_cap)}) "
-                    f"if add else {ev}"]
+            for first, end in _scans(n_det):
+                out += [f"for c in range({first}, {end}):", f"    near = {inf}"]
+                for pu, pw in view:
+                    out += [f"    ex = {code.term(pu)} - {dx}[{v}, c, ln]",
+                            f"    ey = {code.term(pw)} - {dy}[{v}, c, ln]",
+                            "    near = min(near, ex * ex + ey * ey)"]
+                out += [f"    add = (not ({matched})) & (c < ndet[{v}, ln])",
+                        f"    d = np.sqrt(near) if near < {inf} else {missing}",
+                        f"    {ev} = {ev} + {lit(weight)} * min(d, {lit(penalty_cap)}) "
+                        f"if add else {ev}"]
         total = code.let(f"{total} + ({ev} if ndet[{v}, ln] > 0 else {zero})")
     return total
 

@@ -86,15 +86,16 @@ def _lanes(pr, n_lanes, c_cap, rng):
     return (cand, rot, pos, dx, dy, dx32, dy32, ndet), scalar
 
 
-@pytest.mark.parametrize(("kind", "error"), [
-    ("locust", (False, 0.0, np.inf, np.inf)),  # the paper's Eq. 5
-    ("locust, offsets after the joints", (True, 0.5, 10.0, 10.0)),  # the defaults' error
-    ("free root, distorted pinholes", (True, 1.0, np.inf, 20.0)),
-    ("free root, distorted pinholes", (False, 0.0, 10.0, 10.0))])
-def test_generated_error_equals_the_scalar_kernel(kind, error):
+@pytest.mark.parametrize(("kind", "error", "c_cap"), [
+    ("locust", (False, 0.0, np.inf, np.inf), 9),  # the paper's Eq. 5
+    ("locust, offsets after the joints", (True, 0.5, 10.0, 10.0), 9),  # the defaults' error
+    ("locust", (True, 0.5, 10.0, 10.0), 21),  # 24 detections: scans of 16 and 8
+    ("free root, distorted pinholes", (True, 1.0, np.inf, 20.0), 9),
+    ("free root, distorted pinholes", (False, 0.0, 10.0, 10.0), 9)])
+def test_generated_error_equals_the_scalar_kernel(kind, error, c_cap):
+    """c_cap 9 is padded to 12: padding and lanes with fewer (or no) detections."""
     pr = _problem(kind)
     rng = np.random.default_rng(3)
-    c_cap = 9  # padded to 12: padding and lanes with fewer (or no) detections
     args, scalar = _lanes(pr, 37, c_cap, rng)
     e = np.empty(37)
     _lk.call_fused(cg.fused_kernel(pr.folded, pr.cams, c_cap, error), *args, e)
