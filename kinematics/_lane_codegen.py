@@ -13,7 +13,9 @@ with a literal 0 or 1 is left out (folded joints have many: identity rotations, 
 along one axis, orthographic views that drop a coordinate). Leaving out ``x · 0`` and
 ``x + 0`` changes nothing for finite values but the sign of a zero, so E and the angles
 are the scalar kernel's to the last bit (tests/kinematics/test_lane_codegen.py) wherever the
-postures and roots are finite (a NaN root makes every marker NaN in both).
+postures and roots are finite (a NaN root makes every marker NaN in both). The float32
+variant (``single``, precision "float32") is the exception: the same code in float32, within
+float32 rounding of the scalar kernel's E.
 
 The number of detections per view is a constant of the generated code too (the lanes'
 detections padded with :data:`kinematics._lane_kernels.PAD`), so the scan over them is

@@ -280,8 +280,9 @@ class AnnealParams:
     precision: str = setting(
         "float64", "What the lanes' generated kernels compute E in: 'float64' gives the "
         "scalar kernel's results to the last bit; 'float32' is faster, but its results only "
-        "match to within float32 rounding (docs/fitting.md, 'Backends', gives both accuracy "
-        "tables). The scalar kernel and the lanes' general loops always use float64.",
+        "match to within float32 rounding (docs/fitting.md, 'Backends'; docs/benchmarks.md, "
+        "'Lanes', has its accuracy table). The scalar kernel and the lanes' general loops "
+        "always use float64.",
         choices=PRECISIONS)
 
     def __post_init__(self) -> None:

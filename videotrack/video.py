@@ -52,7 +52,7 @@ INTRA_CODECS = frozenset(
 _GREY_PIXEL_FORMATS = frozenset({"Y800", "GREY", "Y8  ", "GRAY"})
 
 #: Codecs (FOURCC, lower case) whose packets are whole JPEG images: their frames are decoded
-#: from the packets by OpenCV's libjpeg-turbo (:meth:`_Capture._use_packets`).
+#: from the packets by OpenCV's libjpeg-turbo (:class:`_Packets`).
 JPEG_CODECS = frozenset({"mjpg"})  # OpenCV names MJPEG so in AVI, MOV and MP4 alike
 
 #: A packet's decode may differ from FFmpeg's by rounding (the colour conversion, in grey
@@ -438,8 +438,8 @@ class VideoSource:
     fps : float, optional
         Frame rate overriding the container's (image sequences default to 25).
     threads : int
-        FFmpeg decoding threads; 0 lets FFmpeg choose (MJPEG is decoded from its packets, in
-        the reading thread).
+        FFmpeg decoding threads; 0 lets FFmpeg choose (MJPEG is decoded from its packets by
+        libjpeg-turbo instead, in :data:`DECODE_THREADS` threads during sequential reads).
 
     Raises
     ------
