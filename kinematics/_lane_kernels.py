@@ -390,12 +390,13 @@ def iterate_lanes(n_iter, free_idx, n_hist, step, hist, nbins, th, runs, n_runs,
                   max_redraws, n_end, n_l, n_tau, c_l, c_tau, eps, active, rs, it, tau,
                   length, to_tau, to_l, e_cur, e_best, cur, cand, best, cs, sn, body, cams, dx,
                   dy, ndet, cmax, bidirectional, weight, cap, penalty_cap, rot, pos, mk, proj,
-                  nearest, e, fused, use_fused):
+                  nearest, e, fused, use_fused, single):
     """Anneal every lane (scalar ``anneal_chain``'s iteration, per lane) until an active lane
     has finished (``it >= n_end`` or best E below ``eps``) or ``n_iter`` iterations passed.
     Inactive lanes compute but change nothing that is read back. With ``use_fused`` the
     candidates' E comes from ``fused``, a kernel generated for the body
-    (:mod:`kinematics._lane_codegen`), instead of the general loops."""
+    (:mod:`kinematics._lane_codegen`), instead of the general loops; ``single``: that
+    kernel computes in float32 and reads the detections' float32 copies."""
     (parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index, joint_flags,
      marker_joint, marker_local, slide_index) = body
     kind, P, K, dist, R, t = cams
@@ -418,9 +419,10 @@ def iterate_lanes(n_iter, free_idx, n_hist, step, hist, nbins, th, runs, n_runs,
     cand_bits = cand.view(np.uint64)
     best_bits = best.view(np.uint64)
     # the detections in float32, for a float32 kernel: they change only between calls
-    dx32 = np.empty(dx.shape if use_fused else (0, 0, 0), np.float32)
+    convert = use_fused and single
+    dx32 = np.empty(dx.shape if convert else (0, 0, 0), np.float32)
     dy32 = np.empty(dx32.shape, np.float32)
-    if use_fused:
+    if convert:
         dx32[:] = dx
         dy32[:] = dy
     done = False
@@ -601,7 +603,7 @@ def _kept_lanes(active, queue_empty):
 # -- the frame procedure (fit_frames' runs, re-analysis and candidates) ----------------------
 @njit(parallel=True, **_OPTS)
 def fit_frames_lanes(group_off, frame_ids, root_pos, root_rot, start, body, cams, dofs,
-                     schedule, error, obs, claim_gate, n_lanes, fused, n_fused, out):
+                     schedule, error, obs, claim_gate, n_lanes, fused, n_fused, single, out):
     """Fit many frames, their runs packed into lanes: the scalar ``fit_frames`` for
     independent frames (``start_previous`` false, one partition, unlabelled points), with the
     same outputs to the last bit. Frames ``group_off[g]:group_off[g + 1]`` are fitted by one
@@ -609,15 +611,16 @@ def fit_frames_lanes(group_off, frame_ids, root_pos, root_rot, start, body, cams
     partitions' (detections farther from every marker are unexplained); every other argument
     is ``fit_frames``'. ``fused`` is the body's generated kernel (:func:`iterate_lanes`) and
     ``n_fused`` the detections per view it scans (at least every frame's), or ``no_fused``
-    and 0 for the general loops."""
+    and 0 for the general loops; ``single``: the kernel is float32."""
     for g in prange(group_off.shape[0] - 1):
         _fit_group(group_off[g], group_off[g + 1], frame_ids, root_pos, root_rot, start, body,
-                   cams, dofs, schedule, error, obs, claim_gate, n_lanes, fused, n_fused, out)
+                   cams, dofs, schedule, error, obs, claim_gate, n_lanes, fused, n_fused, single,
+                   out)
 
 
 @njit(**_OPTS)
 def _fit_group(f0, f1, frame_ids, root_pos, root_rot, start, body, cams, dofs, schedule,
-               error, obs, claim_gate, nl, fused, n_fused, out):
+               error, obs, claim_gate, nl, fused, n_fused, single, out):
     (parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index, joint_flags,
      marker_joint, marker_local, slide_index) = body
     kind, P, K, dist, R, t = cams
@@ -825,4 +828,4 @@ def _fit_group(f0, f1, frame_ids, root_pos, root_rot, start, body, cams, dofs, s
                       lo, hi, max_redraws, n_end, n_l, n_tau, c_l, c_tau, eps, active, rs, it, tau,
                       length, to_tau, to_l, e_cur, e_best, cur, cand, best, cs, sn, body,
                       cams, dx, dy, ndet, cmax, bidirectional, weight, cap,
-                      penalty_cap, rot, pos, mk, proj, nearest, e, fused, n_fused > 0)
+                      penalty_cap, rot, pos, mk, proj, nearest, e, fused, n_fused > 0, single)

@@ -874,10 +874,11 @@ class Fitter:
             threads = numba.get_num_threads()
             groups = np.unique(np.linspace(0, n, min(threads, n) + 1).astype(np.int64))
             error = self._error_args(p, arrays.objective)
-            fused, n_fused = self._fused_kernel(arrays, error, p.precision == "float32")
+            single = p.precision == "float32"
+            fused, n_fused = self._fused_kernel(arrays, error, single)
             _lk.fit_frames_lanes(groups, frame_ids, roots, rots, start, pr.folded, pr.cams,
                                  pr.dofs, schedule_of(p), error, arrays,
-                                 float(p.claim_gate_px), _lk.LANES, fused, n_fused, out)
+                                 float(p.claim_gate_px), _lk.LANES, fused, n_fused, single, out)
         else:
             _ak.fit_frames(seg_off, frame_ids, roots, rots, start, pr.folded, cams,
                            pr.dofs, schedule_of(p), self._error_args(p, arrays.objective),
@@ -934,8 +935,8 @@ class Fitter:
         return fn, _codegen.padded_detections(c_cap)
 
     def lane_frames(self) -> int:
-        """Frames a block needs for backend 'auto' to fit it in lanes (where they are
-        valid): enough runs to fill the lanes of every numba thread."""
+        """Frames whose runs fill the lanes of every numba thread once (the pipeline hands
+        the fitting thread blocks of a few times this)."""
         return -(-_lk.LANES * numba.get_num_threads() // max(1, self.params.candidates))
 
     @staticmethod

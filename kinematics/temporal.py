@@ -256,7 +256,8 @@ def solve_path(unary, postures, scale, n_angles: int, weight: float = 1.0,
     n = unary.shape[0]
     scale = np.asarray(scale, float)
     raw = transitions(postures, scale, n_angles)  # (n - 1, K, K)
-    trans = np.zeros((n, *unary.shape[1:2] * 2))
+    k = unary.shape[1]
+    trans = np.zeros((n, k, k))
     trans[1:] = weight * np.minimum(raw, JUMP_CAP)
     cut = np.zeros(n, bool) if breaks is None else np.asarray(breaks, bool).copy()
     has = np.isfinite(unary).any(axis=1)
@@ -274,6 +275,6 @@ def solve_path(unary, postures, scale, n_angles: int, weight: float = 1.0,
     bounds = np.r_[np.flatnonzero(cut), n].astype(np.int64)
     choice = np.full(n, -1, np.int64)
     cost = np.full(unary.shape, np.inf)
-    if unary.shape[1]:
+    if k:
         path_dp(np.ascontiguousarray(unary), trans, bounds, start0, use_start0, choice, cost)
     return choice, np.where(np.isfinite(unary), cost, np.inf)

@@ -399,8 +399,8 @@ def fit_project(
 
 
 #: Records handed to the fitting thread at a time while detecting; None: four times as many
-#: as fill the lanes of every thread (:meth:`Fitter.lane_frames`). 64 did not fill them on 2
-#: threads, so the streamed fit ran on the scalar kernel, 2-2.5x slower than the lanes; 128
+#: as fill the lanes of every thread (:meth:`Fitter.lane_frames`). 64 (when 'auto' wanted
+#: full lanes) left the streamed fit to the scalar kernel, 2-2.5x slower than the lanes; 128
 #: filled them once, and each block's last runs and re-analyses ran in half-empty lanes
 #: (2 threads, docs/benchmarks.md "End to end": Table 1 schedule 576 frames/s with 128,
 #: 734 with 256, 696 with 512; short schedule 897, 1038, 1084).

@@ -66,6 +66,15 @@ def test_branch_free_sincos_is_the_branching_one_to_the_bit():
     np.testing.assert_array_equal(c, ref[:, 1])
 
 
+def test_float32_sincos_is_within_two_float32_ulp():
+    x = np.random.default_rng(1).uniform(-1000.0, 1000.0, 20000)
+    got = np.array([_ak.sincos32(v) for v in x], dtype=float)
+    xf = x.astype(np.float32).astype(float)  # the kernel's input, rounded to float32
+    for k, true in enumerate((np.sin(xf), np.cos(xf))):
+        ulp = np.spacing(np.abs(true).astype(np.float32)).astype(float)
+        assert np.all(np.abs(got[:, k] - true) <= 2.0 * ulp)
+
+
 def test_paper_profile_identical(locust):
     truth = smooth_random_motion(locust, 20, 1, seed=4)
     dets = planted(locust, locust_cameras(), truth, ghosts=1)
@@ -108,7 +117,7 @@ def _kernel_outputs(fitter, dets, n_lanes, groups, generated=True, single=False)
         (_lk.no_fused, 0)
     _lk.fit_frames_lanes(np.asarray(groups, np.int64), idx, roots, rots, pr.start, pr.folded,
                          pr.cams, pr.dofs, schedule_of(p), error, arrays,
-                         float(p.claim_gate_px), n_lanes, fused, n_fused, out)
+                         float(p.claim_gate_px), n_lanes, fused, n_fused, single, out)
     return out
 
 
@@ -195,6 +204,9 @@ def test_bad_backend_is_named():
     with pytest.raises(KinematicsError) as err:
         AnnealParams(backend="gpu")
     assert err.value.field == "backend"
+    with pytest.raises(KinematicsError) as err:
+        AnnealParams(precision="float16")
+    assert err.value.field == "precision"
 
 
 def test_choice_over_time_does_not_depend_on_chunk_size(locust):
