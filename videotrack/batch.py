@@ -42,6 +42,7 @@ import numpy as np
 
 from kinematics.errors import LocatedError
 from kinematics.fileio import atomic_write_text
+from videotrack.cores import available_cores
 from videotrack.errors import VideoTrackError, VideoTrackWarning
 from videotrack.project import Project, Trial, TrialOutputs, trial_outputs
 from videotrack.tables import text_table
@@ -102,14 +103,6 @@ class TrialReport:
     steps: tuple[str, ...] = ()
     log: tuple[str, ...] = ()
     warnings: tuple[str, ...] = ()
-
-
-def available_cores() -> int:
-    """CPU cores this process may use."""
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # not on Linux
-        return os.cpu_count() or 1
 
 
 # -- one trial --------------------------------------------------------------------------------

@@ -32,6 +32,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from videotrack.cores import available_cores
 from videotrack.errors import VideoTrackError, VideoTrackWarning
 
 # Silence FFmpeg's own console messages (e.g. on truncated files): problems are reported as
@@ -62,7 +63,7 @@ _PACKET_TOLERANCE = 3.0
 
 #: Threads decoding MJPEG packets ahead of a sequential read (libjpeg-turbo releases the
 #: GIL), and packets each keeps in flight.
-DECODE_THREADS = max(1, min(4, os.cpu_count() or 1))
+DECODE_THREADS = min(4, available_cores())
 _AHEAD_PER_THREAD = 2
 
 #: Highest frame index used to check that seeking is exact on codecs with inter frames.

@@ -1,5 +1,8 @@
 """Video input: files, image sequences, random access, truncation, bad files, sync."""
 
+import os
+import subprocess
+import sys
 import warnings
 
 import cv2
@@ -278,3 +281,14 @@ def test_frame_ranges():
         assert resolve_frames("5:50", 10) == range(5, 10)
     with pytest.raises(VideoTrackError, match="starts at 12"):
         resolve_frames("12:", 10)
+
+
+@pytest.mark.skipif(not hasattr(os, "sched_setaffinity"), reason="CPU affinity is Linux's")
+def test_decode_threads_follow_the_cpu_affinity_not_the_machine():
+    # a container or taskset may allow one core of many: the decoder must not start four
+    code = ("import os; os.sched_setaffinity(0, {min(os.sched_getaffinity(0))}); "
+            "import videotrack.video as v; from videotrack.batch import available_cores; "
+            "print(v.DECODE_THREADS, available_cores())")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout.split()
+    assert out == ["1", "1"]
