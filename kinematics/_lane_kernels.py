@@ -42,8 +42,10 @@ Layout (``L = LANES``): state ``cur``, ``cand``, ``best``, ``cs``, ``sn`` (n_sta
 ``rot`` (nj + n_chains, 9, L) row-major A'_j and the roots' seed rotations; ``pos``
 (nj + n_chains, 3, L); ``mk`` (nm, 3, L); ``proj``
 (nv, nm, 2, L); detections ``dx``, ``dy`` (nv, c_max, L), padded with :data:`PAD` beyond the
-lane's own ``ndet`` (nv, L). The supported problems are those ``Fitter._use_lanes`` accepts
-(unlabelled points, one partition, independent frames); the scalar kernel does the rest.
+lane's own ``ndet`` (nv, L); for labelled keypoints row i is marker i's keypoint, of weight
+``dw`` (nv, c_max, L). The supported problems are those ``Fitter._use_lanes`` accepts
+(unlabelled points or labelled 2D keypoints, one partition, independent frames); the scalar
+kernel does the rest.
 """
 
 from __future__ import annotations
@@ -53,6 +55,7 @@ from numba import cfunc, njit, prange, types
 
 from kinematics._anneal_kernels import (
     NAN_MARKER_COST,
+    OBJ_LABELLED,
     ROOT_POSE,
     clear_frame,
     evaluate,
@@ -354,6 +357,36 @@ def error_lanes(proj, dx, dy, ndet, cmax, bidirectional, weight, cap, penalty_ca
             out[ln] += ev[ln] if ndet[v, ln] > 0 else 0.0
 
 
+@njit(inline="always", **_OPTS)
+def labelled_lanes(proj, dx, dy, dw, ndet, cap, ev, out):
+    """Labelled E of every lane (the scalar ``labelled_error``, same operations in the same
+    order) into ``out``: model marker i of view v against its own keypoint ``dx, dy [v, i]``
+    of weight ``dw [v, i]``; a view's keypoints are the model markers in order, or none
+    (``ndet``); a keypoint not finite or of weight <= 0 costs nothing. ``ev`` is scratch."""
+    nv = proj.shape[0]
+    nm = proj.shape[1]
+    missing = cap if cap < np.inf else NAN_MARKER_COST
+    nl = out.shape[0]
+    for ln in range(nl):
+        out[ln] = 0.0
+    for v in range(nv):
+        for ln in range(nl):
+            ev[ln] = 0.0
+        for i in range(nm):
+            for ln in range(nl):
+                w = dw[v, i, ln]
+                kx = dx[v, i, ln]
+                ky = dy[v, i, ln]
+                ex = proj[v, i, 0, ln] - kx
+                ey = proj[v, i, 1, ln] - ky
+                d = np.sqrt(ex * ex + ey * ey)
+                add = w * min(d if np.isfinite(d) else missing, cap)
+                use = (ndet[v, ln] == nm) & (w > 0.0) & np.isfinite(kx) & np.isfinite(ky)
+                ev[ln] = ev[ln] + (add if use else 0.0)  # + 0.0 leaves a sum >= 0 as it is
+        for ln in range(nl):
+            out[ln] += ev[ln]
+
+
 # -- the annealing iterations of all lanes ---------------------------------------------------
 #: A histogram whose bins above the threshold form at most this many runs is tested by
 #: comparing the bin with the runs' ends (vectorised) instead of looking the bin up (a
@@ -390,13 +423,14 @@ def iterate_lanes(n_iter, free_idx, n_hist, step, hist, nbins, th, runs, n_runs,
                   max_redraws, n_end, n_l, n_tau, c_l, c_tau, eps, active, rs, it, tau,
                   length, to_tau, to_l, e_cur, e_best, cur, cand, best, cs, sn, body, cams, dx,
                   dy, ndet, cmax, bidirectional, weight, cap, penalty_cap, rot, pos, mk, proj,
-                  nearest, e, fused, use_fused, single):
+                  nearest, e, fused, use_fused, single, labelled, dw):
     """Anneal every lane (scalar ``anneal_chain``'s iteration, per lane) until an active lane
     has finished (``it >= n_end`` or best E below ``eps``) or ``n_iter`` iterations passed.
     Inactive lanes compute but change nothing that is read back. With ``use_fused`` the
     candidates' E comes from ``fused``, a kernel generated for the body
     (:mod:`kinematics._lane_codegen`), instead of the general loops; ``single``: that
-    kernel computes in float32 and reads the detections' float32 copies."""
+    kernel computes in float32 and reads the detections' float32 copies. ``labelled``:
+    the detections are labelled keypoints of weights ``dw`` (:func:`labelled_lanes`)."""
     (parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index, joint_flags,
      marker_joint, marker_local, slide_index) = body
     kind, P, K, dist, R, t = cams
@@ -497,8 +531,11 @@ def iterate_lanes(n_iter, free_idx, n_hist, step, hist, nbins, th, runs, n_runs,
             project_lanes(cand, cs, sn, parent, chain, pre_rot, pre_trans, post_trans,
                           elem_axis, elem_index, joint_flags, marker_joint, marker_local,
                           slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj)
-            error_lanes(proj, dx, dy, ndet, cmax, bidirectional, weight, cap, penalty_cap,
-                        nearest, ev, dmin, arg, matched, near, e)
+            if labelled:
+                labelled_lanes(proj, dx, dy, dw, ndet, cap, ev, e)
+            else:
+                error_lanes(proj, dx, dy, ndet, cmax, bidirectional, weight, cap,
+                            penalty_cap, nearest, ev, dmin, arg, matched, near, e)
         for ln in range(nl):
             acc = (e[ln] <= e_cur[ln]) | (e[ln] < e_acc[ln])
             accept[ln] = acc
@@ -639,7 +676,8 @@ def _fit_group(f0, f1, frame_ids, root_pos, root_rot, start, body, cams, dofs, s
     while n_hist < free_idx.shape[0] and dof_kind[free_idx[n_hist]] == 0:
         n_hist += 1
     runs, n_runs = allowed_runs(hist, nbins, th)
-    c_cap = max(1, n_fused)
+    labelled = objective == OBJ_LABELLED
+    c_cap = max(1, n_fused, nm if labelled else 0)  # labelled: keypoint i is marker i's
     for f in range(f0, f1):
         for v in range(nv):
             c_cap = max(c_cap, det_off[f * nv + v + 1] - det_off[f * nv + v])
@@ -657,6 +695,7 @@ def _fit_group(f0, f1, frame_ids, root_pos, root_rot, start, body, cams, dofs, s
     e = np.empty(nl)
     dx = np.full((nv, c_cap, nl), PAD)
     dy = np.full((nv, c_cap, nl), PAD)
+    dw = np.zeros((nv, c_cap, nl) if labelled else (nv, 0, nl))  # keypoints' weights
     ndet = np.zeros((nv, nl), np.int64)
     cmax = np.zeros(nv, np.int64)
     active = np.zeros(nl, np.bool_)
@@ -722,6 +761,9 @@ def _fit_group(f0, f1, frame_ids, root_pos, root_rot, start, body, cams, dofs, s
                     for c in range(c_cap):
                         dx[v, c, ln] = det_points[a + c, 0] if c < b - a else PAD
                         dy[v, c, ln] = det_points[a + c, 1] if c < b - a else PAD
+                    if labelled:
+                        for c in range(c_cap):
+                            dw[v, c, ln] = det_conf[a + c] if c < b - a else 0.0
                 for j in range(nj):  # the roots' slots (project_lanes)
                     if parent[j] < 0:
                         c = chain[j]
@@ -817,6 +859,7 @@ def _fit_group(f0, f1, frame_ids, root_pos, root_rot, start, body, cams, dofs, s
             rot, pos, mk = _take3(rot, keep), _take3(pos, keep), _take3(mk, keep)
             proj = _take4(proj, keep)
             dx, dy, ndet = _take3(dx, keep), _take3(dy, keep), _take2(ndet, keep)
+            dw = _take3(dw, keep)
             e, active, rs, it = _take1(e, keep), _take1(active, keep), _take1(rs, keep), \
                 _take1(it, keep)
             tau, length = _take1(tau, keep), _take1(length, keep)
@@ -828,4 +871,5 @@ def _fit_group(f0, f1, frame_ids, root_pos, root_rot, start, body, cams, dofs, s
                       lo, hi, max_redraws, n_end, n_l, n_tau, c_l, c_tau, eps, active, rs, it, tau,
                       length, to_tau, to_l, e_cur, e_best, cur, cand, best, cs, sn, body,
                       cams, dx, dy, ndet, cmax, bidirectional, weight, cap,
-                      penalty_cap, rot, pos, mk, proj, nearest, e, fused, n_fused > 0, single)
+                      penalty_cap, rot, pos, mk, proj, nearest, e, fused, n_fused > 0, single,
+                      labelled, dw)

@@ -920,7 +920,8 @@ class Fitter:
         ``single``: a kernel computing in float32 (precision 'float32')."""
         counts = np.diff(arrays.offsets)
         c_cap = int(counts.max()) if counts.size else 0
-        if os.environ.get("VIDEOTRACK_NO_CODEGEN") or not _codegen.fits(
+        if arrays.objective != _ak.OBJ_NEAREST or os.environ.get(
+                "VIDEOTRACK_NO_CODEGEN") or not _codegen.fits(
                 self.problem.folded, self.problem.cams, c_cap):
             return _lk.no_fused, 0
         try:
@@ -943,18 +944,20 @@ class Fitter:
     def _use_lanes(p: AnnealParams, objective: int, parts, n_frames: int, *,
                    hidden: bool = False) -> bool:
         """Whether the lane kernel fits this block: it does what the scalar kernel does for
-        unlabelled points, one partition and independent frames, without markers marked
-        hidden (``hidden``); 'auto' also wants a few runs per thread
+        unlabelled points or labelled 2D keypoints, one partition and independent frames,
+        without markers marked hidden (``hidden``); 'auto' also wants a few runs per thread
         (:data:`kinematics._lane_kernels.MIN_RUNS_PER_THREAD`: a single frame, as the GUI
         fits, goes to the scalar kernel)."""
-        valid = (objective == _ak.OBJ_NEAREST and parts.bounds.shape[0] == 1
+        valid = (objective in (_ak.OBJ_NEAREST, _ak.OBJ_LABELLED)
+                 and parts.bounds.shape[0] == 1
                  and parts.samples == 0 and p.start == "mean" and not p.error.one_to_one
                  and parts.confirm == 0 and not hidden)
         if p.backend == "lanes" and not valid:
-            raise KinematicsError("the lanes backend fits unlabelled points with one "
-                                  "partition, start 'mean', no start samples and no hidden "
-                                  "markers (nor views that show only some: [[views]] "
-                                  "model_markers); use backend 'auto' or 'scalar'",
+            raise KinematicsError("the lanes backend fits unlabelled points or labelled 2D "
+                                  "keypoints with one partition, start 'mean', no start "
+                                  "samples and no hidden markers (nor views that show "
+                                  "only some: [[views]] model_markers); use backend 'auto' "
+                                  "or 'scalar'",
                                   field="backend")
         runs = n_frames * max(1, p.candidates)
         return p.backend == "lanes" or (p.backend == "auto" and valid

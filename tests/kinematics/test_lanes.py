@@ -13,7 +13,10 @@ from kinematics import _anneal_kernels as _ak
 from kinematics import _lane_kernels as _lk
 from kinematics.anneal import AnnealParams, Fitter
 from kinematics.errors import KinematicsError
+from kinematics.fk import forward_kinematics
+from kinematics.observations import Observations
 from kinematics.problem import FitOutputs, error_args, partitions_of, schedule_of
+from kinematics.settings import ErrorOptions
 from videotrack.motion import smooth_random_motion
 from videotrack.paper_setup import locust_cameras
 
@@ -105,6 +108,48 @@ def test_free_root_and_distorted_pinholes_identical():
     assert_same(scalar, lanes)
 
 
+def _keypoints(body, cams, frames, seed):
+    """The planted frames as labelled keypoints (marker i of each view is keypoint i), with
+    confidences below 1, missing keypoints (NaN, weight 0), a view without any and a frame
+    without any."""
+    rng = np.random.default_rng(seed)
+    kp = np.array([[np.c_[view, rng.uniform(0.3, 1.0, len(view))] for view in f]
+                   for f in frames])
+    kp[1, 0, 2, :2] = np.nan  # a keypoint not found
+    kp[2, 1, 0, 2] = 0.0  # a keypoint of weight 0
+    kp[3, 1, :, :2] = np.nan  # a view with no keypoint: it holds no rows
+    kp[4, :, :, :2] = np.nan  # nothing in the frame
+    names = list(body.marker_names)
+    return Observations.keypoints(kp, list(cams), names, names)
+
+
+@pytest.mark.parametrize("params", [
+    AnnealParams().with_schedule(1500),  # the defaults: candidates and the path
+    AnnealParams.paper(error=ErrorOptions(cap_px=20.0)).with_schedule(1500),  # re-analysis
+], ids=["defaults", "paper-capped"])
+def test_labelled_keypoints_identical(locust, params):
+    cams = locust_cameras()
+    truth = smooth_random_motion(locust, 16, 1, seed=8)
+    frames = [[c.project(forward_kinematics(locust, a).markers)
+               + np.random.default_rng(k).normal(0, 0.5, (len(locust.marker_names), 2))
+               for c in cams.values()] for k, a in enumerate(truth)]
+    obs = _keypoints(locust, cams, frames, seed=9)
+    scalar, lanes = fit_both(locust, cams, obs, params)  # backend "lanes" would refuse
+    assert_same(scalar, lanes)
+    assert lanes[4].status == "no-detections"
+    off = np.abs(np.array([r.angles_deg for r in lanes])[5:] - truth[5:])
+    assert np.median(off) < 2  # fitted, not only equal
+
+
+def test_labelled_keypoints_free_root_pinholes_identical():
+    body = mouse_like(translation_window=4.0, rotation_window_deg=30.0)
+    cams = three_pinholes()
+    _, _, frames = planted_frames(body, cams, n=10, seed=11)
+    obs = _keypoints(body, {c.name: c for c in cams}, frames, seed=12)
+    scalar, lanes = fit_both(body, cams, obs, AnnealParams().with_schedule(1500))
+    assert_same(scalar, lanes)
+
+
 def _kernel_outputs(fitter, dets, n_lanes, groups, generated=True, single=False):
     p = fitter.params
     pr = fitter.problem
@@ -193,7 +238,9 @@ def test_auto_uses_lanes_only_where_valid(locust):
     assert f._use_lanes(f.params, _ak.OBJ_NEAREST, parts, many // 2)
     assert not f._use_lanes(f.params, _ak.OBJ_NEAREST, parts, many // 2 - 1)
     assert not f._use_lanes(f.params, _ak.OBJ_NEAREST, parts, 1)  # a single frame (GUI)
-    assert not f._use_lanes(f.params, _ak.OBJ_LABELLED, parts, many)
+    assert f._use_lanes(f.params, _ak.OBJ_LABELLED, parts, many)  # labelled 2D keypoints
+    assert not f._use_lanes(f.params, _ak.OBJ_POINTS3D, parts, many)
+    assert not f._use_lanes(f.params, _ak.OBJ_CLOUD, parts, many)
     assert not f._use_lanes(replace(f.params, backend="scalar"), _ak.OBJ_NEAREST, parts, many)
     with pytest.raises(KinematicsError, match="backend"):
         f._use_lanes(replace(f.params, backend="lanes", start="previous"), _ak.OBJ_NEAREST,
