@@ -18,8 +18,9 @@ points per view):
   video), the paper's Table 1 schedule with re-analysis, and the short schedule that keeps
   Table 2's accuracy (refinement, N_end 5000, 1-px threshold) on a longer video: fitted
   frames/s of each backend on 2 threads, and whether the results agree;
-* the growth table: ns per chain-iteration against detections per view (locust) and against
-  markers and views (the stick insect's leg and body with 2 or 4 pinhole views);
+* the growth table: ns per chain-iteration against detections per view (locust), for
+  labelled keypoints (1 px noise, weights 0.5-1, 5 % missing) and against markers and
+  views (the stick insect's leg and body with 2 or 4 pinhole views);
 * throughput against accuracy (``--sweep-frames``): the Table 1 schedule and shorter ones
   with refinement, one or two runs per frame, each with its angle RMSE against the truth;
   the Table 1 schedule and N_end 2000 again with ``precision = "float32"``.
@@ -51,6 +52,7 @@ from kinematics.anneal import AnnealParams, Fitter  # noqa: E402
 from kinematics.cameras import PinholeCamera  # noqa: E402
 from kinematics.chain_xml import load_body  # noqa: E402
 from kinematics.fk import forward_kinematics  # noqa: E402
+from kinematics.observations import Observations  # noqa: E402
 from kinematics.rotations import euler_yxz  # noqa: E402
 from videotrack.motion import smooth_random_motion  # noqa: E402
 from videotrack.paper_setup import bundled_chain, locust_cameras  # noqa: E402
@@ -73,10 +75,25 @@ def detections(body, cams, angles, ghosts: int, seed: int = 0) -> list:
     return out
 
 
+def keypoints(body, cams, angles, seed: int = 4) -> Observations:
+    """Labelled 2D keypoints of ``angles``: every marker projected with 1 px noise and a
+    confidence in [0.5, 1], 5 % of them missing."""
+    rng = np.random.default_rng(seed)
+    kp = []
+    for a in angles:
+        mk = forward_kinematics(body, a).markers
+        kp.append([np.c_[cam.project(mk) + rng.normal(0, 1.0, (len(mk), 2)),
+                         rng.uniform(0.5, 1.0, len(mk))] for cam in cams.values()])
+    kp = np.array(kp)
+    kp[rng.random(kp.shape[:3]) < 0.05, :2] = np.nan
+    names = list(body.marker_names)
+    return Observations.keypoints(kp, list(cams), names, names)
+
+
 def timed_fit(body, cams, dets, params, repeats: int):
     """(best seconds, results) of fitting every frame; the first call compiles."""
     fitter = Fitter(body, cams, params)
-    fitter.fit(dets[:2])
+    fitter.fit(dets, frames=[0, 1])
     best, res = np.inf, None
     for _ in range(repeats):
         t0 = time.perf_counter()
@@ -199,6 +216,11 @@ def main(argv=None) -> int:
         rows.append((f"locust, 2 views, {ghosts} detections per view: ns per iteration",
                      f"{s:.0f}", f"{lane:.1f}", f"{s / lane:.2f}x",
                      "same" if ok else "DIFFERENT", ""))
+    kp = keypoints(locust, cams, truth)
+    s, lane, ok = per_iteration(locust, cams, kp, short, 1, args.threads)
+    rows.append(("locust, 2 views, labelled keypoints (DeepLabCut-like): ns per iteration",
+                 f"{s:.0f}", f"{lane:.1f}", f"{s / lane:.2f}x", "same" if ok else "DIFFERENT",
+                 ""))
     with bundled_chain("stick_insect_frontleg.xml") as p:
         stick = load_body(p)
     st = smooth_random_motion(stick, args.frames, 1, seed=2)

@@ -917,18 +917,20 @@ class Fitter:
         loops (``no_fused``, 0) where none is made: for a body too large or a view of the
         block with too many detections, with ``VIDEOTRACK_NO_CODEGEN`` set, or where the
         kernel cannot be made (a read-only cache folder: a warning, the same results).
-        ``single``: a kernel computing in float32 (precision 'float32')."""
+        ``single``: a kernel computing in float32 (precision 'float32'; labelled keypoints
+        have none and use the general loops)."""
+        labelled = arrays.objective == _ak.OBJ_LABELLED  # keypoint i is marker i's: no scan
         counts = np.diff(arrays.offsets)
-        c_cap = int(counts.max()) if counts.size else 0
-        if arrays.objective != _ak.OBJ_NEAREST or os.environ.get(
-                "VIDEOTRACK_NO_CODEGEN") or not _codegen.fits(
-                self.problem.folded, self.problem.cams, c_cap):
+        c_cap = 0 if labelled else int(counts.max()) if counts.size else 0
+        if (arrays.objective not in (_ak.OBJ_NEAREST, _ak.OBJ_LABELLED)
+                or (labelled and single) or os.environ.get("VIDEOTRACK_NO_CODEGEN")
+                or not _codegen.fits(self.problem.folded, self.problem.cams, c_cap)):
             return _lk.no_fused, 0
         try:
             fn = _codegen.fused_kernel(self.problem.folded, self.problem.cams, c_cap,
                                        (error.bidirectional, error.weight, error.cap,
                                         error.penalty_cap),
-                                       single=single)
+                                       single=single, labelled=labelled)
         except Exception as exc:  # any failure: the general loops give the same results
             warnings.warn(f"lanes: no kernel generated for this body ({exc}); using the "
                           "general loops (the same results, slower)", stacklevel=2)

@@ -83,7 +83,7 @@ def _lanes(pr, n_lanes, c_cap, rng):
         scalar.append((root_pos, root_rot, np.concatenate(points).reshape(-1, 2),
                        np.asarray(off, np.int64)))
     dx32, dy32 = dx.astype(np.float32), dy.astype(np.float32)
-    return (cand, rot, pos, dx, dy, dx32, dy32, ndet), scalar
+    return (cand, rot, pos, dx, dy, dx32, dy32, np.zeros_like(dx), ndet), scalar
 
 
 @pytest.mark.parametrize(("kind", "error", "c_cap"), [
@@ -106,6 +106,44 @@ def test_generated_error_equals_the_scalar_kernel(kind, error, c_cap):
                                 _ak.NO_HIDDEN, bidirectional, weight, cap, penalty_cap, False,
                                 np.empty(len(pr.cams.kind)))
         assert e[ln] == ref, f"lane {ln}"
+
+
+@pytest.mark.parametrize(("kind", "cap"), [("locust", 10.0), ("locust", np.inf),
+                                           ("free root, distorted pinholes", 20.0)])
+def test_generated_labelled_error_equals_the_scalar_kernel(kind, cap):
+    """Labelled keypoints: weights, keypoints not found (NaN) or of weight 0, views without
+    rows, markers behind a camera (lane 4 of the pinholes)."""
+    pr = _problem(kind)
+    rng = np.random.default_rng(5)
+    n_lanes, nm, nv = 37, pr.folded.marker_joint.size, len(pr.cams.kind)
+    args, scalar = _lanes(pr, n_lanes, 9, rng)
+    cand, rot, pos = args[:3]
+    dx, dy = np.full((nv, nm, n_lanes), PAD), np.full((nv, nm, n_lanes), PAD)
+    dw, ndet = np.zeros((nv, nm, n_lanes)), np.zeros((nv, n_lanes), np.int64)
+    refs = []
+    for ln, (root_pos, root_rot, _, _) in enumerate(scalar):
+        mk, proj = np.empty((nm, 3)), np.empty((nv, nm, 2))
+        _ak.project_posture(cand[:, ln].copy(), root_pos, root_rot, *pr.folded, *pr.cams,
+                            np.empty(cand.shape[0]), np.empty(cand.shape[0]),
+                            np.empty((pr.folded.parent.size, 3, 3)),
+                            np.empty((pr.folded.parent.size, 3)), mk, proj)
+        kp = proj + rng.normal(0.0, 4.0, proj.shape)
+        w = rng.uniform(0.2, 1.0, (nv, nm))
+        kp[rng.random((nv, nm)) < 0.15] = np.nan
+        w[rng.random((nv, nm)) < 0.1] = 0.0
+        rows = [v for v in range(nv) if rng.random() > 0.2]  # the others hold no rows
+        for v in rows:
+            dx[v, :, ln], dy[v, :, ln], dw[v, :, ln], ndet[v, ln] = *kp[v].T, w[v], nm
+        points = np.concatenate([kp[v] for v in rows]).reshape(-1, 2)
+        off = np.cumsum([0] + [nm if v in rows else 0 for v in range(nv)]).astype(np.int64)
+        conf = np.concatenate([w[v] for v in rows]) if rows else np.zeros(0)
+        refs.append(_ak.labelled_error(proj, points, conf, off, cap, np.empty(nv)))
+    e = np.empty(n_lanes)
+    fused = cg.fused_kernel(pr.folded, pr.cams, 0, (False, 0.0, cap, np.inf), labelled=True)
+    _lk.call_fused(fused, cand, rot, pos, dx, dy, dx.astype(np.float32),
+                   dy.astype(np.float32), dw, ndet, e)
+    np.testing.assert_array_equal(e, refs)
+    assert np.isfinite(e).all() and (e > 0).sum() > n_lanes // 2
 
 
 @pytest.mark.parametrize(("kind", "error"), [

@@ -141,12 +141,22 @@ def test_labelled_keypoints_identical(locust, params):
     assert np.median(off) < 2  # fitted, not only equal
 
 
-def test_labelled_keypoints_free_root_pinholes_identical():
+@pytest.mark.parametrize("loops", ["generated", "general", "float32 asked"])
+def test_labelled_keypoints_free_root_pinholes_identical(loops, monkeypatch):
+    # the kernel generated for the body, or the general loops (labelled_lanes): asked for,
+    # or because labelled keypoints have no float32 kernel (the lanes stay float64)
+    if loops == "general":
+        monkeypatch.setenv("VIDEOTRACK_NO_CODEGEN", "1")
     body = mouse_like(translation_window=4.0, rotation_window_deg=30.0)
     cams = three_pinholes()
     _, _, frames = planted_frames(body, cams, n=10, seed=11)
     obs = _keypoints(body, {c.name: c for c in cams}, frames, seed=12)
-    scalar, lanes = fit_both(body, cams, obs, AnnealParams().with_schedule(1500))
+    params = AnnealParams(precision="float32" if loops == "float32 asked" else "float64")
+    fitter = Fitter(body, cams, params)
+    fused, _ = fitter._fused_kernel(fitter.observations(obs).arrays(np.arange(10)),
+                                    error_args(params.error), params.precision == "float32")
+    assert (fused is _lk.no_fused) == (loops != "generated")
+    scalar, lanes = fit_both(body, cams, obs, params.with_schedule(1500))
     assert_same(scalar, lanes)
 
 
