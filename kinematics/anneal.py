@@ -874,7 +874,8 @@ class Fitter:
             threads = numba.get_num_threads()
             groups = np.unique(np.linspace(0, n, min(threads, n) + 1).astype(np.int64))
             error = self._error_args(p, arrays.objective)
-            single = p.precision == "float32"
+            # labelled keypoints have no float32 kernel: theirs stays float64
+            single = p.precision == "float32" and arrays.objective != _ak.OBJ_LABELLED
             fused, n_fused = self._fused_kernel(arrays, error, single)
             _lk.fit_frames_lanes(groups, frame_ids, roots, rots, start, pr.folded, pr.cams,
                                  pr.dofs, schedule_of(p), error, arrays,
@@ -917,13 +918,14 @@ class Fitter:
         loops (``no_fused``, 0) where none is made: for a body too large or a view of the
         block with too many detections, with ``VIDEOTRACK_NO_CODEGEN`` set, or where the
         kernel cannot be made (a read-only cache folder: a warning, the same results).
-        ``single``: a kernel computing in float32 (precision 'float32'; labelled keypoints
-        have none and use the general loops)."""
+        ``single``: a kernel computing in float32 (precision 'float32'; not for labelled
+        keypoints)."""
         labelled = arrays.objective == _ak.OBJ_LABELLED  # keypoint i is marker i's: no scan
+        single = single and not labelled
         counts = np.diff(arrays.offsets)
         c_cap = 0 if labelled else int(counts.max()) if counts.size else 0
         if (arrays.objective not in (_ak.OBJ_NEAREST, _ak.OBJ_LABELLED)
-                or (labelled and single) or os.environ.get("VIDEOTRACK_NO_CODEGEN")
+                or os.environ.get("VIDEOTRACK_NO_CODEGEN")
                 or not _codegen.fits(self.problem.folded, self.problem.cams, c_cap)):
             return _lk.no_fused, 0
         try:
