@@ -644,13 +644,14 @@ def _kept_lanes(active, queue_empty):
 def fit_frames_lanes(group_off, frame_ids, root_pos, root_rot, start, body, cams, dofs,
                      schedule, error, obs, claim_gate, n_lanes, fused, n_fused, single, out):
     """Fit many frames, their runs packed into lanes: the scalar ``fit_frames`` for
-    independent frames (``start_previous`` false, one partition, unlabelled points), with the
-    same outputs to the last bit. Frames ``group_off[g]:group_off[g + 1]`` are fitted by one
-    thread (``prange`` over groups) with ``n_lanes`` lanes; ``claim_gate`` is the
-    partitions' (detections farther from every marker are unexplained); every other argument
-    is ``fit_frames``'. ``fused`` is the body's generated kernel (:func:`iterate_lanes`) and
-    ``n_fused`` the detections per view it scans (at least every frame's), or ``no_fused``
-    and 0 for the general loops; ``single``: the kernel is float32."""
+    independent frames (``start_previous`` false, one partition, unlabelled points or
+    labelled 2D keypoints), with the same outputs to the last bit. Frames
+    ``group_off[g]:group_off[g + 1]`` are fitted by one thread (``prange`` over groups) with
+    ``n_lanes`` lanes; ``claim_gate`` is the partitions' (detections farther from every
+    marker are unexplained); every other argument is ``fit_frames``'. ``fused`` is the body's
+    generated kernel (:func:`iterate_lanes`) and ``n_fused`` the detections per view it scans
+    (at least every frame's; 1 for labelled keypoints, whose rows are the markers'), or
+    ``no_fused`` and 0 for the general loops; ``single``: the kernel is float32."""
     for g in prange(group_off.shape[0] - 1):
         _fit_group(group_off[g], group_off[g + 1], frame_ids, root_pos, root_rot, start, body,
                    cams, dofs, schedule, error, obs, claim_gate, n_lanes, fused, n_fused, single,

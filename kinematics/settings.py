@@ -274,15 +274,15 @@ class AnnealParams:
     backend: str = setting(
         "auto", "Which kernel anneals: 'scalar' one run at a time, 'lanes' many runs at once "
         "in SIMD lanes (the same results to the last bit; faster on many frames), 'auto' "
-        "lanes where they are valid (unlabelled points, one partition, start 'mean') and "
-        "there are at least 32 runs per thread (half-empty lanes still beat the scalar kernel), "
-        "else scalar.", choices=BACKENDS)
+        "lanes where they are valid (unlabelled points or labelled 2D keypoints, one "
+        "partition, start 'mean') and there are at least 32 runs per thread (half-empty "
+        "lanes still beat the scalar kernel), else scalar.", choices=BACKENDS)
     precision: str = setting(
         "float64", "What the lanes' generated kernels compute E in: 'float64' gives the "
         "scalar kernel's results to the last bit; 'float32' is faster, but its results only "
         "match to within float32 rounding (docs/fitting.md, 'Backends'; docs/benchmarks.md, "
-        "'Lanes', has its accuracy table). The scalar kernel and the lanes' general loops "
-        "always use float64.",
+        "'Lanes', has its accuracy table). The scalar kernel, the lanes' general loops and "
+        "the kernels for labelled keypoints always use float64.",
         choices=PRECISIONS)
 
     def __post_init__(self) -> None:

@@ -127,16 +127,22 @@ def test_generated_labelled_error_equals_the_scalar_kernel(kind, cap):
                             np.empty(cand.shape[0]), np.empty(cand.shape[0]),
                             np.empty((pr.folded.parent.size, 3, 3)),
                             np.empty((pr.folded.parent.size, 3)), mk, proj)
-        kp = proj + rng.normal(0.0, 4.0, proj.shape)
+        # keypoints also where the marker is behind the camera (its cost is the cap's)
+        kp = np.where(np.isfinite(proj), proj, 300.0) + rng.normal(0.0, 4.0, proj.shape)
         w = rng.uniform(0.2, 1.0, (nv, nm))
         kp[rng.random((nv, nm)) < 0.15] = np.nan
+        kp[rng.random((nv, nm)) < 0.1, 0] = np.nan  # x only
         w[rng.random((nv, nm)) < 0.1] = 0.0
-        rows = [v for v in range(nv) if rng.random() > 0.2]  # the others hold no rows
-        for v in rows:
-            dx[v, :, ln], dy[v, :, ln], dw[v, :, ln], ndet[v, ln] = *kp[v].T, w[v], nm
-        points = np.concatenate([kp[v] for v in rows]).reshape(-1, 2)
-        off = np.cumsum([0] + [nm if v in rows else 0 for v in range(nv)]).astype(np.int64)
-        conf = np.concatenate([w[v] for v in rows]) if rows else np.zeros(0)
+        # rows per view: the markers', none, or (never from a reader) one too few or many
+        counts = rng.choice([nm, nm, nm, 0, nm - 1, nm + 2], nv)
+        for v in range(nv):
+            k = min(counts[v], nm)
+            dx[v, :k, ln], dy[v, :k, ln], dw[v, :k, ln] = kp[v, :k, 0], kp[v, :k, 1], w[v, :k]
+            ndet[v, ln] = counts[v]
+        rows = [np.r_[kp[v], np.full((2, 2), 5.0)][:counts[v]] for v in range(nv)]
+        points = np.concatenate(rows).reshape(-1, 2)
+        off = np.cumsum(np.r_[0, counts]).astype(np.int64)
+        conf = np.concatenate([np.r_[w[v], 1.0, 1.0][:counts[v]] for v in range(nv)])
         refs.append(_ak.labelled_error(proj, points, conf, off, cap, np.empty(nv)))
     e = np.empty(n_lanes)
     fused = cg.fused_kernel(pr.folded, pr.cams, 0, (False, 0.0, cap, np.inf), labelled=True)

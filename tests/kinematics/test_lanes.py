@@ -134,7 +134,7 @@ def test_labelled_keypoints_identical(locust, params):
                + np.random.default_rng(k).normal(0, 0.5, (len(locust.marker_names), 2))
                for c in cams.values()] for k, a in enumerate(truth)]
     obs = _keypoints(locust, cams, frames, seed=9)
-    scalar, lanes = fit_both(locust, cams, obs, params)  # backend "lanes" would refuse
+    scalar, lanes = fit_both(locust, cams, obs, params)
     assert_same(scalar, lanes)
     assert lanes[4].status == "no-detections"
     off = np.abs(np.array([r.angles_deg for r in lanes])[5:] - truth[5:])
@@ -164,7 +164,7 @@ def _kernel_outputs(fitter, dets, n_lanes, groups, generated=True, single=False)
     p = fitter.params
     pr = fitter.problem
     obs = fitter.observations(dets)
-    idx = np.arange(len(dets))
+    idx = np.arange(obs.n_frames)
     roots, rots = fitter._place(obs, idx)
     out = FitOutputs.empty(len(idx), pr.n_state, fitter.n_views, max(p.max_runs, p.candidates))
     arrays, error = obs.arrays(idx), error_args(p.error)
@@ -193,14 +193,31 @@ def test_general_loops_equal_the_generated_kernel(locust):
 def test_same_results_for_any_lane_and_thread_count(locust, generated, single):
     truth = smooth_random_motion(locust, 12, 1, seed=6)
     dets = planted(locust, locust_cameras(), truth, ghosts=1)
+    _same_for_any_lane_and_thread_count(locust, dets, generated, single)
+
+
+@pytest.mark.parametrize("generated", [True, False])
+def test_labelled_same_results_for_any_lane_and_thread_count(locust, generated):
+    # lanes that shrink and reorder (3 and 8 lanes) carry their keypoints' weights along
+    cams = locust_cameras()
+    truth = smooth_random_motion(locust, 12, 1, seed=10)
+    frames = [[c.project(forward_kinematics(locust, a).markers)
+               + np.random.default_rng(k).normal(0, 2.0, (len(locust.marker_names), 2))
+               for c in cams.values()] for k, a in enumerate(truth)]
+    _same_for_any_lane_and_thread_count(locust, _keypoints(locust, cams, frames, seed=13),
+                                        generated, False)
+
+
+def _same_for_any_lane_and_thread_count(locust, dets, generated, single):
+    n = dets.n_frames if isinstance(dets, Observations) else len(dets)  # frames 0 .. n
     fitter = Fitter(locust, locust_cameras(), AnnealParams(threshold_mode="absolute",
                                                            reanalysis_threshold=2.0
                                                            ).with_schedule(1000))
-    ref = _kernel_outputs(fitter, dets, 32, [0, 12], generated, single)
+    ref = _kernel_outputs(fitter, dets, 32, [0, n], generated, single)
     before = numba.get_num_threads()
     try:
-        for n_lanes, groups, threads in ((8, [0, 5, 12], 2), (3, [0, 1, 2, 12], 1),
-                                         (64, [0, 12], 1)):
+        for n_lanes, groups, threads in ((8, [0, 5, n], 2), (3, [0, 1, 2, n], 1),
+                                         (64, [0, n], 1)):
             numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
             other = _kernel_outputs(fitter, dets, n_lanes, groups, generated, single)
             for name in ref._fields:
