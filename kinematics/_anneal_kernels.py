@@ -823,6 +823,18 @@ def nearest_residuals(proj, points, view_off, seen, gate, out):
 
 
 @njit(cache=True, nogil=True, inline="always")
+def observed(objective, view_off, obs3):
+    """Whether a frame has anything to fit: a detection in some view (``view_off``, its
+    views' offsets), or for 3D points and clouds a point of weight > 0 (``obs3``)."""
+    if objective in (OBJ_POINTS3D, OBJ_CLOUD):
+        has = False
+        for i in range(obs3.shape[0]):
+            has = has or obs3[i, 3] > 0.0
+        return has
+    return view_off[view_off.shape[0] - 1] > view_off[0]
+
+
+@njit(cache=True, nogil=True, inline="always")
 def evaluate(objective, proj, mk, points, conf, view_off, obs3, bidirectional, weight, cap,
              penalty_cap, one, per_view, nearest):
     """E of projected (``proj``) and 3D (``mk``) markers under ``objective``; fills
@@ -1557,12 +1569,7 @@ def fit_frames(seg_off, frame_ids, root_pos, root_rot, start, body, cams, dofs, 
             rp = root_pos[f]
             rr = root_rot[f]
             clear_frame(out, f)
-            has = vo[nv] > vo[0]
-            if objective in (OBJ_POINTS3D, OBJ_CLOUD):
-                has = False
-                for i in range(obs3.shape[1]):
-                    has = has or obs3[f, i, 3] > 0.0
-            if has:  # else no observation at all: nothing to fit
+            if observed(objective, vo, obs3[f]):  # else nothing to fit
                 e_keep = np.inf
                 run = 0
                 u_keep = 1 << 30  # with max_unexplained < 0 only E decides (u stays 0)

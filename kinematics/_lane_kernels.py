@@ -43,9 +43,9 @@ Layout (``L = LANES``): state ``cur``, ``cand``, ``best``, ``cs``, ``sn`` (n_sta
 (nj + n_chains, 3, L); ``mk`` (nm, 3, L); ``proj``
 (nv, nm, 2, L); detections ``dx``, ``dy`` (nv, c_max, L), padded with :data:`PAD` beyond the
 lane's own ``ndet`` (nv, L); for labelled keypoints row i is marker i's keypoint, of weight
-``dw`` (nv, c_max, L). The supported problems are those ``Fitter._use_lanes`` accepts
-(unlabelled points or labelled 2D keypoints, one partition, independent frames); the scalar
-kernel does the rest.
+``dw`` (nv, c_max, L); 3D points ``o3`` (nm, 4, L). The supported problems are those
+``Fitter._use_lanes`` accepts (unlabelled points, labelled 2D keypoints or 3D points, one
+partition, independent frames); the scalar kernel does the rest.
 """
 
 from __future__ import annotations
@@ -56,6 +56,7 @@ from numba import cfunc, njit, prange, types
 from kinematics._anneal_kernels import (
     NAN_MARKER_COST,
     OBJ_LABELLED,
+    OBJ_POINTS3D,
     ROOT_POSE,
     clear_frame,
     evaluate,
@@ -65,6 +66,7 @@ from kinematics._anneal_kernels import (
     log_unit,
     mul33,
     next_uniform,
+    observed,
     project_posture,
     sincos,
     stream_state,
@@ -389,6 +391,28 @@ def labelled_lanes(proj, dx, dy, dw, ndet, cap, ev, out):
             out[ln] += ev[ln]
 
 
+@njit(inline="always", **_OPTS)
+def points3d_lanes(mk, o3, cap, out):
+    """3D-point E of every lane (the scalar ``points3d_error``, same operations in the same
+    order) into ``out``: marker i against its own point ``o3[i, :3]`` of weight
+    ``o3[i, 3]``; a point not finite or of weight <= 0 costs nothing."""
+    nl = out.shape[0]
+    for ln in range(nl):
+        out[ln] = 0.0
+    for i in range(mk.shape[0]):
+        for ln in range(nl):
+            w = o3[i, 3, ln]
+            ox = o3[i, 0, ln]
+            oy = o3[i, 1, ln]
+            oz = o3[i, 2, ln]
+            ex = mk[i, 0, ln] - ox
+            ey = mk[i, 1, ln] - oy
+            ez = mk[i, 2, ln] - oz
+            add = w * min(np.sqrt(ex * ex + ey * ey + ez * ez), cap)
+            use = (w > 0.0) & np.isfinite(ox) & np.isfinite(oy) & np.isfinite(oz)
+            out[ln] = out[ln] + (add if use else 0.0)  # + 0.0 leaves a sum >= 0 as it is
+
+
 # -- the annealing iterations of all lanes ---------------------------------------------------
 #: A histogram whose bins above the threshold form at most this many runs is tested by
 #: comparing the bin with the runs' ends (vectorised) instead of looking the bin up (a
@@ -425,14 +449,15 @@ def iterate_lanes(n_iter, free_idx, n_hist, step, hist, nbins, th, runs, n_runs,
                   max_redraws, n_end, n_l, n_tau, c_l, c_tau, eps, active, rs, it, tau,
                   length, to_tau, to_l, e_cur, e_best, cur, cand, best, cs, sn, body, cams, dx,
                   dy, ndet, cmax, bidirectional, weight, cap, penalty_cap, rot, pos, mk, proj,
-                  nearest, e, fused, use_fused, single, labelled, dw):
+                  nearest, e, fused, use_fused, single, labelled, dw, points3d, o3):
     """Anneal every lane (scalar ``anneal_chain``'s iteration, per lane) until an active lane
     has finished (``it >= n_end`` or best E below ``eps``) or ``n_iter`` iterations passed.
     Inactive lanes compute but change nothing that is read back. With ``use_fused`` the
     candidates' E comes from ``fused``, a kernel generated for the body
     (:mod:`kinematics._lane_codegen`), instead of the general loops; ``single``: that
     kernel computes in float32 and reads the detections' float32 copies. ``labelled``:
-    the detections are labelled keypoints of weights ``dw`` (:func:`labelled_lanes`)."""
+    the detections are labelled keypoints of weights ``dw`` (:func:`labelled_lanes`);
+    ``points3d``: E is against each lane's 3D points ``o3`` (:func:`points3d_lanes`)."""
     (parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index, joint_flags,
      marker_joint, marker_local, slide_index) = body
     kind, P, K, dist, R, t = cams
@@ -533,7 +558,9 @@ def iterate_lanes(n_iter, free_idx, n_hist, step, hist, nbins, th, runs, n_runs,
             project_lanes(cand, cs, sn, parent, chain, pre_rot, pre_trans, post_trans,
                           elem_axis, elem_index, joint_flags, marker_joint, marker_local,
                           slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj)
-            if labelled:
+            if points3d:
+                points3d_lanes(mk, o3, cap, e)
+            elif labelled:
                 labelled_lanes(proj, dx, dy, dw, ndet, cap, ev, e)
             else:
                 error_lanes(proj, dx, dy, ndet, cmax, bidirectional, weight, cap,
@@ -644,8 +671,8 @@ def _kept_lanes(active, queue_empty):
 def fit_frames_lanes(group_off, frame_ids, root_pos, root_rot, start, body, cams, dofs,
                      schedule, error, obs, claim_gate, n_lanes, fused, n_fused, single, out):
     """Fit many frames, their runs packed into lanes: the scalar ``fit_frames`` for
-    independent frames (``start_previous`` false, one partition, unlabelled points or
-    labelled 2D keypoints), with the same outputs to the last bit. Frames
+    independent frames (``start_previous`` false, one partition, unlabelled points, labelled
+    2D keypoints or 3D points), with the same outputs to the last bit. Frames
     ``group_off[g]:group_off[g + 1]`` are fitted by one thread (``prange`` over groups) with
     ``n_lanes`` lanes; ``claim_gate`` is the partitions' (detections farther from every
     marker are unexplained); every other argument is ``fit_frames``'. ``fused`` is the body's
@@ -680,6 +707,7 @@ def _fit_group(f0, f1, frame_ids, root_pos, root_rot, start, body, cams, dofs, s
         n_hist += 1
     runs, n_runs = allowed_runs(hist, nbins, th)
     labelled = objective == OBJ_LABELLED
+    points3d = objective == OBJ_POINTS3D
     c_cap = max(1, n_fused, nm if labelled else 0)  # labelled: keypoint i is marker i's
     for f in range(f0, f1):
         for v in range(nv):
@@ -699,6 +727,7 @@ def _fit_group(f0, f1, frame_ids, root_pos, root_rot, start, body, cams, dofs, s
     dx = np.full((nv, c_cap, nl), PAD)
     dy = np.full((nv, c_cap, nl), PAD)
     dw = np.zeros((nv, c_cap, nl) if labelled else (nv, 0, nl))  # keypoints' weights
+    o3 = np.zeros((nm if points3d else 0, 4, nl))  # 3D points (x, y, z, weight)
     ndet = np.zeros((nv, nl), np.int64)
     cmax = np.zeros(nv, np.int64)
     active = np.zeros(nl, np.bool_)
@@ -742,7 +771,7 @@ def _fit_group(f0, f1, frame_ids, root_pos, root_rot, start, body, cams, dofs, s
     first_runs = min(max(min_runs, 1), max_runs)
     for f in range(f0, f1):
         clear_frame(out, f)
-        if det_off[f * nv + nv] > det_off[f * nv]:
+        if observed(objective, det_off[f * nv: f * nv + nv + 1], obs3[f]):
             for r in range(first_runs):
                 queue[tail] = (f - f0) * max_runs + r
                 tail += 1
@@ -767,6 +796,10 @@ def _fit_group(f0, f1, frame_ids, root_pos, root_rot, start, body, cams, dofs, s
                     if labelled:
                         for c in range(c_cap):
                             dw[v, c, ln] = det_conf[a + c] if c < b - a else 0.0
+                if points3d:
+                    for i in range(nm):
+                        for k in range(4):
+                            o3[i, k, ln] = obs3[f, i, k]
                 for j in range(nj):  # the roots' slots (project_lanes)
                     if parent[j] < 0:
                         c = chain[j]
@@ -862,7 +895,7 @@ def _fit_group(f0, f1, frame_ids, root_pos, root_rot, start, body, cams, dofs, s
             rot, pos, mk = _take3(rot, keep), _take3(pos, keep), _take3(mk, keep)
             proj = _take4(proj, keep)
             dx, dy, ndet = _take3(dx, keep), _take3(dy, keep), _take2(ndet, keep)
-            dw = _take3(dw, keep)
+            dw, o3 = _take3(dw, keep), _take3(o3, keep)
             e, active, rs, it = _take1(e, keep), _take1(active, keep), _take1(rs, keep), \
                 _take1(it, keep)
             tau, length = _take1(tau, keep), _take1(length, keep)
@@ -875,4 +908,4 @@ def _fit_group(f0, f1, frame_ids, root_pos, root_rot, start, body, cams, dofs, s
                       length, to_tau, to_l, e_cur, e_best, cur, cand, best, cs, sn, body,
                       cams, dx, dy, ndet, cmax, bidirectional, weight, cap,
                       penalty_cap, rot, pos, mk, proj, nearest, e, fused, n_fused > 0, single,
-                      labelled, dw)
+                      labelled, dw, points3d, o3)

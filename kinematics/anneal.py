@@ -948,20 +948,20 @@ class Fitter:
     def _use_lanes(p: AnnealParams, objective: int, parts, n_frames: int, *,
                    hidden: bool = False) -> bool:
         """Whether the lane kernel fits this block: it does what the scalar kernel does for
-        unlabelled points or labelled 2D keypoints, one partition and independent frames,
-        without markers marked hidden (``hidden``); 'auto' also wants a few runs per thread
+        unlabelled points, labelled 2D keypoints or 3D points, one partition and independent
+        frames, without markers marked hidden (``hidden``); 'auto' also wants a few runs per thread
         (:data:`kinematics._lane_kernels.MIN_RUNS_PER_THREAD`: a single frame, as the GUI
         fits, goes to the scalar kernel)."""
-        valid = (objective in (_ak.OBJ_NEAREST, _ak.OBJ_LABELLED)
+        valid = (objective in (_ak.OBJ_NEAREST, _ak.OBJ_LABELLED, _ak.OBJ_POINTS3D)
                  and parts.bounds.shape[0] == 1
                  and parts.samples == 0 and p.start == "mean" and not p.error.one_to_one
                  and parts.confirm == 0 and not hidden)
         if p.backend == "lanes" and not valid:
-            raise KinematicsError("the lanes backend fits unlabelled points or labelled 2D "
-                                  "keypoints with one partition, start 'mean', no start "
-                                  "samples and no hidden markers (nor views that show "
-                                  "only some: [[views]] model_markers); use backend 'auto' "
-                                  "or 'scalar'",
+            raise KinematicsError("the lanes backend fits unlabelled points, labelled 2D "
+                                  "keypoints or 3D points with one partition, start "
+                                  "'mean', no start samples and no hidden markers (nor "
+                                  "views that show only some: [[views]] model_markers); use "
+                                  "backend 'auto' or 'scalar'",
                                   field="backend")
         runs = n_frames * max(1, p.candidates)
         return p.backend == "lanes" or (p.backend == "auto" and valid

@@ -274,8 +274,8 @@ class AnnealParams:
     backend: str = setting(
         "auto", "Which kernel anneals: 'scalar' one run at a time, 'lanes' many runs at once "
         "in SIMD lanes (the same results to the last bit; faster on many frames), 'auto' "
-        "lanes where they are valid (unlabelled points or labelled 2D keypoints, one "
-        "partition, start 'mean') and there are at least 32 runs per thread (half-empty "
+        "lanes where they are valid (unlabelled points, labelled 2D keypoints or 3D points, "
+        "one partition, start 'mean') and there are at least 32 runs per thread (half-empty "
         "lanes still beat the scalar kernel), else scalar.", choices=BACKENDS)
     precision: str = setting(
         "float64", "What the lanes' generated kernels compute E in: 'float64' gives the "

@@ -13,7 +13,7 @@ from kinematics import _anneal_kernels as _ak
 from kinematics import _lane_kernels as _lk
 from kinematics.anneal import AnnealParams, Fitter
 from kinematics.errors import KinematicsError
-from kinematics.fk import forward_kinematics
+from kinematics.fk import forward_kinematics, forward_kinematics_reference
 from kinematics.observations import Observations
 from kinematics.problem import FitOutputs, error_args, partitions_of, schedule_of
 from kinematics.settings import ErrorOptions
@@ -160,6 +160,30 @@ def test_labelled_keypoints_free_root_pinholes_identical(loops, monkeypatch):
     assert_same(scalar, lanes)
 
 
+@pytest.mark.parametrize("params", [
+    AnnealParams(tau0=5.0).with_schedule(1500),  # the defaults: candidates and the path
+    AnnealParams.paper(refine=True, tau0=5.0, reanalysis_threshold=1.0,
+                       error=ErrorOptions(cap_px=3.0)).with_schedule(1500),  # re-analysis
+], ids=["defaults", "paper-refined"])
+def test_3d_points_identical(params):
+    # labelled 3D points (triangulated keypoints, an Anipose CSV): no cameras, a free root
+    body = mouse_like(translation_window=4.0, rotation_window_deg=30.0)
+    angles, roots, _ = planted_frames(body, three_pinholes(), n=14, seed=13)
+    rng = np.random.default_rng(14)
+    pts = np.array([forward_kinematics_reference(body, a, r).markers
+                    for a, r in zip(angles, roots, strict=True)])
+    pts = np.concatenate([pts + rng.normal(0, 0.1, pts.shape),
+                          rng.uniform(0.3, 1.0, (*pts.shape[:2], 1))], axis=2)
+    pts[3, 1, 0] = np.nan  # a point not found
+    pts[5, 2, 3] = 0.0  # a point of weight 0
+    pts[6, :, :3] = np.nan  # nothing in the frame
+    obs = Observations.points_3d(pts, body.marker_names, body.marker_names)
+    scalar, lanes = fit_both(body, {}, obs, params)
+    assert_same(scalar, lanes)
+    assert lanes[6].status == "no-detections" and lanes[6].runs == 0
+    assert max(r.runs for r in lanes) > 1
+
+
 def _kernel_outputs(fitter, dets, n_lanes, groups, generated=True, single=False):
     p = fitter.params
     pr = fitter.problem
@@ -266,7 +290,7 @@ def test_auto_uses_lanes_only_where_valid(locust):
     assert not f._use_lanes(f.params, _ak.OBJ_NEAREST, parts, many // 2 - 1)
     assert not f._use_lanes(f.params, _ak.OBJ_NEAREST, parts, 1)  # a single frame (GUI)
     assert f._use_lanes(f.params, _ak.OBJ_LABELLED, parts, many)  # labelled 2D keypoints
-    assert not f._use_lanes(f.params, _ak.OBJ_POINTS3D, parts, many)
+    assert f._use_lanes(f.params, _ak.OBJ_POINTS3D, parts, many)  # 3D points
     assert not f._use_lanes(f.params, _ak.OBJ_CLOUD, parts, many)
     assert not f._use_lanes(replace(f.params, backend="scalar"), _ak.OBJ_NEAREST, parts, many)
     with pytest.raises(KinematicsError, match="backend"):
