@@ -108,6 +108,13 @@ def test_free_root_and_distorted_pinholes_identical():
     assert_same(scalar, lanes)
 
 
+def _projected(body, cams, angles, noise):
+    """Per frame, per view: the markers of ``angles`` projected, with Gaussian noise."""
+    return [[c.project(forward_kinematics(body, a).markers)
+             + np.random.default_rng(k).normal(0, noise, (len(body.marker_names), 2))
+             for c in cams.values()] for k, a in enumerate(angles)]
+
+
 def _keypoints(body, cams, frames, seed):
     """The planted frames as labelled keypoints (marker i of each view is keypoint i), with
     confidences below 1, missing keypoints (NaN, weight 0), a view without any and a frame
@@ -130,10 +137,7 @@ def _keypoints(body, cams, frames, seed):
 def test_labelled_keypoints_identical(locust, params):
     cams = locust_cameras()
     truth = smooth_random_motion(locust, 16, 1, seed=8)
-    frames = [[c.project(forward_kinematics(locust, a).markers)
-               + np.random.default_rng(k).normal(0, 0.5, (len(locust.marker_names), 2))
-               for c in cams.values()] for k, a in enumerate(truth)]
-    obs = _keypoints(locust, cams, frames, seed=9)
+    obs = _keypoints(locust, cams, _projected(locust, cams, truth, 0.5), seed=9)
     scalar, lanes = fit_both(locust, cams, obs, params)
     assert_same(scalar, lanes)
     assert lanes[4].status == "no-detections"
@@ -225,11 +229,8 @@ def test_labelled_same_results_for_any_lane_and_thread_count(locust, generated):
     # lanes that shrink and reorder (3 and 8 lanes) carry their keypoints' weights along
     cams = locust_cameras()
     truth = smooth_random_motion(locust, 12, 1, seed=10)
-    frames = [[c.project(forward_kinematics(locust, a).markers)
-               + np.random.default_rng(k).normal(0, 2.0, (len(locust.marker_names), 2))
-               for c in cams.values()] for k, a in enumerate(truth)]
-    _same_for_any_lane_and_thread_count(locust, _keypoints(locust, cams, frames, seed=13),
-                                        generated, False)
+    kp = _keypoints(locust, cams, _projected(locust, cams, truth, 2.0), seed=13)
+    _same_for_any_lane_and_thread_count(locust, kp, generated, False)
 
 
 def _same_for_any_lane_and_thread_count(locust, dets, generated, single):
