@@ -97,27 +97,28 @@ PAD = 1.0e30
 _OPTS = {"cache": True, "nogil": True, "error_model": "numpy"}
 
 #: A kernel generated for one body (:mod:`kinematics._lane_codegen`): every lane's E of its
-#: candidate, ``evaluate(cand, rot, pos, dx, dy, dx32, dy32, dw, ndet, e)`` (``dx32``,
+#: candidate, ``evaluate(cand, rot, pos, dx, dy, dx32, dy32, dw, o3, ndet, e)`` (``dx32``,
 #: ``dy32``: the detections in float32, for a float32 kernel; ``dw``: labelled keypoints'
-#: weights). Called through a function pointer, so the lane loops are compiled once for
-#: every generated kernel.
+#: weights; ``o3``: 3D points). Called through a function pointer, so the lane loops are
+#: compiled once for every generated kernel.
 FUSED_SIGNATURE = types.void(types.float64[:, ::1], types.float64[:, :, ::1],
                              types.float64[:, :, ::1], types.float64[:, :, ::1],
                              types.float64[:, :, ::1], types.float32[:, :, ::1],
                              types.float32[:, :, ::1], types.float64[:, :, ::1],
-                             types.int64[:, ::1], types.float64[::1])
+                             types.float64[:, :, ::1], types.int64[:, ::1],
+                             types.float64[::1])
 
 
 @cfunc(FUSED_SIGNATURE, cache=True, nopython=True)
-def no_fused(cand, rot, pos, dx, dy, dx32, dy32, dw, ndet, e):
+def no_fused(cand, rot, pos, dx, dy, dx32, dy32, dw, o3, ndet, e):
     """The ``fused`` argument where no kernel was generated (never called)."""
 
 
 @njit(**_OPTS)
-def call_fused(fused, cand, rot, pos, dx, dy, dx32, dy32, dw, ndet, e):
+def call_fused(fused, cand, rot, pos, dx, dy, dx32, dy32, dw, o3, ndet, e):
     """Run a generated kernel's machine code (for tests: calling a numba ``cfunc`` from
     Python runs its Python source instead)."""
-    fused(cand, rot, pos, dx, dy, dx32, dy32, dw, ndet, e)
+    fused(cand, rot, pos, dx, dy, dx32, dy32, dw, o3, ndet, e)
 
 
 @njit(**_OPTS)
@@ -553,7 +554,7 @@ def iterate_lanes(n_iter, free_idx, n_hist, step, hist, nbins, th, runs, n_runs,
                 for ln in range(nl):
                     sn[i, ln], cs[i, ln] = sincos(cand[i, ln])
         if use_fused:
-            fused(cand, rot, pos, dx, dy, dx32, dy32, dw, ndet, e)
+            fused(cand, rot, pos, dx, dy, dx32, dy32, dw, o3, ndet, e)
         else:
             project_lanes(cand, cs, sn, parent, chain, pre_rot, pre_trans, post_trans,
                           elem_axis, elem_index, joint_flags, marker_joint, marker_local,

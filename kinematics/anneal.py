@@ -874,8 +874,8 @@ class Fitter:
             threads = numba.get_num_threads()
             groups = np.unique(np.linspace(0, n, min(threads, n) + 1).astype(np.int64))
             error = self._error_args(p, arrays.objective)
-            # labelled keypoints have no float32 kernel: theirs stays float64
-            single = p.precision == "float32" and arrays.objective != _ak.OBJ_LABELLED
+            # labelled keypoints and 3D points have no float32 kernel: theirs stays float64
+            single = p.precision == "float32" and arrays.objective == _ak.OBJ_NEAREST
             fused, n_fused = self._fused_kernel(arrays, error, single)
             _lk.fit_frames_lanes(groups, frame_ids, roots, rots, start, pr.folded, pr.cams,
                                  pr.dofs, schedule_of(p), error, arrays,
@@ -920,19 +920,23 @@ class Fitter:
         kernel cannot be made (a read-only cache folder: a warning, the same results).
         ``single``: a kernel computing in float32 (precision 'float32'; not for labelled
         keypoints)."""
-        labelled = arrays.objective == _ak.OBJ_LABELLED  # keypoint i is marker i's: no scan
-        single = single and not labelled
+        # labelled keypoints and 3D points: point i is marker i's, no scan and no float32
+        labelled = arrays.objective == _ak.OBJ_LABELLED
+        points3d = arrays.objective == _ak.OBJ_POINTS3D
+        single = single and not (labelled or points3d)
         counts = np.diff(arrays.offsets)
-        c_cap = 0 if labelled else int(counts.max()) if counts.size else 0
-        if (arrays.objective not in (_ak.OBJ_NEAREST, _ak.OBJ_LABELLED)
+        c_cap = 0 if labelled or points3d else int(counts.max()) if counts.size else 0
+        if (arrays.objective not in (_ak.OBJ_NEAREST, _ak.OBJ_LABELLED, _ak.OBJ_POINTS3D)
                 or os.environ.get("VIDEOTRACK_NO_CODEGEN")
-                or not _codegen.fits(self.problem.folded, self.problem.cams, c_cap)):
+                or not _codegen.fits(self.problem.folded, self.problem.cams, c_cap,
+                                     points3d)):
             return _lk.no_fused, 0
         try:
             fn = _codegen.fused_kernel(self.problem.folded, self.problem.cams, c_cap,
                                        (error.bidirectional, error.weight, error.cap,
                                         error.penalty_cap),
-                                       single=single, labelled=labelled)
+                                       single=single, labelled=labelled,
+                                       points3d=points3d)
         except Exception as exc:  # any failure: the general loops give the same results
             warnings.warn(f"lanes: no kernel generated for this body ({exc}); using the "
                           "general loops (the same results, slower)", stacklevel=2)

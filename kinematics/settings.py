@@ -282,7 +282,7 @@ class AnnealParams:
         "scalar kernel's results to the last bit; 'float32' is faster, but its results only "
         "match to within float32 rounding (docs/fitting.md, 'Backends'; docs/benchmarks.md, "
         "'Lanes', has its accuracy table). The scalar kernel, the lanes' general loops and "
-        "the kernels for labelled keypoints always use float64.",
+        "the kernels for labelled keypoints and 3D points always use float64.",
         choices=PRECISIONS)
 
     def __post_init__(self) -> None:

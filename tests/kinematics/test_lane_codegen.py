@@ -83,7 +83,8 @@ def _lanes(pr, n_lanes, c_cap, rng):
         scalar.append((root_pos, root_rot, np.concatenate(points).reshape(-1, 2),
                        np.asarray(off, np.int64)))
     dx32, dy32 = dx.astype(np.float32), dy.astype(np.float32)
-    return (cand, rot, pos, dx, dy, dx32, dy32, np.zeros_like(dx), ndet), scalar
+    no_points = np.zeros((0, 4, n_lanes))
+    return (cand, rot, pos, dx, dy, dx32, dy32, np.zeros_like(dx), no_points, ndet), scalar
 
 
 @pytest.mark.parametrize(("kind", "error", "c_cap"), [
@@ -147,9 +148,46 @@ def test_generated_labelled_error_equals_the_scalar_kernel(kind, cap):
     e = np.empty(n_lanes)
     fused = cg.fused_kernel(pr.folded, pr.cams, 0, (False, 0.0, cap, np.inf), labelled=True)
     _lk.call_fused(fused, cand, rot, pos, dx, dy, dx.astype(np.float32),
-                   dy.astype(np.float32), dw, ndet, e)
+                   dy.astype(np.float32), dw, np.zeros((0, 4, n_lanes)), ndet, e)
     np.testing.assert_array_equal(e, refs)
     assert np.isfinite(e).all() and (e > 0).sum() > n_lanes // 2
+
+
+@pytest.mark.parametrize("cap", [5.0, np.inf])
+def test_generated_3d_point_error_equals_the_scalar_kernel(cap):
+    """3D points (no cameras), a free root: weights, points not found (one coordinate NaN)
+    or of weight 0."""
+    body = mouse_like(translation_window=4.0, rotation_window_deg=30.0)
+    pr = Fitter(body, {}, AnnealParams()).problem
+    rng = np.random.default_rng(6)
+    n_lanes, nm = 29, pr.folded.marker_joint.size
+    nj, nc = pr.folded.parent.shape[0], int(pr.folded.chain.max()) + 1
+    cand = np.repeat(pr.start[:, None], n_lanes, axis=1)
+    cand[pr.dofs.free_idx] += rng.normal(0.0, 0.3, (pr.dofs.free_idx.size, n_lanes))
+    rot, pos = np.zeros((nj + nc, 9, n_lanes)), np.zeros((nj + nc, 3, n_lanes))
+    o3 = np.zeros((nm, 4, n_lanes))
+    refs = []
+    for ln in range(n_lanes):
+        root_pos = rng.normal(0.0, 5.0, (nc, 3))
+        root_rot = np.stack([euler_yxz(*rng.uniform(-0.5, 0.5, 3)) for _ in range(nc)])
+        rot[nj:, :, ln], pos[nj:, :, ln] = root_rot.reshape(nc, 9), root_pos
+        mk = np.empty((nm, 3))
+        _ak.project_posture(cand[:, ln].copy(), root_pos, root_rot, *pr.folded, *pr.cams,
+                            np.empty(cand.shape[0]), np.empty(cand.shape[0]),
+                            np.empty((nj, 3, 3)), np.empty((nj, 3)), mk,
+                            np.empty((0, nm, 2)))
+        pts = np.c_[mk + rng.normal(0.0, 3.0, mk.shape), rng.uniform(0.2, 1.0, nm)]
+        pts[rng.random(nm) < 0.15, rng.integers(0, 3)] = np.nan
+        pts[rng.random(nm) < 0.1, 3] = 0.0
+        o3[:, :, ln] = pts
+        refs.append(_ak.points3d_error(mk, pts, cap))
+    dx = np.zeros((0, 1, n_lanes))
+    e = np.empty(n_lanes)
+    fused = cg.fused_kernel(pr.folded, pr.cams, 0, (False, 0.0, cap, np.inf), points3d=True)
+    _lk.call_fused(fused, cand, rot, pos, dx, dx, dx.astype(np.float32),
+                   dx.astype(np.float32), dx, o3, np.zeros((0, n_lanes), np.int64), e)
+    np.testing.assert_array_equal(e, refs)
+    assert (e > 0).all()
 
 
 @pytest.mark.parametrize(("kind", "error"), [

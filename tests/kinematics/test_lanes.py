@@ -169,8 +169,11 @@ def test_labelled_keypoints_free_root_pinholes_identical(loops, monkeypatch):
     AnnealParams.paper(refine=True, tau0=5.0, reanalysis_threshold=1.0,
                        error=ErrorOptions(cap_px=3.0)).with_schedule(1500),  # re-analysis
 ], ids=["defaults", "paper-refined"])
-def test_3d_points_identical(params):
+@pytest.mark.parametrize("loops", ["generated", "general"])
+def test_3d_points_identical(params, loops, monkeypatch):
     # labelled 3D points (triangulated keypoints, an Anipose CSV): no cameras, a free root
+    if loops == "general":
+        monkeypatch.setenv("VIDEOTRACK_NO_CODEGEN", "1")
     body = mouse_like(translation_window=4.0, rotation_window_deg=30.0)
     angles, roots, _ = planted_frames(body, three_pinholes(), n=14, seed=13)
     rng = np.random.default_rng(14)
@@ -182,6 +185,10 @@ def test_3d_points_identical(params):
     pts[5, 2, 3] = 0.0  # a point of weight 0
     pts[6, :, :3] = np.nan  # nothing in the frame
     obs = Observations.points_3d(pts, body.marker_names, body.marker_names)
+    fitter = Fitter(body, {}, params)
+    fused, _ = fitter._fused_kernel(fitter.observations(obs).arrays(np.arange(14)),
+                                    error_args(params.error))
+    assert (fused is _lk.no_fused) == (loops == "general")
     scalar, lanes = fit_both(body, {}, obs, params)
     assert_same(scalar, lanes)
     assert lanes[6].status == "no-detections" and lanes[6].runs == 0
