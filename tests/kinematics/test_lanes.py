@@ -164,12 +164,14 @@ def test_labelled_keypoints_free_root_pinholes_identical(loops, monkeypatch):
     assert_same(scalar, lanes)
 
 
-@pytest.mark.parametrize("params", [
-    AnnealParams(tau0=5.0).with_schedule(1500),  # the defaults: candidates and the path
-    AnnealParams.paper(refine=True, tau0=5.0, reanalysis_threshold=1.0,
-                       error=ErrorOptions(cap_px=3.0)).with_schedule(1500),  # re-analysis
-], ids=["defaults", "paper-refined"])
-@pytest.mark.parametrize("loops", ["generated", "general"])
+_DEFAULTS_3D = AnnealParams(tau0=5.0).with_schedule(1500)  # candidates and the path
+_REFINED_3D = AnnealParams.paper(refine=True, tau0=5.0, reanalysis_threshold=1.0,
+                                 error=ErrorOptions(cap_px=3.0)).with_schedule(1500)
+
+
+@pytest.mark.parametrize(("params", "loops"), [
+    (_DEFAULTS_3D, "generated"), (_REFINED_3D, "generated"), (_DEFAULTS_3D, "general"),
+], ids=["defaults", "paper-refined (re-analysis)", "defaults, general loops"])
 def test_3d_points_identical(params, loops, monkeypatch):
     # labelled 3D points (triangulated keypoints, an Anipose CSV): no cameras, a free root
     if loops == "general":
