@@ -918,12 +918,11 @@ class Fitter:
         loops (``no_fused``, 0) where none is made: for a body too large or a view of the
         block with too many detections, with ``VIDEOTRACK_NO_CODEGEN`` set, or where the
         kernel cannot be made (a read-only cache folder: a warning, the same results).
-        ``single``: a kernel computing in float32 (precision 'float32'; not for labelled
-        keypoints)."""
-        # labelled keypoints and 3D points: point i is marker i's, no scan and no float32
+        ``single``: a kernel computing in float32 (precision 'float32'; unlabelled points
+        only, as :meth:`_fit_block` asks)."""
+        # labelled keypoints and 3D points: point i is marker i's, no scan
         labelled = arrays.objective == _ak.OBJ_LABELLED
         points3d = arrays.objective == _ak.OBJ_POINTS3D
-        single = single and not (labelled or points3d)
         counts = np.diff(arrays.offsets)
         c_cap = 0 if labelled or points3d else int(counts.max()) if counts.size else 0
         if (arrays.objective not in (_ak.OBJ_NEAREST, _ak.OBJ_LABELLED, _ak.OBJ_POINTS3D)
