@@ -208,6 +208,39 @@ def test_unexplained_detections_trigger_reanalysis_and_the_flag():
         AnnealParams.paper(max_unexplained=-2)
 
 
+def test_block_residuals_equal_the_per_frame_ones(monkeypatch):
+    """A block's marker residuals and unexplained counts, computed in one kernel call, are
+    the per-frame ones: with a ghost, an empty view and a frame without detections."""
+    body = three_legs()
+    cams = top_and_side()
+    _, frames = planted(body, cams, 6, seed=8)
+    frames[2][0] = np.vstack([frames[2][0], [[5.0, 5.0]]])  # a ghost far from the body
+    frames[3][1] = np.empty((0, 2))
+    frames[4] = [np.empty((0, 2)), np.empty((0, 2))]
+    params = AnnealParams.paper(refine=True, max_unexplained=0, reanalysis_threshold=2.0
+                                ).with_schedule(500)
+    fitter = Fitter(body, cams, params)
+    batched = []
+    block_residuals = Fitter._block_residuals
+
+    def spy(self, *args):
+        out = block_residuals(self, *args)
+        batched.append(out is not None)
+        return out
+
+    monkeypatch.setattr(Fitter, "_block_residuals", spy)
+    together = fitter.fit(frames)
+    assert batched and all(batched)
+    monkeypatch.setattr(Fitter, "_block_residuals", lambda *args: None)
+    alone = fitter.fit(frames)
+    assert together[4].runs == 0 and together[2].unexplained == 1
+    for a, b in zip(together, alone, strict=True):
+        np.testing.assert_array_equal(a.angles_deg, b.angles_deg)
+        np.testing.assert_array_equal(a.marker_residuals, b.marker_residuals)
+        assert (a.unexplained, a.matched, a.status) == (b.unexplained, b.matched, b.status)
+        np.testing.assert_array_equal(a.worst_px, b.worst_px)
+
+
 def test_start_search_stages_follow_each_leg_outward():
     """The start search draws a fly leg's axes joint by joint, each stage scored by the
     markers those axes place (the thorax-coxa joint's three axes place the coxa's end)."""
