@@ -826,7 +826,7 @@ def nearest_residuals(proj, points, view_off, seen, gate, out):
 def block_residuals(states, ran, root_pos, root_rot, body, cams, points, offsets, gate, out,
                     unexplained):
     """:func:`nearest_residuals` of many frames' fitted postures in one call (a block's
-    results; per frame from Python it was a third of a short fit's time): for each frame k
+    results; per frame from Python it was a third of the per-frame Python): for each frame k
     with ``ran[k]``, posture ``states[k]`` projected and every marker's distance to the
     nearest detection of its view written into ``out[k]`` (n_views, n_markers), the
     detections farther than ``gate`` from every marker counted into ``unexplained[k]``.

@@ -897,7 +897,7 @@ class Fitter:
                 arrays=block.frame(k, obs.n_views),
                 runs=int(out.runs[k]), iterations=int(out.iterations[k]),
                 pairs=int(out.pairs[k]), error=(float(out.error[k]), view_error[k].copy()),
-                candidates=cands, residuals=None if batch is None else (
+                candidates=cands, given_residuals=None if batch is None else (
                     batch[0][k], int(batch[1][k])),
                 confirmed_only=parts.confirm > 0 and bool(
                     np.nanmin(out.run_error[k, :max(1, p.candidates)], initial=np.inf)
@@ -908,7 +908,8 @@ class Fitter:
                          gate: float):
         """(marker residuals (n, n_views, n_markers), unexplained (n,)) of a block's fitted
         frames, as :meth:`_residuals` gives them frame by frame, in one kernel call; None
-        where its per-frame rules apply (keypoints, 3D points, clouds, hidden markers)."""
+        where its per-frame rules apply (keypoints, 3D points, clouds, no views, hidden
+        markers, views that show only some markers)."""
         if (obs.kind != "points" or not obs.n_views or obs.hidden is not None
                 or obs.unseen is not None or self.unseen is not None):
             return None
@@ -993,12 +994,12 @@ class Fitter:
                       root_rot, p: AnnealParams, *, runs: int, iterations: int, pairs: int,
                       error=None, candidates=(), ambiguous: bool = False,
                       confirmed_only: bool = False, arrays=None,
-                      residuals=None) -> FrameResult:
+                      given_residuals=None) -> FrameResult:
         """The :class:`FrameResult` of ``state`` fitted to frame ``position`` of ``obs``;
         ``error`` (E, E per view) is computed unless given. ``confirmed_only``: the runs
         beyond the candidates' only confirmed a result already within the threshold (not a
         re-analysis). ``arrays``: that frame's observation arrays, if the caller has them
-        (selecting them again was a tenth of a short fit's time); ``residuals``: (marker
+        (selecting them again was a tenth of a short fit's time); ``given_residuals``: (marker
         residuals, unexplained) of :meth:`_residuals`, if the caller has them
         (:meth:`_block_residuals`)."""
         pr, nv = self.problem, self.n_views
@@ -1007,12 +1008,13 @@ class Fitter:
         counts = arrays.offsets[1:] - arrays.offsets[:-1]  # (np.diff: 4 µs a frame)
         missing = tuple(self.view_names[v] for v in range(len(counts)) if counts[v] == 0)
         angles, fitted_roots = pr.posture(state, root_pos, root_rot)
-        given = residuals
         residuals = np.full((nv, pr.folded.marker_joint.size), np.nan)
         unexplained = 0
-        if runs:
-            residuals, unexplained = given or self._residuals(obs, state, root_pos, root_rot,
-                                                              arrays, p.claim_gate_px)
+        if runs and given_residuals is not None:
+            residuals, unexplained = given_residuals
+        elif runs:
+            residuals, unexplained = self._residuals(obs, state, root_pos, root_rot, arrays,
+                                                     p.claim_gate_px)
             if error is None:
                 error = self._state_error(arrays, state, root_pos, root_rot, p)
         err, view_err = error if error is not None else (np.nan, np.full(nv, np.nan))
