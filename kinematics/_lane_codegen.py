@@ -437,9 +437,8 @@ def fused_kernel(folded, cams, c_cap: int, error, single: bool = False,
                  labelled: bool = False, points3d: bool = False):
     """The generated ``evaluate`` cfunc for this body, views, detections, error, precision
     and objective (``labelled``: 2D keypoints; ``points3d``: 3D points), made (and compiled)
-    on first use; the
-    source is kept in :func:`generated_dir`, named by its hash, so numba's cache of the
-    machine code outlives the process."""
+    on first use; the source is kept in :func:`generated_dir`, named by its hash, so numba's
+    cache of the machine code outlives the process."""
     src = fused_source(folded, cams, padded_detections(c_cap), error, single, labelled,
                        points3d)
     path = source_path(src)

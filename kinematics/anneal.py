@@ -1010,11 +1010,10 @@ class Fitter:
         angles, fitted_roots = pr.posture(state, root_pos, root_rot)
         residuals = np.full((nv, pr.folded.marker_joint.size), np.nan)
         unexplained = 0
-        if runs and given_residuals is not None:
-            residuals, unexplained = given_residuals
-        elif runs:
-            residuals, unexplained = self._residuals(obs, state, root_pos, root_rot, arrays,
-                                                     p.claim_gate_px)
+        if runs:
+            residuals, unexplained = (given_residuals if given_residuals is not None else
+                                      self._residuals(obs, state, root_pos, root_rot, arrays,
+                                                      p.claim_gate_px))
             if error is None:
                 error = self._state_error(arrays, state, root_pos, root_rot, p)
         err, view_err = error if error is not None else (np.nan, np.full(nv, np.nan))
