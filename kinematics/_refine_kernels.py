@@ -21,10 +21,12 @@ from kinematics._anneal_kernels import (
     DOF_HISTOGRAM,
     NO_CLAIMS,
     OBJ_CLOUD,
+    OBJ_CLOUD_ONE,
     OBJ_LABELLED,
     OBJ_POINTS3D,
     cloud_nearest,
     hidden_in,
+    one_to_one,
     project_posture,
     solve_spd,
 )
@@ -58,20 +60,32 @@ def assign_pairs(objective, proj, mk, points, conf, view_off, obs3, gate, pair):
     i's own keypoint in view v (if present, with confidence > 0). 3D points: ``pair[i] =
     i`` where marker i's point is present. Unlabelled 3D points (``OBJ_CLOUD``):
     ``pair[i]`` = the row of marker i's nearest cloud point (px-equivalents, as
-    :func:`kinematics._anneal_kernels.cloud_error`). -1 marks no pair (farther than
-    ``gate``: pixels, or length units for labelled 3D).
+    :func:`kinematics._anneal_kernels.cloud_error`); with ``OBJ_CLOUD_ONE`` each point
+    pairs with one marker at most (:func:`kinematics._anneal_kernels.one_to_one`), so a
+    marker whose own point is missing does not take a neighbour's. -1 marks no pair
+    (farther than ``gate``: pixels, or length units for labelled 3D).
     """
     nv = proj.shape[0]
     nm = mk.shape[0]
     n = 0
     g2 = gate * gate
     pair[:] = -1
-    if objective == OBJ_CLOUD:
+    if objective in (OBJ_CLOUD, OBJ_CLOUD_ONE):
         for i in range(nm):
-            d, arg = cloud_nearest(mk, i, obs3, NO_CLAIMS)
-            if arg >= 0 and d <= gate:
-                pair[i] = arg
-                n += 1
+            _, pair[i] = cloud_nearest(mk, i, obs3, NO_CLAIMS)
+        if objective == OBJ_CLOUD_ONE:  # losers hold -(their point + 2)
+            one_to_one(mk, obs3, 0, obs3.shape[0], 0, nm, True, NO_CLAIMS, np.inf, pair)
+        for i in range(nm):
+            c = pair[i] if pair[i] >= -1 else -pair[i] - 2
+            ok = c >= 0
+            if ok:
+                s = obs3[c, 3]
+                dx = mk[i, 0] - obs3[c, 0]
+                dy = mk[i, 1] - obs3[c, 1]
+                dz = mk[i, 2] - obs3[c, 2]
+                ok = s * s * (dx * dx + dy * dy + dz * dz) <= g2
+            pair[i] = c if ok else -1
+            n += 1 if ok else 0
         return n
     if objective == OBJ_POINTS3D:
         for i in range(nm):
@@ -113,11 +127,11 @@ def fill_residuals(objective, proj, mk, points, conf, obs3, pair, res):
     weighted by the square root of the confidence); returns their sum of squares."""
     res[:] = 0.0
     s = 0.0
-    if objective in (OBJ_POINTS3D, OBJ_CLOUD):
+    if objective in (OBJ_POINTS3D, OBJ_CLOUD, OBJ_CLOUD_ONE):
         for i in range(mk.shape[0]):
             c = pair[i]
             if c >= 0:  # a cloud point's weight is its px per unit, labelled ones' a variance
-                w = obs3[c, 3] if objective == OBJ_CLOUD else np.sqrt(obs3[c, 3])
+                w = np.sqrt(obs3[c, 3]) if objective == OBJ_POINTS3D else obs3[c, 3]
                 for k in range(3):
                     r = w * (mk[i, k] - obs3[c, k])
                     res[3 * i + k] = r

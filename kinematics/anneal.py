@@ -60,6 +60,7 @@ import numpy as np
 from kinematics import _anneal_kernels as _ak
 from kinematics import _lane_codegen as _codegen
 from kinematics import _lane_kernels as _lk
+from kinematics import _refine_kernels as _rk
 from kinematics import placement, temporal
 from kinematics.cameras import CameraArrays
 from kinematics.cloud import cloud_observations, view_groups
@@ -86,6 +87,8 @@ STATUSES = ("ok", "reanalysed", "ambiguous", "failed", "no-detections")
 #: The start search's draws per joint and kept posture (``start_samples`` None) for a body
 #: of several partitions (docs/benchmarks.md, the fly).
 DEFAULT_START_SAMPLES = 64
+#: Levenberg-Marquardt steps of the final polish at most (it stops once converged).
+POLISH_STEPS = 50
 
 
 class Candidate(NamedTuple):
@@ -698,8 +701,9 @@ class Fitter:
             start = self.problem.state(self._posture_deg(start_deg), roots[0])[0]
             for q in range(len(self.problem.free_chains)):
                 start[self.problem.root_axes[q]] = 0.0  # the seed holds the root's rotation
-        return self._fit_block(obs, np.zeros(1, np.int64), np.array([int(frame)], np.int64),
-                               roots, rots, start, np.array([0, 1], np.int64))[0]
+        return self._polished(obs, 0, self._fit_block(
+            obs, np.zeros(1, np.int64), np.array([int(frame)], np.int64), roots, rots, start,
+            np.array([0, 1], np.int64))[0])
 
     def _one_frame(self, detections_frame, frame, root_positions, caller: str):
         """The observations of one frame, its roots (1, n_chains, 3) and root rotations:
@@ -737,10 +741,9 @@ class Fitter:
         found = self._refit_from(obs, 0, seed, self.params, polish=True, counted=counted)
         if found is None:
             return None
-        return self._frame_result(obs, 0, int(frame), found.state, found.seed_pos,
-                                  found.seed_rot, self.params, runs=1,
-                                  iterations=counted[0], pairs=0, error=None,
-                                  candidates=(found,))
+        return self._polished(obs, 0, self._frame_result(
+            obs, 0, int(frame), found.state, found.seed_pos, found.seed_rot, self.params,
+            runs=1, iterations=counted[0], pairs=0, error=None, candidates=(found,)))
 
     def iter_fit(self, detections, frames=None, *, chunk_size: int | None = None,
                  sequence_starts: Iterable[int] = (), previous: FrameResult | None = None,
@@ -781,7 +784,8 @@ class Fitter:
         obs = self.observations(detections)
         idx = self._frame_indices(frames, obs.n_frames)
         starts = np.asarray(list(sequence_starts), np.int64)
-        return self._iter(obs, idx, chunk_size, starts, previous, cancel)
+        return self._final_polish(obs, idx, self._iter(obs, idx, chunk_size, starts,
+                                                       previous, cancel))
 
     def _iter(self, obs: Observations, idx: np.ndarray, chunk_size: int | None,
               starts: np.ndarray | None = None, previous: FrameResult | None = None,
@@ -825,6 +829,48 @@ class Fitter:
         else:
             for block in chunks():
                 yield from block
+
+    def _final_polish(self, obs: Observations, idx, results: Iterable[FrameResult]
+                      ) -> Iterator[FrameResult]:
+        """``results`` (one per frame of ``idx``, in order) as :meth:`_polished` leaves
+        them."""
+        for position, r in zip(idx, results, strict=False):  # a cancelled fit yields fewer
+            yield self._polished(obs, int(position), r)
+
+    def _polished(self, obs: Observations, position: int, r: FrameResult) -> FrameResult:
+        """The chosen posture of frame ``position`` fitted by least squares to its cloud
+        points within ``final_polish_px``, each point paired with one marker at most
+        (Levenberg-Marquardt, the refinement's kernel), and kept whatever its E: annealing
+        minimises a sum of distances, which puts the misfit of a limb the rigid chain cannot
+        fit on one joint; least squares spreads it. Only the partitions whose own markers
+        all have a point move: a limb missing one would be pulled by the others alone.
+        Matching in 3D only; the status, decided on the fit, stays."""
+        p = self.params
+        if p.final_polish_px is None or obs.kind != "cloud" or not r.runs:
+            return r
+        pr = self.problem
+        cams, arrays = self._kernel_inputs(obs.arrays(np.array([position], np.int64)))
+        state, pos, rot = self.state(r.angles_deg, r.root_positions)
+        cloud = np.ascontiguousarray(arrays.points3d[0])
+        _, mk = self._project_state(state, pos, rot, markers=True)
+        pair = np.empty(len(mk), np.int64)
+        _rk.assign_pairs(_ak.OBJ_CLOUD_ONE, np.empty((0, len(mk), 2)), mk, arrays.points,
+                         arrays.conf, arrays.offsets, cloud, float(p.final_polish_px), pair)
+        parts = self._partitions(p, search=False)
+        moved = [parts.dofs[parts.dof_off[k]: parts.dof_off[k + 1]]
+                 for k, (_, _, m0, _, m_own) in enumerate(parts.bounds)
+                 if (pair[m0:m_own] >= 0).all()]
+        if not moved:
+            return r
+        _rk.refine_posture(state, np.concatenate(moved), pr.lo, pr.hi, pr.dof_kind,
+                           POLISH_STEPS, float(p.final_polish_px), pos, rot, *pr.folded,
+                           *cams, _ak.OBJ_CLOUD_ONE, arrays.points, arrays.conf,
+                           arrays.offsets, cloud)
+        new = self._frame_result(obs, position, r.frame, state, pos, rot, p, runs=r.runs,
+                                 iterations=r.iterations, pairs=r.refined_pairs or 0)
+        return replace(r, **{k: getattr(new, k) for k in (
+            "angles_deg", "root_positions", "error", "error_per_view", "marker_residuals",
+            "matched", "unexplained", "worst_px")})
 
     def _video_threshold(self, obs: Observations, idx, roots, rots) -> float:
         """The re-analysis threshold on E measured on the video itself (threshold_mode

@@ -177,6 +177,14 @@ class AnnealParams:
                                 min=0, max=10**6)
     refine_gate_px: float = setting(5.0, "Refinement ignores marker/detection pairs farther "
                                     "apart than this (pixels); > 0.", min=0.0, max=1e9)
+    final_polish_px: float | None = setting(
+        50.0, "With matching in 3D: after the fit, each frame's chosen posture is fitted by "
+        "least squares to its nearest cloud points within this distance (px-equivalents) "
+        "and kept whatever its E. Annealing minimises a sum of distances, which leaves the "
+        "whole misfit of a limb the rigid chain cannot fit on one joint; least squares "
+        "spreads it over the limb (docs/fitting.md, 'The final polish'). The status is "
+        "decided before it. None, written 0 in a project file: off (the paper).",
+        min=0.0, max=1e9, none=0.0)
     root_gate_px: float | None = setting(
         None, "Root-marker tracking ignores a view whose nearest detection is farther than "
         "this (pixels) from the predicted root marker; None, written 0 in a project file: no "
@@ -320,10 +328,11 @@ class AnnealParams:
         if th is not None and not (_is_real(th) and math.isfinite(th) and 0 <= th <= 1):
             raise KinematicsError(f"must be None or a number in [0, 1], got {th!r}",
                                   field="plausibility_threshold")
-        g = self.root_gate_px
-        if g is not None and not (_is_real(g) and g > 0):
-            raise KinematicsError(f"must be None or a number > 0, got {g!r}",
-                                  field="root_gate_px")
+        for name in ("root_gate_px", "final_polish_px"):
+            g = getattr(self, name)
+            if g is not None and not (_is_real(g) and math.isfinite(g) and g > 0):
+                raise KinematicsError(f"must be None or a finite number > 0, got {g!r}",
+                                      field=name)
         for name in ("auto_k", "path_weight", "ambiguous_px", "ambiguous_move"):
             value = getattr(self, name)
             if not _is_real(value) or not (math.isfinite(value) and value >= 0):
@@ -407,7 +416,7 @@ BEST_ERROR = {"mode": "bounded", "cap_px": 10.0}
 #: Profiles: 'best' (the defaults) and 'paper' (what differs from them in the paper's).
 PROFILES = ("best", "paper")
 PAPER = {"refine": False, "threshold_mode": "absolute", "candidates": 1, "match": "views",
-         "max_runs": 5,
+         "max_runs": 5, "final_polish_px": None,
          "start_samples": 0, "confirm_runs": "off", "error": ErrorOptions()}
 
 
