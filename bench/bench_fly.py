@@ -40,7 +40,9 @@ Protocol:
    (``videotrack.synth.write_points_project``) as ``--diameter`` px markers (4), one FFV1
    video per camera, and detected with the written project (``videotrack detect``). A
    second video draws only ``--leg``'s 5 markers.
-5. Fits, all frame-independent (``start="mean"``), unlabelled markers, refinement on, the
+5. Fits, all frame-independent (``start="mean"``), unlabelled markers, refinement on (and,
+   where markers are matched in 3D, the final polish: ``--param final_polish_px=None`` for
+   the fit without it), the
    Table 1 schedule shortened to ``--n-end`` (N_l, N_tau scaled), re-analysis threshold
    ``--threshold`` px per marker image (times markers x views of that fit; with
    ``--param match=3d`` times markers: E then sums one distance per marker), marker cost
