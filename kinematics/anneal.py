@@ -872,7 +872,11 @@ class Fitter:
                            arrays.offsets, cloud)
         new = self._frame_result(obs, position, r.frame, state, pos, rot, p, runs=r.runs,
                                  iterations=r.iterations, pairs=r.refined_pairs or 0)
-        return replace(r, **{k: getattr(new, k) for k in (
+        # the chosen candidate is the polished posture too (cycling back to it in the GUI)
+        cands = tuple(Candidate(new.angles_deg, new.root_positions, new.error, state, pos, rot)
+                      if np.array_equal(c.angles_deg, r.angles_deg) else c
+                      for c in r.candidates)
+        return replace(r, candidates=cands, **{k: getattr(new, k) for k in (
             "angles_deg", "root_positions", "error", "error_per_view", "marker_residuals",
             "matched", "unexplained", "worst_px")})
 

@@ -221,6 +221,9 @@ def test_final_polish_spreads_a_misfit_by_least_squares():
     params = AnnealParams(match="3d", candidates=1, threshold_mode="absolute",
                           reanalysis_threshold=50.0).with_schedule(3000)
     polished = Fitter(body, cams, params).fit(frames)
+    with_candidates = Fitter(body, cams, replace(params, candidates=2)).fit(frames[:2])
+    for r in with_candidates:  # the chosen candidate is polished with it
+        assert sum(np.array_equal(c.angles_deg, r.angles_deg) for c in r.candidates) == 1
     fitter = Fitter(body, cams, replace(params, final_polish_px=None))
     annealed = fitter.fit(frames)
     free = ~body.locked_mask()
