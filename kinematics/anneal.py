@@ -418,8 +418,7 @@ class Fitter:
     @property
     def matches_in_3d(self) -> bool:
         """Whether unlabelled points are triangulated and matched in 3D (``match``: '3d', or
-        'auto' with 3 or more views and a body annealed in several partitions; under 'auto'
-        observations with markers hidden in some views are still matched per view)."""
+        'auto' with 3 or more views and a body annealed in several partitions)."""
         p = self.params
         if p.match != "auto":
             return p.match == "3d"
@@ -482,10 +481,7 @@ class Fitter:
         if obs.kind == "cloud" and obs.points3d.shape[2] not in (4, 4 + nm):
             raise KinematicsError(f"a cloud needs 4 columns, or 4 + {nm} (one per marker), "
                                   f"got {obs.points3d.shape[2]}", field="cloud")
-        # markers hidden in some views cannot be triangulated: 'auto' matches them per view
-        marked = obs.hidden is not None or obs.unseen is not None
-        if obs.kind == "points" and self.matches_in_3d and not (
-                marked and self.params.match == "auto"):
+        if obs.kind == "points" and self.matches_in_3d:
             if self._views_3d < 3:
                 each = " of each colour (views that show the same markers)" if (
                     self.unseen is not None) else ""

@@ -235,24 +235,3 @@ def test_error_refuses_marks_of_the_wrong_shape(locust):
     with pytest.raises(KinematicsError, match=r"hidden marks need shape \(2, 4\)") as err:
         fitter.error(truth[0], frames[0], hidden=np.zeros((2, 3), bool))
     assert err.value.field == "hidden"
-
-
-def test_match_auto_fits_hidden_marks_per_view_and_3d_refuses_them():
-    """Markers hidden in some views cannot be triangulated: under ``match = 'auto'`` a
-    many-limbed body seen by 5 views is then matched per view (it was refused, asking the
-    user to set what 'auto' should have chosen); ``'3d'`` names the setting to change."""
-    from tests.kinematics.test_cloud_objective import ring
-    from tests.kinematics.test_partitions import planted, three_legs
-
-    body, cams = three_legs(), ring()
-    _, frames = planted(body, cams, 2, seed=1)
-    pts = np.concatenate([v for frame in frames for v in frame])
-    off = np.r_[0, np.cumsum([len(v) for frame in frames for v in frame])]
-    hidden = np.zeros((2, len(cams), len(body.marker_names)), bool)
-    hidden[0, 0, 3] = True
-    obs = Observations.unlabelled(pts, off, list(cams), np.zeros(2, int)).with_hidden(hidden)
-    fitter = Fitter(body, cams, AnnealParams().with_schedule(300))
-    assert fitter.matches_in_3d and fitter.observations(obs).kind == "points"
-    assert len(fitter.fit(obs)) == 2
-    with pytest.raises(KinematicsError, match="match = 'views'"):
-        Fitter(body, cams, AnnealParams(match="3d")).observations(obs)
