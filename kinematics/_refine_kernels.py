@@ -73,7 +73,7 @@ def assign_pairs(objective, proj, mk, points, conf, view_off, obs3, gate, pair):
     if objective in (OBJ_CLOUD, OBJ_CLOUD_ONE):
         for i in range(nm):
             _, pair[i] = cloud_nearest(mk, i, obs3, NO_CLAIMS)
-        if objective == OBJ_CLOUD_ONE:  # losers hold -(their point + 2)
+        if objective == OBJ_CLOUD_ONE:  # losers hold -(the point they took instead + 2)
             one_to_one(mk, obs3, 0, obs3.shape[0], 0, nm, True, NO_CLAIMS, np.inf, pair)
         for i in range(nm):
             c = pair[i] if pair[i] >= -1 else -pair[i] - 2
@@ -84,6 +84,9 @@ def assign_pairs(objective, proj, mk, points, conf, view_off, obs3, gate, pair):
                 dy = mk[i, 1] - obs3[c, 1]
                 dz = mk[i, 2] - obs3[c, 2]
                 ok = s * s * (dx * dx + dy * dy + dz * dz) <= g2
+            # one_to_one lets two losers take the same spare point: the first keeps it
+            for j in range(i if objective == OBJ_CLOUD_ONE and ok else 0):
+                ok = ok and pair[j] != c
             pair[i] = c if ok else -1
             n += 1 if ok else 0
         return n

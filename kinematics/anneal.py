@@ -770,7 +770,10 @@ class Fitter:
             ``frames`` and jumps of the movement itself are found without help.
         previous : FrameResult, optional
             The result chosen just before the first of ``frames`` (a resumed fit): the path
-            continues from it, so a fit resumed where it stopped chooses as the whole would.
+            continues from it, so a fit resumed where it stopped chooses as the whole would
+            (with the final polish, ``final_polish_px``, it continues from the polished
+            posture, where the whole continued from the fitted one: a choice between
+            candidates that nearly tie can differ at the seam).
         cancel : callable, optional
             Asked before each batch; once it returns True no further batch is fitted and
             the frames fitted so far are yielded (the path through time holds back up to 64
@@ -844,12 +847,14 @@ class Fitter:
         minimises a sum of distances, which puts the misfit of a limb the rigid chain cannot
         fit on one joint; least squares spreads it. Only the partitions whose own markers
         all have a point move: a limb missing one would be pulled by the others alone.
-        Matching in 3D only; the status, decided on the fit, stays."""
+        Matching in 3D only; the status, decided on the fit, stays, and a posture whose E
+        the polish would take above the threshold stays as fitted."""
         p = self.params
         if p.final_polish_px is None or obs.kind != "cloud" or not r.runs:
             return r
         pr = self.problem
-        cams, arrays = self._kernel_inputs(obs.arrays(np.array([position], np.int64)))
+        frame_arrays = obs.arrays(np.array([position], np.int64))
+        cams, arrays = self._kernel_inputs(frame_arrays)
         state, pos, rot = self.state(r.angles_deg, r.root_positions)
         cloud = np.ascontiguousarray(arrays.points3d[0])
         _, mk = self._project_state(state, pos, rot, markers=True)
@@ -867,10 +872,14 @@ class Fitter:
                            *cams, _ak.OBJ_CLOUD_ONE, arrays.points, arrays.conf,
                            arrays.offsets, cloud)
         new = self._frame_result(obs, position, r.frame, state, pos, rot, p, runs=r.runs,
-                                 iterations=r.iterations, pairs=r.refined_pairs or 0)
+                                 iterations=r.iterations, pairs=r.refined_pairs or 0,
+                                 arrays=frame_arrays)
+        if r.error <= r.threshold < new.error:  # E grows a little: never across the threshold
+            return r
         # the chosen candidate is the polished posture too (cycling back to it in the GUI)
         cands = tuple(Candidate(new.angles_deg, new.root_positions, new.error, state, pos, rot)
-                      if np.array_equal(c.angles_deg, r.angles_deg) else c
+                      if np.array_equal(c.angles_deg, r.angles_deg)
+                      and np.array_equal(c.root_positions, r.root_positions) else c
                       for c in r.candidates)
         return replace(r, candidates=cands, **{k: getattr(new, k) for k in (
             "angles_deg", "root_positions", "error", "error_per_view", "marker_residuals",

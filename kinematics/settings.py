@@ -179,11 +179,13 @@ class AnnealParams:
                                     "apart than this (pixels); > 0.", min=0.0, max=1e9)
     final_polish_px: float | None = setting(
         50.0, "With matching in 3D: after the fit, each frame's chosen posture is fitted by "
-        "least squares to its nearest cloud points within this distance (px-equivalents) "
-        "and kept whatever its E. Annealing minimises a sum of distances, which leaves the "
-        "whole misfit of a limb the rigid chain cannot fit on one joint; least squares "
-        "spreads it over the limb (docs/fitting.md, 'The final polish'). The status is "
-        "decided before it. None, written 0 in a project file: off (the paper).",
+        "least squares to its cloud points within this distance (px-equivalents), each "
+        "point paired with one marker, moving only the limbs whose markers all have a point, "
+        "and kept though E grows a little (not across the threshold). Annealing minimises a "
+        "sum of distances, which leaves the whole misfit of a limb the rigid chain cannot "
+        "fit on one joint; least squares spreads it over the limb (docs/fitting.md, 'The "
+        "final polish'). The status is decided before it. None, written 0 in a project "
+        "file: off (the paper).",
         min=0.0, max=1e9, none=0.0)
     root_gate_px: float | None = setting(
         None, "Root-marker tracking ignores a view whose nearest detection is farther than "
@@ -330,8 +332,8 @@ class AnnealParams:
                                   field="plausibility_threshold")
         for name in ("root_gate_px", "final_polish_px"):
             g = getattr(self, name)
-            if g is not None and not (_is_real(g) and math.isfinite(g) and g > 0):
-                raise KinematicsError(f"must be None or a finite number > 0, got {g!r}",
+            if g is not None and not (_is_real(g) and g > 0):
+                raise KinematicsError(f"must be None or a number > 0, got {g!r}",
                                       field=name)
         for name in ("auto_k", "path_weight", "ambiguous_px", "ambiguous_move"):
             value = getattr(self, name)

@@ -124,11 +124,18 @@ def test_polish_pairs_each_point_with_one_marker():
             cloud, 5.0, pair)
     assert rk.assign_pairs(ak.OBJ_CLOUD, *args) == 4 and pair.tolist() == [0, 0, 2, 2]
     assert rk.assign_pairs(ak.OBJ_CLOUD_ONE, *args) == 3
-    assert pair.tolist() == [0, 1, 2, -1]  # marker 3's point is missing: no pair
+    assert pair.tolist() == [0, 1, 2, -1]  # marker 3's spare point is 46 px off: no pair
     res = np.empty(12)
     sse = rk.fill_residuals(ak.OBJ_CLOUD_ONE, args[0], mk, args[2], args[3], cloud, pair,
                             res)
     assert sse == pytest.approx(1.0 + 9.0)  # 0.1 and 0.3 units at 10 px per unit
+    # two markers that both lost point 0 take the one spare point in turn: the first keeps it
+    mk = np.array([[0.0, 0.0, 0.0], [0.2, 0.0, 0.0], [-0.2, 0.0, 0.0]])
+    cloud = np.array([[0.0, 0.0, 0.0, 10.0], [1.0, 0.0, 0.0, 10.0]])
+    pair = np.empty(3, np.int64)
+    assert rk.assign_pairs(ak.OBJ_CLOUD_ONE, np.zeros((0, 3, 2)), mk, np.empty((0, 2)),
+                           np.empty(0), np.zeros(1, np.int64), cloud, 50.0, pair) == 2
+    assert pair.tolist() == [0, 1, -1]
 
 
 def ring(n=5, distance=80.0, focal=800.0):
