@@ -843,10 +843,11 @@ class Fitter:
     def _polished(self, obs: Observations, position: int, r: FrameResult) -> FrameResult:
         """The chosen posture of frame ``position`` fitted by least squares to its cloud
         points within ``final_polish_px``, each point paired with one marker at most
-        (Levenberg-Marquardt, the refinement's kernel), and kept whatever its E: annealing
-        minimises a sum of distances, which puts the misfit of a limb the rigid chain cannot
-        fit on one joint; least squares spreads it. Only the partitions whose own markers
-        all have a point move: a limb missing one would be pulled by the others alone.
+        (Levenberg-Marquardt, the refinement's kernel), and kept though its E grows a
+        little: annealing minimises a sum of distances, which puts the misfit of a limb the
+        rigid chain cannot fit on one joint; least squares spreads it. Only the partitions
+        whose own markers all have a point move: a limb missing one would be pulled by the
+        others alone.
         Matching in 3D only; the status, decided on the fit, stays, and a posture whose E
         the polish would take above the threshold stays as fitted."""
         p = self.params

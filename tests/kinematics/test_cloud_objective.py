@@ -257,6 +257,11 @@ def test_final_polish_spreads_a_misfit_by_least_squares():
         # the product weighs each point by its px per unit, scipy does not: 1 % apart
         assert sse(p.angles_deg, target) <= 1.01 * 2 * best.cost + 1e-9
         assert p.error == pytest.approx(fitter.error(p.angles_deg, frame)[0], rel=1e-9)
+    # an accepted frame is never polished across its threshold: it stays as fitted
+    assert polished[0].error > annealed[0].error
+    mid = 0.5 * (polished[0].error + annealed[0].error)
+    held = Fitter(body, cams, replace(params, reanalysis_threshold=mid)).fit(frames[:1])[0]
+    assert held.status == "ok" and held.error == annealed[0].error
     spread = [sse(p.angles_deg, t) for p, t in zip(polished[:4], targets, strict=False)]
     as_annealed = [sse(q.angles_deg, t) for q, t in zip(annealed[:4], targets, strict=False)]
     assert sum(spread) < 0.8 * sum(as_annealed), (spread, as_annealed)
