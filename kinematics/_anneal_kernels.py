@@ -525,6 +525,13 @@ def takes(n, c):
 
 
 @njit(cache=True, nogil=True, inline="always")
+def point_of(n):
+    """The point a marker's ``nearest`` entry ``n`` takes: ``n``, or for a marker that lost
+    its nearest point the one :func:`one_to_one` gave it instead (``-(c + 2)``); -1 none."""
+    return n if n >= -1 else -n - 2
+
+
+@njit(cache=True, nogil=True, inline="always")
 def may_take(cloud, c, i):
     """Whether model marker ``i`` may take cloud point ``c``. A cloud of markers of several
     colours (each colour triangulated on its own) has one column per model marker after x,
@@ -566,7 +573,7 @@ def one_to_one(X, Y, a, b, m0, m1, scaled, claimed, cap, nearest):
             di = _dist2(X, i, Y, c, scaled)
             lost = False
             for j in range(m0, m1):
-                cj = nearest[j] if nearest[j] >= 0 else -nearest[j] - 2
+                cj = point_of(nearest[j])
                 if j != i and cj == c:
                     dj = _dist2(X, j, Y, c, scaled)
                     lost = lost or dj < di or (dj == di and j < i)

@@ -27,6 +27,7 @@ from kinematics._anneal_kernels import (
     cloud_nearest,
     hidden_in,
     one_to_one,
+    point_of,
     project_posture,
     solve_spd,
 )
@@ -76,7 +77,7 @@ def assign_pairs(objective, proj, mk, points, conf, view_off, obs3, gate, pair):
         if objective == OBJ_CLOUD_ONE:  # losers hold -(the point they took instead + 2)
             one_to_one(mk, obs3, 0, obs3.shape[0], 0, nm, True, NO_CLAIMS, np.inf, pair)
         for i in range(nm):
-            c = pair[i] if pair[i] >= -1 else -pair[i] - 2
+            c = point_of(pair[i])
             ok = c >= 0
             if ok:
                 s = obs3[c, 3]

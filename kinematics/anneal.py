@@ -847,9 +847,8 @@ class Fitter:
         little: annealing minimises a sum of distances, which puts the misfit of a limb the
         rigid chain cannot fit on one joint; least squares spreads it. Only the partitions
         whose own markers all have a point move: a limb missing one would be pulled by the
-        others alone.
-        Matching in 3D only; the status, decided on the fit, stays, and a posture whose E
-        the polish would take above the threshold stays as fitted."""
+        others alone. Matching in 3D only; the status, decided on the fit, stays, and a
+        posture whose E the polish would take above the threshold stays as fitted."""
         p = self.params
         if p.final_polish_px is None or obs.kind != "cloud" or not r.runs:
             return r
