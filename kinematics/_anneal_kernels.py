@@ -662,8 +662,10 @@ OBJ_NEAREST = 0  # unlabelled points per view: Eq. 5 and its variants
 OBJ_LABELLED = 1  # labelled 2D keypoints: marker i of view v against its own keypoint
 OBJ_POINTS3D = 2  # labelled 3D points: marker i against its own 3D point
 OBJ_CLOUD = 3  # unlabelled 3D points (detections triangulated across views): nearest point
-# the cloud paired one to one, for refinement only (the final polish, Fitter._polished)
+# refinement only (the final polish, Fitter._polished): the cloud paired one to one, and
+# with _VIEWS a marker left without a point paired in each view with its nearest detection
 OBJ_CLOUD_ONE = 4
+OBJ_CLOUD_VIEWS = 5
 
 
 @njit(cache=True, nogil=True)

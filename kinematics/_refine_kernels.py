@@ -22,6 +22,7 @@ from kinematics._anneal_kernels import (
     NO_CLAIMS,
     OBJ_CLOUD,
     OBJ_CLOUD_ONE,
+    OBJ_CLOUD_VIEWS,
     OBJ_LABELLED,
     OBJ_POINTS3D,
     cloud_nearest,
@@ -63,18 +64,23 @@ def assign_pairs(objective, proj, mk, points, conf, view_off, obs3, gate, pair):
     ``pair[i]`` = the row of marker i's nearest cloud point (px-equivalents, as
     :func:`kinematics._anneal_kernels.cloud_error`); with ``OBJ_CLOUD_ONE`` each point
     pairs with one marker at most (:func:`kinematics._anneal_kernels.one_to_one`), so a
-    marker whose own point is missing does not take a neighbour's. -1 marks no pair
-    (farther than ``gate``: pixels, or length units for labelled 3D).
+    marker whose own point is missing does not take a neighbour's; ``OBJ_CLOUD_VIEWS``
+    pairs as ``OBJ_CLOUD_ONE``, and a marker left without a point with its nearest
+    detection in each view among those within their own gate, ``conf`` (px):
+    ``pair[nm + v * nm + i]`` (its point is missing where its blob fused with another in
+    one view, and the other views still place it). -1 marks no pair (farther than
+    ``gate``: pixels, or length units for labelled 3D).
     """
     nv = proj.shape[0]
     nm = mk.shape[0]
     n = 0
     g2 = gate * gate
     pair[:] = -1
-    if objective in (OBJ_CLOUD, OBJ_CLOUD_ONE):
+    if objective in (OBJ_CLOUD, OBJ_CLOUD_ONE, OBJ_CLOUD_VIEWS):
+        one = objective != OBJ_CLOUD
         for i in range(nm):
             _, pair[i] = cloud_nearest(mk, i, obs3, NO_CLAIMS)
-        if objective == OBJ_CLOUD_ONE:  # losers hold -(the point they took instead + 2)
+        if one:  # losers hold -(the point they took instead + 2)
             one_to_one(mk, obs3, 0, obs3.shape[0], 0, nm, True, NO_CLAIMS, np.inf, pair)
         for i in range(nm):
             c = point_of(pair[i])
@@ -86,10 +92,18 @@ def assign_pairs(objective, proj, mk, points, conf, view_off, obs3, gate, pair):
                 dz = mk[i, 2] - obs3[c, 2]
                 ok = s * s * (dx * dx + dy * dy + dz * dz) <= g2
             # one_to_one lets two losers take the same spare point: the first keeps it
-            for j in range(i if objective == OBJ_CLOUD_ONE and ok else 0):
+            for j in range(i if one and ok else 0):
                 ok = ok and pair[j] != c
             pair[i] = c if ok else -1
             n += 1 if ok else 0
+        if objective == OBJ_CLOUD_VIEWS:
+            for v in range(nv):
+                for i in range(nm):
+                    if pair[i] < 0:
+                        arg = _nearest_in_gate(proj, v, i, points, conf, view_off[v],
+                                               view_off[v + 1])
+                        pair[nm + v * nm + i] = arg
+                        n += 1 if arg >= 0 else 0
         return n
     if objective == OBJ_POINTS3D:
         for i in range(nm):
@@ -104,25 +118,48 @@ def assign_pairs(objective, proj, mk, points, conf, view_off, obs3, gate, pair):
         a = view_off[v]
         b = view_off[v + 1]
         for i in range(nm):
-            best = np.inf
             arg = -1
             if objective == OBJ_LABELLED:
                 if b - a == nm and conf[a + i] > 0.0:
-                    best = (proj[v, i, 0] - points[a + i, 0]) ** 2 + (
+                    d2 = (proj[v, i, 0] - points[a + i, 0]) ** 2 + (
                         proj[v, i, 1] - points[a + i, 1]) ** 2
-                    arg = a + i
+                    arg = a + i if d2 <= g2 else -1
             elif not hidden_in(obs3, i, v):
-                for c in range(a, b):
-                    dx = proj[v, i, 0] - points[c, 0]
-                    dy = proj[v, i, 1] - points[c, 1]
-                    d2 = dx * dx + dy * dy
-                    if d2 < best:
-                        best = d2
-                        arg = c
-            ok = arg >= 0 and best <= g2
-            pair[v * nm + i] = arg if ok else -1
-            n += 1 if ok else 0
+                arg = _nearest_within(proj, v, i, points, a, b, g2)
+            pair[v * nm + i] = arg
+            n += 1 if arg >= 0 else 0
     return n
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _nearest_in_gate(proj, v, i, points, gates, a, b):
+    """The row of ``a:b`` nearest marker i's projection in view v among those within their
+    own ``gates`` (px); -1 if none."""
+    best = np.inf
+    arg = -1
+    for c in range(a, b):
+        dx = proj[v, i, 0] - points[c, 0]
+        dy = proj[v, i, 1] - points[c, 1]
+        d2 = dx * dx + dy * dy
+        if d2 < best and d2 <= gates[c] * gates[c]:
+            best = d2
+            arg = c
+    return arg
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _nearest_within(proj, v, i, points, a, b, g2):
+    """The row of ``a:b`` nearest marker i's projection in view v, -1 beyond ``sqrt(g2)``."""
+    best = np.inf
+    arg = -1
+    for c in range(a, b):
+        dx = proj[v, i, 0] - points[c, 0]
+        dy = proj[v, i, 1] - points[c, 1]
+        d2 = dx * dx + dy * dy
+        if d2 < best:
+            best = d2
+            arg = c
+    return arg if best <= g2 else -1
 
 
 @njit(cache=True, nogil=True)
@@ -131,8 +168,10 @@ def fill_residuals(objective, proj, mk, points, conf, obs3, pair, res):
     weighted by the square root of the confidence); returns their sum of squares."""
     res[:] = 0.0
     s = 0.0
-    if objective in (OBJ_POINTS3D, OBJ_CLOUD, OBJ_CLOUD_ONE):
-        for i in range(mk.shape[0]):
+    nm = mk.shape[0]
+    off = 0  # the rows and pairs before the views' (OBJ_CLOUD_VIEWS: the cloud's)
+    if objective in (OBJ_POINTS3D, OBJ_CLOUD, OBJ_CLOUD_ONE, OBJ_CLOUD_VIEWS):
+        for i in range(nm):
             c = pair[i]
             if c >= 0:  # a cloud point's weight is its px per unit, labelled ones' a variance
                 w = np.sqrt(obs3[c, 3]) if objective == OBJ_POINTS3D else obs3[c, 3]
@@ -140,18 +179,42 @@ def fill_residuals(objective, proj, mk, points, conf, obs3, pair, res):
                     r = w * (mk[i, k] - obs3[c, k])
                     res[3 * i + k] = r
                     s += r * r
-        return s
-    nm = proj.shape[1]
+        if objective != OBJ_CLOUD_VIEWS:
+            return s
+        off = nm
     for k in range(proj.shape[0] * nm):
-        c = pair[k]
+        c = pair[off + k]
         if c >= 0:
             w = np.sqrt(conf[c]) if objective == OBJ_LABELLED else 1.0
             rx = w * (proj[k // nm, k % nm, 0] - points[c, 0])
             ry = w * (proj[k // nm, k % nm, 1] - points[c, 1])
-            res[2 * k] = rx
-            res[2 * k + 1] = ry
+            res[3 * off + 2 * k] = rx
+            res[3 * off + 2 * k + 1] = ry
             s += rx * rx + ry * ry
     return s
+
+
+@njit(cache=True, nogil=True)
+def _pair_rows(objective, pair, nv, nm, rows):
+    """The residual rows of :func:`fill_residuals` that the pairs fill, in order, into
+    ``rows``; returns their number (the other rows are zero and are skipped)."""
+    n = 0
+    off = 0
+    if objective in (OBJ_POINTS3D, OBJ_CLOUD, OBJ_CLOUD_ONE, OBJ_CLOUD_VIEWS):
+        for i in range(nm):
+            if pair[i] >= 0:
+                for k in range(3):
+                    rows[n] = 3 * i + k
+                    n += 1
+        if objective != OBJ_CLOUD_VIEWS:
+            return n
+        off = nm
+    for k in range(nv * nm):
+        if pair[off + k] >= 0:
+            rows[n] = 3 * off + 2 * k
+            rows[n + 1] = 3 * off + 2 * k + 1
+            n += 2
+    return n
 
 
 @njit(cache=True, nogil=True)
@@ -179,11 +242,13 @@ def refine_posture(angles, free_idx, lo, hi, dof_kind, n_steps, gate, root_pos, 
     nj = parent.shape[0]
     na = angles.shape[0]
     nf = free_idx.shape[0]
-    nr = max(2 * nv * nm, 3 * nm)
-    pair = np.empty(max(nv * nm, nm), np.int64)
+    both = objective == OBJ_CLOUD_VIEWS  # rows and pairs of the cloud, then of the views
+    nr = 2 * nv * nm + 3 * nm if both else max(2 * nv * nm, 3 * nm)
+    pair = np.empty(nv * nm + nm if both else max(nv * nm, nm), np.int64)
     jac = np.zeros((nr, nf))
     res = np.zeros(nr)
     res1 = np.zeros(nr)
+    rows = np.empty(nr, np.int64)  # the rows of the pairs: the others are zero
     proj = np.empty((nv, nm, 2))
     cs = np.empty(na)
     sn = np.empty(na)
@@ -191,6 +256,8 @@ def refine_posture(angles, free_idx, lo, hi, dof_kind, n_steps, gate, root_pos, 
     pos = np.empty((nj, 3))
     mk = np.empty((nm, 3))
     trial = angles.copy()
+    jtj = np.empty((nf, nf))
+    jtr = np.empty(nf)
     a = np.empty((nf, nf))
     g = np.empty(nf)
     project_posture(angles, root_pos, root_rot, parent, chain, pre_rot, pre_trans, post_trans,
@@ -198,6 +265,7 @@ def refine_posture(angles, free_idx, lo, hi, dof_kind, n_steps, gate, root_pos, 
                     kind, P, K, dist, R, t, cs, sn, rot, pos, mk, proj)
     n_pairs = assign_pairs(objective, proj, mk, points, conf, view_off, obs3, gate, pair)
     cost = fill_residuals(objective, proj, mk, points, conf, obs3, pair, res)
+    n_rows = _pair_rows(objective, pair, nv, nm, rows)
     lam = 1e-3
     step = 0
     while step < n_steps and n_pairs > 0 and cost > 0.0:
@@ -211,23 +279,29 @@ def refine_posture(angles, free_idx, lo, hi, dof_kind, n_steps, gate, root_pos, 
                             mk, proj)
             angles[i] = x
             fill_residuals(objective, proj, mk, points, conf, obs3, pair, res1)
-            for k in range(nr):
+            for kk in range(n_rows):
+                k = rows[kk]
                 jac[k, q] = (res1[k] - res[k]) / FD_STEP
+        # J^T J and -J^T r once per Jacobian (symmetric: each product computed once)
+        for r in range(nf):
+            s = 0.0
+            for kk in range(n_rows):
+                s -= jac[rows[kk], r] * res[rows[kk]]
+            jtr[r] = s
+            for c in range(r, nf):
+                s = 0.0
+                for kk in range(n_rows):
+                    s += jac[rows[kk], r] * jac[rows[kk], c]
+                jtj[r, c] = s
+                jtj[c, r] = s
         # Damped Gauss-Newton steps with growing damping until one lowers the cost.
         improved = False
         tries = 0
         c_trial = cost
         while not improved and tries < MAX_DAMPING_TRIES:
+            a[:, :] = jtj
+            g[:] = jtr
             for r in range(nf):
-                s = 0.0
-                for k in range(nr):
-                    s -= jac[k, r] * res[k]
-                g[r] = s
-                for c in range(nf):
-                    s = 0.0
-                    for k in range(nr):
-                        s += jac[k, r] * jac[k, c]
-                    a[r, c] = s
                 a[r, r] += lam * a[r, r] + 1e-12
             solve_spd(a, g, nf)
             for q in range(nf):
@@ -250,6 +324,7 @@ def refine_posture(angles, free_idx, lo, hi, dof_kind, n_steps, gate, root_pos, 
             n_pairs = assign_pairs(objective, proj, mk, points, conf, view_off, obs3, gate,
                                    pair)
             cost = fill_residuals(objective, proj, mk, points, conf, obs3, pair, res)
+            n_rows = _pair_rows(objective, pair, nv, nm, rows)
             step = n_steps if converged else step + 1
         else:
             step = n_steps  # converged: no damped step lowers the cost

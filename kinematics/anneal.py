@@ -63,7 +63,7 @@ from kinematics import _lane_kernels as _lk
 from kinematics import _refine_kernels as _rk
 from kinematics import placement, temporal
 from kinematics.cameras import CameraArrays
-from kinematics.cloud import cloud_observations, view_groups
+from kinematics.cloud import SUPPORT_PX, cloud_observations, view_groups
 from kinematics.error_function import projection_error
 from kinematics.errors import KinematicsError
 from kinematics.fk import forward_kinematics, forward_kinematics_reference
@@ -845,35 +845,60 @@ class Fitter:
         points within ``final_polish_px``, each point paired with one marker at most
         (Levenberg-Marquardt, the refinement's kernel), and kept though its E grows a
         little: annealing minimises a sum of distances, which puts the misfit of a limb the
-        rigid chain cannot fit on one joint; least squares spreads it. Only the partitions
-        whose own markers all have a point move: a limb missing one would be pulled by the
-        others alone. Matching in 3D only; the status, decided on the fit, stays, and a
-        posture whose E the polish would take above the threshold stays as fitted."""
+        rigid chain cannot fit on one joint; least squares spreads it. A marker without a
+        point (its blob fused with a neighbour's in a view, so too few views triangulate
+        it) is placed by its detections in the views (``OBJ_CLOUD_VIEWS``, gated as the
+        comment below says) where two views have one, and its limb is held if the polished
+        marker is not explained (within ``cap_px``) in two views; only the partitions whose
+        own markers are all placed move: a limb missing one would be pulled by the others
+        alone. Matching in 3D only; the status, decided on the fit, stays, and a posture
+        whose E the polish would take above the threshold stays as fitted."""
         p = self.params
         if p.final_polish_px is None or obs.kind != "cloud" or not r.runs:
             return r
         pr = self.problem
-        frame_arrays = obs.arrays(np.array([position], np.int64))
-        cams, arrays = self._kernel_inputs(frame_arrays)
+        arrays = obs.arrays(np.array([position], np.int64))  # with the views' detections
         state, pos, rot = self.state(r.angles_deg, r.root_positions)
         cloud = np.ascontiguousarray(arrays.points3d[0])
-        _, mk = self._project_state(state, pos, rot, markers=True)
+        proj, mk = self._project_state(state, pos, rot, markers=True)
+        gate = float(p.final_polish_px)
         pair = np.empty(len(mk), np.int64)
         _rk.assign_pairs(_ak.OBJ_CLOUD_ONE, np.empty((0, len(mk), 2)), mk, arrays.points,
-                         arrays.conf, arrays.offsets, cloud, float(p.final_polish_px), pair)
-        parts = self._partitions(p, search=False)
-        moved = [parts.dofs[parts.dof_off[k]: parts.dof_off[k + 1]]
-                 for k, (_, _, m0, _, m_own) in enumerate(parts.bounds)
-                 if (pair[m0:m_own] >= 0).all()]
-        if not moved:
-            return r
-        _rk.refine_posture(state, np.concatenate(moved), pr.lo, pr.hi, pr.dof_kind,
-                           POLISH_STEPS, float(p.final_polish_px), pos, rot, *pr.folded,
-                           *cams, _ak.OBJ_CLOUD_ONE, arrays.points, arrays.conf,
-                           arrays.offsets, cloud)
+                         arrays.conf, arrays.offsets, cloud, gate, pair)
+        covered = pair >= 0
+        explained = p.error.cap_px or gate  # E's distance beyond which a marker is unexplained
+        gates = np.zeros(len(arrays.points))  # no view places a marker: the cloud alone
+        if not covered.all() and self.unseen is None:  # (views of one colour: the cloud alone)
+            # A marker without a point pairs in each view with a detection no point has
+            # (its own blob) within the gate, or one a point has (its blob fused with a
+            # neighbour's there) where that explains it; two views place it
+            gates = np.where(_unclaimed(self.cameras, cloud, arrays.points, arrays.offsets),
+                             gate, explained)
+            covered |= _views_near(proj, arrays.points, arrays.offsets, gates) >= 2
+        parts, start = self._partitions(p, search=False), state
+        while True:  # the views must agree where they placed a marker, else its limb is held
+            moved, folded, marks = _covered_partitions(parts, pr.folded, covered)
+            if moved.size == 0:
+                return r
+            state = start.copy()
+            placed = marks[pair[marks] < 0]
+            if placed.size == 0:  # the cloud alone: no view's projections to compute
+                objective, cams = _ak.OBJ_CLOUD_ONE, self._kernel_inputs(arrays)[0]
+            else:
+                objective, cams = _ak.OBJ_CLOUD_VIEWS, pr.cams
+            _rk.refine_posture(state, moved, pr.lo, pr.hi, pr.dof_kind, POLISH_STEPS, gate,
+                               pos, rot, *folded, *cams, objective, arrays.points, gates,
+                               arrays.offsets, cloud)
+            if placed.size == 0:
+                break
+            near = _views_near(self._project_state(state, pos, rot)[:, placed], arrays.points,
+                               arrays.offsets, np.full(len(arrays.points), explained))
+            if (near >= 2).all():
+                break
+            covered[placed[near < 2]] = False
         new = self._frame_result(obs, position, r.frame, state, pos, rot, p, runs=r.runs,
                                  iterations=r.iterations, pairs=r.refined_pairs or 0,
-                                 arrays=frame_arrays)
+                                 arrays=arrays)
         if r.error <= r.threshold < new.error:  # E grows a little: never across the threshold
             return r
         # the chosen candidate is the polished posture too (cycling back to it in the GUI)
@@ -2004,3 +2029,49 @@ def anneal_reference(body: Body, cameras, detections_frame, params: AnnealParams
         if it % p.n_l == 0:
             length *= p.c_l
     return best, float(e_best), it
+
+
+
+
+def _unclaimed(cameras, cloud: np.ndarray, points: np.ndarray, offsets: np.ndarray
+               ) -> np.ndarray:
+    """Which of one frame's detections (``points``, ``offsets`` per view) support no point
+    of its ``cloud``: farther than :data:`~kinematics.cloud.SUPPORT_PX` from every point's
+    projection."""
+    xyz = cloud[cloud[:, 3] > 0, :3]
+    free = np.ones(len(points), bool)
+    for v, cam in enumerate(cameras):
+        pts = points[offsets[v]: offsets[v + 1]]
+        if len(pts) and len(xyz):
+            d2 = ((pts[:, None] - cam.project(xyz)[None]) ** 2).sum(-1)
+            free[offsets[v]: offsets[v + 1]] = ~(d2 <= SUPPORT_PX ** 2).any(axis=1)
+    return free
+
+
+def _views_near(proj: np.ndarray, points: np.ndarray, offsets: np.ndarray, gates: np.ndarray
+                ) -> np.ndarray:
+    """Per marker (``proj``: n_views, n_markers, 2), the views with a detection within its
+    own gate (``gates``, px) of the marker's projection."""
+    n = np.zeros(proj.shape[1], np.int64)
+    for v in range(len(offsets) - 1):
+        pts, g = points[offsets[v]: offsets[v + 1]], gates[offsets[v]: offsets[v + 1]]
+        if len(pts):
+            n += (((proj[v][:, None] - pts[None]) ** 2).sum(-1) <= g * g).any(axis=1)
+    return n
+
+
+def _covered_partitions(parts, folded, covered: np.ndarray):
+    """The final polish's entries, body and markers: the partitions whose own markers are
+    all ``covered`` (a cloud point, or detections in two views), with only their markers. A
+    limb with a marker nothing places would be pulled by the others alone; the markers of
+    held limbs stay out, as they do not move and paired they could only take the moving
+    markers' points."""
+    active = [k for k, (_, _, m0, _, m_own) in enumerate(parts.bounds)
+              if covered[m0:m_own].all()]
+    if not active:
+        return np.zeros(0, np.int64), folded, np.zeros(0, np.int64)
+    marks = np.concatenate([np.arange(parts.bounds[k, 2], parts.bounds[k, 4]) for k in active])
+    return (np.concatenate([parts.dofs[parts.dof_off[k]: parts.dof_off[k + 1]]
+                            for k in active]),
+            folded._replace(marker_joint=folded.marker_joint[marks],
+                            marker_local=folded.marker_local[marks]), marks)

@@ -69,6 +69,8 @@ __all__ = ["Cloud", "cloud_observations", "pixels_per_unit", "triangulate_unlabe
 #: Sentinel coordinate: padding detections sit at +_FAR, unprojectable points at -_FAR, so
 #: neither is ever within any tolerance of anything (and no NaN reaches an argmin).
 _FAR = 1e15
+#: Default ``support_px``: about a 4-px marker's blob radius plus detection noise.
+SUPPORT_PX = 3.0
 #: Upper bound on (frames x detections² x view pairs) handled at once: bounds the
 #: temporaries of the candidate and support steps to some tens of MB.
 _CHUNK_WORK = 1_000_000
@@ -392,7 +394,7 @@ def _assemble(parts, n_frames: int, n_views: int) -> Cloud:
 
 
 def triangulate_unlabelled(cameras, points, offsets, *, match_px: float = 2.0,
-                           support_px: float = 3.0, min_views: int = 3,
+                           support_px: float = SUPPORT_PX, min_views: int = 3,
                            progress: Callable[[int, int], object] | None = None) -> Cloud:
     """Triangulate unlabelled detections of several calibrated views into 3D points.
 
