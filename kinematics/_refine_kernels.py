@@ -248,7 +248,8 @@ def refine_posture(angles, free_idx, lo, hi, dof_kind, n_steps, gate, root_pos, 
     jac = np.zeros((nr, nf))
     res = np.zeros(nr)
     res1 = np.zeros(nr)
-    rows = np.empty(nr, np.int64)  # the rows of the pairs: the others are zero
+    rows = np.empty(nr, np.int64)  # the rows used: those of the pairs (the others are zero)
+    packed = np.empty(nr)  # the residuals of those rows
     proj = np.empty((nv, nm, 2))
     cs = np.empty(na)
     sn = np.empty(na)
@@ -265,7 +266,11 @@ def refine_posture(angles, free_idx, lo, hi, dof_kind, n_steps, gate, root_pos, 
                     kind, P, K, dist, R, t, cs, sn, rot, pos, mk, proj)
     n_pairs = assign_pairs(objective, proj, mk, points, conf, view_off, obs3, gate, pair)
     cost = fill_residuals(objective, proj, mk, points, conf, obs3, pair, res)
-    n_rows = _pair_rows(objective, pair, nv, nm, rows)
+    n_rows = nr  # every row (the other objectives' unpaired rows are few, and skipping
+    for k in range(nr):  # them cost more than it saved on the locust)
+        rows[k] = k
+    if both:  # most rows are a view's of a marker with a point: zero
+        n_rows = _pair_rows(objective, pair, nv, nm, rows)
     lam = 1e-3
     step = 0
     while step < n_steps and n_pairs > 0 and cost > 0.0:
@@ -279,19 +284,20 @@ def refine_posture(angles, free_idx, lo, hi, dof_kind, n_steps, gate, root_pos, 
                             mk, proj)
             angles[i] = x
             fill_residuals(objective, proj, mk, points, conf, obs3, pair, res1)
-            for kk in range(n_rows):
-                k = rows[kk]
-                jac[k, q] = (res1[k] - res[k]) / FD_STEP
+            for kk in range(n_rows):  # the Jacobian's rows of the pairs, packed
+                jac[kk, q] = (res1[rows[kk]] - res[rows[kk]]) / FD_STEP
+        for kk in range(n_rows):
+            packed[kk] = res[rows[kk]]
         # J^T J and -J^T r once per Jacobian (symmetric: each product computed once)
         for r in range(nf):
             s = 0.0
-            for kk in range(n_rows):
-                s -= jac[rows[kk], r] * res[rows[kk]]
+            for k in range(n_rows):
+                s -= jac[k, r] * packed[k]
             jtr[r] = s
             for c in range(r, nf):
                 s = 0.0
-                for kk in range(n_rows):
-                    s += jac[rows[kk], r] * jac[rows[kk], c]
+                for k in range(n_rows):
+                    s += jac[k, r] * jac[k, c]
                 jtj[r, c] = s
                 jtj[c, r] = s
         # Damped Gauss-Newton steps with growing damping until one lowers the cost.
@@ -324,7 +330,8 @@ def refine_posture(angles, free_idx, lo, hi, dof_kind, n_steps, gate, root_pos, 
             n_pairs = assign_pairs(objective, proj, mk, points, conf, view_off, obs3, gate,
                                    pair)
             cost = fill_residuals(objective, proj, mk, points, conf, obs3, pair, res)
-            n_rows = _pair_rows(objective, pair, nv, nm, rows)
+            if both:
+                n_rows = _pair_rows(objective, pair, nv, nm, rows)
             step = n_steps if converged else step + 1
         else:
             step = n_steps  # converged: no damped step lowers the cost

@@ -866,15 +866,14 @@ class Fitter:
         _rk.assign_pairs(_ak.OBJ_CLOUD_ONE, np.empty((0, len(mk), 2)), mk, arrays.points,
                          arrays.conf, arrays.offsets, cloud, gate, pair)
         covered = pair >= 0
-        explained = p.error.cap_px or gate  # E's distance beyond which a marker is unexplained
-        gates = np.zeros(len(arrays.points))  # no view places a marker: the cloud alone
+        # E's distance beyond which a marker is unexplained (no cap: the gate)
+        explained = p.error.cap_px or gate
+        own = np.zeros(len(arrays.points), bool)
         if not covered.all() and self.unseen is None:  # (views of one colour: the cloud alone)
-            # A marker without a point pairs in each view with a detection no point has
-            # (its own blob) within the gate, or one a point has (its blob fused with a
-            # neighbour's there) where that explains it; two views place it
-            gates = np.where(_unclaimed(self.cameras, cloud, arrays.points, arrays.offsets),
-                             gate, explained)
-            covered |= _views_near(proj, arrays.points, arrays.offsets, gates) >= 2
+            own = _unclaimed(self.cameras, cloud, arrays.points, arrays.offsets)
+            covered |= _placed(proj, arrays.points, arrays.offsets, own, gate, explained)
+        # the kernel's gate of each detection for a marker without a point (in the views)
+        gates = np.where(own, gate, explained)
         parts, start = self._partitions(p, search=False), state
         while True:  # the views must agree where they placed a marker, else its limb is held
             moved, folded, marks = _covered_partitions(parts, pr.folded, covered)
@@ -891,11 +890,11 @@ class Fitter:
                                arrays.offsets, cloud)
             if placed.size == 0:
                 break
-            near = _views_near(self._project_state(state, pos, rot)[:, placed], arrays.points,
-                               arrays.offsets, np.full(len(arrays.points), explained))
-            if (near >= 2).all():
+            ok = _placed(self._project_state(state, pos, rot)[:, placed], arrays.points,
+                         arrays.offsets, own, explained, explained)
+            if ok.all():
                 break
-            covered[placed[near < 2]] = False
+            covered[placed[~ok]] = False
         new = self._frame_result(obs, position, r.frame, state, pos, rot, p, runs=r.runs,
                                  iterations=r.iterations, pairs=r.refined_pairs or 0,
                                  arrays=arrays)
@@ -2036,8 +2035,8 @@ def anneal_reference(body: Body, cameras, detections_frame, params: AnnealParams
 def _unclaimed(cameras, cloud: np.ndarray, points: np.ndarray, offsets: np.ndarray
                ) -> np.ndarray:
     """Which of one frame's detections (``points``, ``offsets`` per view) support no point
-    of its ``cloud``: farther than :data:`~kinematics.cloud.SUPPORT_PX` from every point's
-    projection."""
+    of its ``cloud``: farther than :data:`~kinematics.cloud.SUPPORT_PX` (the support the
+    fitter triangulates with) from every point's projection."""
     xyz = cloud[cloud[:, 3] > 0, :3]
     free = np.ones(len(points), bool)
     for v, cam in enumerate(cameras):
@@ -2060,17 +2059,32 @@ def _views_near(proj: np.ndarray, points: np.ndarray, offsets: np.ndarray, gates
     return n
 
 
+def _placed(proj: np.ndarray, points: np.ndarray, offsets: np.ndarray, own: np.ndarray,
+            own_gate: float, shared_gate: float) -> np.ndarray:
+    """Per marker (``proj``: n_views, n_markers, 2), whether the views place it without a
+    cloud point: a detection in two views, within ``own_gate`` px where no point has it
+    (``own``: the marker's blob seen apart) and within ``shared_gate`` where a point has it
+    (its blob fused with a neighbour's there), one of them its own. A marker hidden in every
+    view but lying on a neighbour's point has only the neighbour's blobs: not placed."""
+    both = _views_near(proj, points, offsets, np.where(own, own_gate, shared_gate))
+    alone = _views_near(proj, points, offsets, np.where(own, own_gate, np.nan))  # NaN: none
+    return (both >= 2) & (alone >= 1)
+
+
 def _covered_partitions(parts, folded, covered: np.ndarray):
     """The final polish's entries, body and markers: the partitions whose own markers are
-    all ``covered`` (a cloud point, or detections in two views), with only their markers. A
-    limb with a marker nothing places would be pulled by the others alone; the markers of
-    held limbs stay out, as they do not move and paired they could only take the moving
-    markers' points."""
+    all ``covered`` (a cloud point, or placed by the views), and the covered markers they
+    move (a trunk's reach its limbs'). A limb with a marker nothing places would be pulled
+    by the others alone; the markers no moving entry reaches stay out, as they do not move
+    and paired they could only take the moving markers' points."""
     active = [k for k, (_, _, m0, _, m_own) in enumerate(parts.bounds)
               if covered[m0:m_own].all()]
     if not active:
         return np.zeros(0, np.int64), folded, np.zeros(0, np.int64)
-    marks = np.concatenate([np.arange(parts.bounds[k, 2], parts.bounds[k, 4]) for k in active])
+    reached = np.zeros(len(covered), bool)  # a trunk's entries move its held limbs too
+    for k in active:
+        reached[parts.bounds[k, 2]: parts.bounds[k, 3]] = True
+    marks = np.flatnonzero(reached & covered)
     return (np.concatenate([parts.dofs[parts.dof_off[k]: parts.dof_off[k + 1]]
                             for k in active]),
             folded._replace(marker_joint=folded.marker_joint[marks],

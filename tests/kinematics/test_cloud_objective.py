@@ -299,3 +299,26 @@ def test_final_polish_places_a_marker_without_a_point_by_its_views():
              for p, q in zip(polished, annealed, strict=True)]
     assert moved == [True, False]
     assert tip_error(polished[0], targets[0]) < 0.5 * tip_error(annealed[0], targets[0])
+
+
+@pytest.mark.parametrize("case, dets, own, placed", [
+    ("fused in two views, seen apart in one", [(103, 100), (108, 100), (102, 101)],
+     [False, True, False], True),
+    ("hidden everywhere, on a neighbour's point", [(101, 100), (99, 101), (100, 102)],
+     [False, False, False], False),
+    ("seen apart in one view, a point's blob 30 px off in the others",
+     [(130, 100), (108, 100), (100, 130)], [False, True, False], False),
+    ("seen apart in two views, 40 px off", [(140, 100), (100, 140), (300, 300)],
+     [True, True, False], True),
+])
+def test_a_marker_without_a_point_is_placed_by_two_views_one_its_own(case, dets, own,
+                                                                      placed):
+    """The polish's rule for a marker without a cloud point: a detection within the gate
+    (50 px) where no point has it, within cap_px (10 px) where one has it (a fused blob),
+    in two views, one of them the marker's own."""
+    from kinematics.anneal import _placed
+
+    proj = np.full((3, 1, 2), 100.0)
+    points = np.array(dets, float)
+    got = _placed(proj, points, np.arange(4), np.array(own), 50.0, 10.0)
+    assert got.tolist() == [placed], case
