@@ -847,10 +847,10 @@ class Fitter:
         little: annealing minimises a sum of distances, which puts the misfit of a limb the
         rigid chain cannot fit on one joint; least squares spreads it. A marker without a
         point (its blob fused with a neighbour's in a view, so too few views triangulate
-        it) is placed by its detections in the views (``OBJ_CLOUD_VIEWS``, gated as the
-        comment below says) where two views have one, and its limb is held if the polished
-        marker is not explained (within ``cap_px``) in two views; only the partitions whose
-        own markers are all placed move: a limb missing one would be pulled by the others
+        it) is paired with its detections in the views instead (``OBJ_CLOUD_VIEWS``) where
+        :func:`_placed` finds two, and its limb is held if the polished marker is not
+        explained (within ``cap_px``) in two views. Only the partitions whose own markers
+        are all paired or placed move: a limb missing one would be pulled by the others
         alone. Matching in 3D only; the status, decided on the fit, stays, and a posture
         whose E the polish would take above the threshold stays as fitted."""
         p = self.params
@@ -2028,8 +2028,6 @@ def anneal_reference(body: Body, cameras, detections_frame, params: AnnealParams
         if it % p.n_l == 0:
             length *= p.c_l
     return best, float(e_best), it
-
-
 
 
 def _unclaimed(cameras, cloud: np.ndarray, points: np.ndarray, offsets: np.ndarray
