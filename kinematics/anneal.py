@@ -131,7 +131,8 @@ class FrameResult:
         after re-runs), ``"ambiguous"`` (within it, but another candidate posture far from
         this one, ``ambiguous_deg`` on an axis and ``ambiguous_move`` at a marker, fits about
         as well, or the chosen posture jumps from a neighbour's and no re-fit found one that
-        continues the movement: see ``candidates``), ``"failed"`` (above it after
+        continues the movement: see ``candidates``; or, matching in 3D, a limb has a marker
+        that neither a cloud point nor two views place), ``"failed"`` (above it after
         ``max_runs``), ``"no-detections"``.
     root_positions : ndarray, shape (n_chains, 3)
         Root of each chain used for this frame (configured or tracked).
@@ -851,8 +852,9 @@ class Fitter:
         :func:`_placed` finds two, and its limb is held if the polished marker is not
         explained (within ``cap_px``) in two views. Only the partitions whose own markers
         are all paired or placed move: a limb missing one would be pulled by the others
-        alone. Matching in 3D only; the status, decided on the fit, stays, and a posture
-        whose E the polish would take above the threshold stays as fitted."""
+        alone, and a frame with such a held limb is ``ambiguous`` (:func:`_unplaced`).
+        Matching in 3D only; the status is otherwise the one decided on the fit, and a
+        posture whose E the polish would take above the threshold stays as fitted."""
         p = self.params
         if p.final_polish_px is None or obs.kind != "cloud" or not r.runs:
             return r
@@ -878,7 +880,7 @@ class Fitter:
         while True:  # the views must agree where they placed a marker, else its limb is held
             moved, folded, marks = _covered_partitions(parts, pr.folded, covered)
             if moved.size == 0:
-                return r
+                return _unplaced(r)
             state = start.copy()
             placed = marks[pair[marks] < 0]
             if placed.size == 0:  # the cloud alone: no view's projections to compute
@@ -898,8 +900,11 @@ class Fitter:
         new = self._frame_result(obs, position, r.frame, state, pos, rot, p, runs=r.runs,
                                  iterations=r.iterations, pairs=r.refined_pairs or 0,
                                  arrays=arrays)
+        held = any(not covered[m0:m_own].all() for _, _, m0, _, m_own in parts.bounds)
         if r.error <= r.threshold < new.error:  # E grows a little: never across the threshold
-            return r
+            return _unplaced(r) if held else r
+        if held:
+            r = _unplaced(r)
         # the chosen candidate is the polished posture too (cycling back to it in the GUI)
         cands = tuple(Candidate(new.angles_deg, new.root_positions, new.error, state, pos, rot)
                       if np.array_equal(c.angles_deg, r.angles_deg)
@@ -2067,6 +2072,13 @@ def _placed(proj: np.ndarray, points: np.ndarray, offsets: np.ndarray, own: np.n
     both = _views_near(proj, points, offsets, np.where(own, own_gate, shared_gate))
     alone = _views_near(proj, points, offsets, np.where(own, own_gate, np.nan))  # NaN: none
     return (both >= 2) & (alone >= 1)
+
+
+def _unplaced(r: FrameResult) -> FrameResult:
+    """A fit within the threshold whose limb has a marker that neither a cloud point nor two
+    views place: ``ambiguous``, as nothing in the frame says where that limb is (on the fly
+    through 6 cameras every such frame was off, docs/benchmarks.md)."""
+    return replace(r, status="ambiguous") if r.status in ("ok", "reanalysed") else r
 
 
 def _covered_partitions(parts, folded, covered: np.ndarray):

@@ -266,7 +266,7 @@ ATTENTION_STATUSES = ("failed", "reanalysed", "ambiguous")
 
 def frames_to_check(results: Mapping, threshold: float) -> list[int]:
     """Frames a person should look at, ascending: those above the threshold or whose fit
-    failed, needed re-runs or is ambiguous (another candidate fits about as well); never
+    failed, needed re-runs or is ambiguous (see FrameResult.status); never
     the ones corrected or accepted by hand."""
     return sorted(f for f, r in results.items() if r.status != "corrected" and (
         bool(is_bad(r.error, threshold)) or r.status in ATTENTION_STATUSES))

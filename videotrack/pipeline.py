@@ -567,8 +567,9 @@ def fit_warnings(table: Results, detections=None) -> list[str]:
         if len(unsure) > BAD_SHARE_WARNING * n:
             frames = [int(table.video_frames[i]) for i in unsure]
             found.append(f"{len(unsure)} of {n} frames ({100 * len(unsure) / n:.1f} %) are "
-                         "ambiguous (another posture fits about as well; see the candidates "
-                         f"file): video frames {_listing(frames)}")
+                         "ambiguous (another posture fits about as well, see the candidates "
+                         "file; or a limb has a marker nothing places): video frames "
+                         f"{_listing(frames)}")
     return found
 
 

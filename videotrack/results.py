@@ -15,10 +15,11 @@ is from the detection it matched (its nearest) in each view; empty where the vie
 detection. They show which marker of a frame is off (a swapped or missing marker).
 
 ``status`` is ``ok``, ``reanalysed``, ``ambiguous`` (another candidate posture far from this
-one fits about as well), ``failed``, ``no-detections`` or ``corrected`` (set by hand in the
-GUI). Empty cells are NaN. The sidecar ``<results>.json`` records the seed, every
-fitting parameter, the chain, cameras and detections used (paths relative to the results
-file's folder, and content hashes) so any run can be replayed and stale results recognised,
+one fits about as well, or the frame needs a look for another reason:
+:class:`kinematics.anneal.FrameResult`), ``failed``, ``no-detections`` or ``corrected``
+(set by hand in the GUI). Empty cells are NaN. The sidecar ``<results>.json`` records the
+seed, every fitting parameter, the chain, cameras and detections used (paths relative to
+the results file's folder, and content hashes) so any run can be replayed and stale results recognised,
 and the warnings of the run that made the results (``warnings``). Both are written
 atomically.
 

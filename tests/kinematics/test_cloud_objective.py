@@ -270,8 +270,8 @@ def test_final_polish_spreads_a_misfit_by_least_squares():
 def test_final_polish_places_a_marker_without_a_point_by_its_views():
     """A marker without a cloud point (a's tip seen by 2 of 5 cameras: no point needs
     fewer than 3) is placed in the polish by its detections in the views that see it, so
-    its limb moves too; seen by one camera only, nothing places it and its limb keeps its
-    annealed posture."""
+    its limb moves too; seen by one camera only, nothing places it, its limb keeps its
+    annealed posture and the frame is ambiguous (a look)."""
     body = three_legs()
     cams = ring()
     angles, _ = planted(body, cams, 2, seed=7)
@@ -299,6 +299,8 @@ def test_final_polish_places_a_marker_without_a_point_by_its_views():
              for p, q in zip(polished, annealed, strict=True)]
     assert moved == [True, False]
     assert tip_error(polished[0], targets[0]) < 0.5 * tip_error(annealed[0], targets[0])
+    assert [r.status for r in annealed] == ["ok", "ok"]
+    assert [r.status for r in polished] == ["ok", "ambiguous"]
 
 
 @pytest.mark.parametrize("case, dets, own, placed", [
