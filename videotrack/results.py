@@ -19,9 +19,9 @@ one fits about as well, or the frame needs a look for another reason:
 :class:`kinematics.anneal.FrameResult`), ``failed``, ``no-detections`` or ``corrected``
 (set by hand in the GUI). Empty cells are NaN. The sidecar ``<results>.json`` records the
 seed, every fitting parameter, the chain, cameras and detections used (paths relative to
-the results file's folder, and content hashes) so any run can be replayed and stale results recognised,
-and the warnings of the run that made the results (``warnings``). Both are written
-atomically.
+the results file's folder, and content hashes) so any run can be replayed and stale
+results recognised, and the warnings of the run that made the results (``warnings``). Both
+are written atomically.
 
 With candidate postures (``[anneal] candidates`` > 1) a third file,
 ``<results stem>.candidates.csv``, holds every frame's distinct postures: ``frame, rank,
