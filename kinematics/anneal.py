@@ -880,7 +880,7 @@ class Fitter:
         while True:  # the views must agree where they placed a marker, else its limb is held
             moved, folded, marks = _covered_partitions(parts, pr.folded, covered)
             if moved.size == 0:
-                return _unplaced(r)
+                break
             state = start.copy()
             placed = marks[pair[marks] < 0]
             if placed.size == 0:  # the cloud alone: no view's projections to compute
@@ -897,14 +897,15 @@ class Fitter:
             if ok.all():
                 break
             covered[placed[~ok]] = False
+        if any(not covered[m0:m_own].all() for _, _, m0, _, m_own in parts.bounds):
+            r = _unplaced(r)  # a limb held
+        if moved.size == 0:
+            return r
         new = self._frame_result(obs, position, r.frame, state, pos, rot, p, runs=r.runs,
                                  iterations=r.iterations, pairs=r.refined_pairs or 0,
                                  arrays=arrays)
-        held = any(not covered[m0:m_own].all() for _, _, m0, _, m_own in parts.bounds)
         if r.error <= r.threshold < new.error:  # E grows a little: never across the threshold
-            return _unplaced(r) if held else r
-        if held:
-            r = _unplaced(r)
+            return r
         # the chosen candidate is the polished posture too (cycling back to it in the GUI)
         cands = tuple(Candidate(new.angles_deg, new.root_positions, new.error, state, pos, rot)
                       if np.array_equal(c.angles_deg, r.angles_deg)

@@ -180,12 +180,13 @@ class AnnealParams:
     final_polish_px: float | None = setting(
         50.0, "With matching in 3D: after the fit, each frame's chosen posture is fitted by "
         "least squares to its cloud points within this distance (px-equivalents), each "
-        "point paired with one marker, moving only the limbs whose markers all have a point, "
-        "and kept though E grows a little (not across the threshold). Annealing minimises a "
-        "sum of distances, which leaves the whole misfit of a limb the rigid chain cannot "
-        "fit on one joint; least squares spreads it over the limb (docs/fitting.md, 'The "
-        "final polish'). The status is decided before it. None, written 0 in a project "
-        "file: off (the paper).",
+        "point paired with one marker; a marker without a point is placed by its "
+        "detections in two views, and a limb with a marker nothing places is held and makes "
+        "the frame 'ambiguous'. Kept though E grows a little (not across the threshold). "
+        "Annealing minimises a sum of distances, which leaves the whole misfit of a limb "
+        "the rigid chain cannot fit on one joint; least squares spreads it over the limb "
+        "(docs/fitting.md, 'The final polish'). None, written 0 in a project file: off "
+        "(the paper).",
         min=0.0, max=1e9, none=0.0)
     root_gate_px: float | None = setting(
         None, "Root-marker tracking ignores a view whose nearest detection is farther than "
