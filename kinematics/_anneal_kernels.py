@@ -784,6 +784,25 @@ def claim_cloud(mk, cloud, claimers, gate, claimed):
 
 
 @njit(cache=True, nogil=True)
+def unclaimed_cloud(cloud, claimed):
+    """The rows of ``cloud`` that are points (s > 0) and not ``claimed``, in order, and an
+    empty claim mask: what :func:`cloud_error` scores with ``claimed``, to the bit, without
+    testing every claimed or padding row on every call (a limb's search and annealing score
+    the same points hundreds of thousands of times; in a later round every other limb's
+    points are claimed)."""
+    keep = np.empty(cloud.shape[0], np.int64)
+    n = 0
+    for c in range(cloud.shape[0]):
+        if cloud[c, 3] > 0.0 and not (c < claimed.shape[0] and claimed[c]):
+            keep[n] = c
+            n += 1
+    out = np.empty((n, cloud.shape[1]))
+    for k in range(n):
+        out[k, :] = cloud[keep[k]]
+    return out, np.zeros(0, np.bool_)
+
+
+@njit(cache=True, nogil=True)
 def count_unexplained_cloud(mk, cloud, gate):
     """Cloud points farther than ``gate`` px-equivalents from every model marker."""
     n = 0
@@ -1185,6 +1204,21 @@ PER_MATCH = 4
 
 
 @njit(cache=True, nogil=True)
+def _first_joint(entries, j0, j1, elem_axis, elem_index, slide_index):
+    """The first joint of ``j0:j1`` that one of the state ``entries`` belongs to (an axis
+    of it, or a free root's translation); ``j0`` if none does."""
+    for j in range(j0, j1):
+        for i in entries:
+            k = slide_index[j]
+            if k >= 0 and k <= i < k + 3:
+                return j
+            for e in range(3):
+                if elem_axis[j, e] >= 0 and elem_index[j, e] == i:
+                    return j
+    return j0
+
+
+@njit(cache=True, nogil=True)
 def beam_start(work, s0, s1, stage_dof_off, stage_dofs, stage_mark, n_samples, state, hist,
                nbins, th, dof_kind, lo, hi, rp, rr, parent, chain, pre_rot, pre_trans,
                post_trans, elem_axis, elem_index, joint_flags, marker_joint, marker_local,
@@ -1208,6 +1242,9 @@ def beam_start(work, s0, s1, stage_dof_off, stage_dofs, stage_mark, n_samples, s
     e_first = np.inf
     any_pinhole = _has_pinhole(kind)
     marks = obs3  # hidden marks not projected (3D objectives read no projection)
+    cloud, free = obs3, claimed  # what the draws are scored against
+    if objective == OBJ_CLOUD:
+        cloud, free = unclaimed_cloud(obs3, claimed)
     rs = state
     beams = np.empty((BEAM, ns))
     beams[0, :] = work
@@ -1221,12 +1258,33 @@ def beam_start(work, s0, s1, stage_dof_off, stage_dofs, stage_mark, n_samples, s
         d0 = stage_dof_off[st]
         d1 = stage_dof_off[st + 1]
         m_end = min(stage_mark[st], m1)
-        span = (j0, j1, m0, m_end)
+        # A stage's entries move no marker before its first (stages are grouped so), and
+        # nothing before its first joint: a draw recomputes only those joints and markers
+        # and adds their E to the beam's, which is computed once per beam. With one-to-one
+        # the markers' costs are not separable, so every draw scores them all.
+        ms = m0 if (st == s0 or one) else min(stage_mark[st - 1], m_end)
+        jf = j0 if one else _first_joint(stage_dofs[d0:d1], j0, j1, elem_axis, elem_index,
+                                         slide_index)
+        je = jf  # one past the last joint that carries a marker the stage places
+        for m in range(ms, m_end):
+            je = max(je, marker_joint[m] + 1)
+        span = (j0, j1, m0, ms)
+        span_new = (jf, je, ms, m_end)
         draws = (BEAM * n_samples) // nb
         nc = 0
         for b in range(nb):
             for k in range(ns):
                 sn[k], cs[k] = sincos(beams[b, k])
+            # The beam's posture (the joints before the stage's first stay so for its
+            # draws) and the E of the markers earlier stages placed
+            _project_cs(beams[b], cs, sn, rp, rr, parent, chain, pre_rot, pre_trans,
+                        post_trans, elem_axis, elem_index, joint_flags, marker_joint,
+                        marker_local, slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj,
+                        any_pinhole, span, marks)
+            e_beam = 0.0
+            if ms > m0:
+                e_beam = partition_error(objective, proj, mk, points, conf, view_off, cloud,
+                                         cap, m0, ms, free, 0.0, penalty_cap, one, nearest)
             for smp in range(draws + 1):
                 cands[nc, :] = beams[b]
                 if smp > 0:  # draw 0 keeps the beam's own values
@@ -1247,10 +1305,10 @@ def beam_start(work, s0, s1, stage_dof_off, stage_dofs, stage_mark, n_samples, s
                 _project_cs(cands[nc], cs, sn, rp, rr, parent, chain, pre_rot, pre_trans,
                             post_trans, elem_axis, elem_index, joint_flags, marker_joint,
                             marker_local, slide_index, kind, P, K, dist, R, t, rot, pos, mk,
-                            proj, any_pinhole, span, marks)
-                cand_e[nc] = partition_error(objective, proj, mk, points, conf, view_off,
-                                             obs3, cap, m0, m_end, claimed, 0.0, penalty_cap,
-                                             one, nearest)
+                            proj, any_pinhole, span_new, marks)
+                cand_e[nc] = e_beam + partition_error(objective, proj, mk, points, conf,
+                                                      view_off, cloud, cap, ms, m_end, free,
+                                                      0.0, penalty_cap, one, nearest)
                 sig = _GOLDEN
                 for i in range(m0, m_end):
                     sig = mix64(sig ^ np.uint64(nearest[i] + 1))
@@ -1267,10 +1325,12 @@ def beam_start(work, s0, s1, stage_dof_off, stage_dofs, stage_mark, n_samples, s
             same = 0
             for b in range(nb):
                 same += 1 if kept_sig[b] == cand_sig[o] else 0
-            if nb < BEAM and same < PER_MATCH:
+            if same < PER_MATCH:
                 beams[nb, :] = cands[o]
                 kept_sig[nb] = cand_sig[o]
                 nb += 1
+                if nb == BEAM:
+                    break
     # Only the best is polished: polishing every kept posture after each stage (32 per joint)
     # was half of a fly run's cost besides annealing, and measured no better (docs/benchmarks.md)
     if refine_steps > 0 and s1 > s0:
@@ -1394,14 +1454,17 @@ def anneal_partitions(origin, state, rp, rr, body, cams, dofs, schedule, error, 
                            points, conf, view_off, obs3, cap, j0, j1, m0, m1, claimed,
                            penalty_cap, one, schedule[13], schedule[14], cs, sn, rot, pos, mk,
                            proj, nearest)
+            cloud, free = obs3, claimed
+            if objective == OBJ_CLOUD:  # the same E, without the claimed points
+                cloud, free = unclaimed_cloud(obs3, claimed)
             _, n = anneal_chain(work, dofs_p, step, hist,
                                 nbins, th, dof_kind, lo, hi, max_redraws, n_end, n_l, n_tau,
                                 tau0, l0, c_l, c_tau, eps, mix64(rs), rp, rr, parent, chain,
                                 pre_rot, pre_trans, post_trans, elem_axis, elem_index,
                                 joint_flags, marker_joint, marker_local, slide_index, kind, P,
-                                K, dist, R, t, objective, points, conf, view_off, obs3,
+                                K, dist, R, t, objective, points, conf, view_off, cloud,
                                 bidirectional, weight, cap, penalty_cap, one, j0, j1, m0,
-                                m1, claimed, cur, cand, best, cs, sn, rot, pos, mk, proj,
+                                m1, free, cur, cand, best, cs, sn, rot, pos, mk, proj,
                                 per_view, nearest)
             its += n
             work[:] = best

@@ -336,3 +336,67 @@ def test_a_marker_without_a_point_is_placed_by_two_views_one_its_own(case, dets,
     points = np.array(dets, float)
     got = _placed(proj, points, np.arange(4), np.array(own), 50.0, 10.0)
     assert got.tolist() == [placed], case
+
+
+@pytest.mark.parametrize("opts", OPTIONS, ids=lambda o: f"{o.mode}-{o.cap_px}-{o.one_to_one}")
+def test_the_unclaimed_points_score_as_the_claims_do(opts):
+    """A limb's search and annealing score a cloud without its claimed points and padding
+    (``unclaimed_cloud``): the same E to the bit, coloured clouds included."""
+    rng = np.random.default_rng(12)
+    penalty = opts.penalty_weight if opts.bidirectional else 0.0
+    for trial in range(12):
+        mk, cloud = random_cloud(rng)
+        if trial % 3 == 0:  # one column per marker: which markers may take the point
+            cloud = np.concatenate([cloud, rng.integers(0, 2, (len(cloud), len(mk)))], 1)
+        claimed = rng.random(len(cloud)) < 0.4
+        rest, none = ak.unclaimed_cloud(cloud, claimed)
+        assert none.size == 0 and len(rest) == int(((cloud[:, 3] > 0) & ~claimed).sum())
+        for m0, m1 in ((0, len(mk)), (2, 5)):
+            want = ak.cloud_error(mk, cloud, m0, m1, claimed, penalty, opts.cap,
+                                  opts.penalty_cap, opts.one_to_one, np.empty(len(mk), np.int64))
+            got = ak.cloud_error(mk, rest, m0, m1, none, penalty, opts.cap, opts.penalty_cap,
+                                 opts.one_to_one, np.empty(len(mk), np.int64))
+            assert got == want
+
+
+@pytest.mark.parametrize("match", ["3d", "views"])
+def test_the_start_search_scores_a_draw_from_its_beam(match):
+    """The start search scores a draw by its beam's E of the markers earlier stages placed
+    plus the E of the markers its stage places, recomputing only the joints that move
+    them: the E it returns is that of the posture it keeps, recomputed whole."""
+    body = three_legs()
+    cams = ring()
+    _, frames = planted(body, cams, 1, seed=4, shuffle=True)
+    fitter = Fitter(body, cams, AnnealParams(match=match, error=ErrorOptions(cap_px=10.0)))
+    pr = fitter.problem
+    obs = fitter.observations(frames)
+    cams_k, arrays = fitter._kernel_inputs(obs.arrays(np.array([0], np.int64)))
+    roots, rots = fitter._place(obs, np.array([0]))
+    parts = fitter._partitions(fitter.params)
+    assert parts.samples > 0 and parts.bounds.shape[0] == 4  # the trunk and three legs
+    obs3 = arrays.points3d[0]
+    claimed = np.zeros(max(len(arrays.points), len(obs3)), np.bool_)
+    _, _, hist, nbins, dof_kind, lo, hi = pr.dofs
+    nj, nm, ns, nv = pr.folded.parent.size, pr.folded.marker_joint.size, pr.n_state, len(
+        cams_k.kind)
+    rot, pos, mk, proj = (np.empty((nj, 3, 3)), np.empty((nj, 3)), np.empty((nm, 3)),
+                          np.empty((nv, nm, 2)))
+    cs, sn, nearest = np.empty(ns), np.empty(ns), np.empty(nm, np.int64)
+    args = (*pr.folded, *cams_k)
+    for p in range(1, 4):  # each leg (trunk at the start posture)
+        work = pr.start.copy()
+        ak.project_posture(work, roots[0], rots[0], *args, cs, sn, rot, pos, mk, proj)
+        j0, j1, m0, m1 = parts.bounds[p, :4]
+        e = ak.beam_start(work, parts.stage_off[p], parts.stage_off[p + 1],
+                          parts.stage_dof_off, parts.stage_dofs, parts.stage_mark, 16,
+                          np.uint64(ak.stream_state(0, p, 0)), hist, nbins, 1e-300, dof_kind,
+                          lo, hi,
+                          roots[0], rots[0], *args, arrays.objective, arrays.points,
+                          arrays.conf, arrays.offsets, obs3, 10.0, j0, j1, m0, m1, claimed,
+                          np.inf, False, 0, 0.0, cs, sn, rot, pos, mk, proj, nearest)
+        ak.project_posture(work, roots[0], rots[0], *args, cs, sn, rot, pos, mk, proj)
+        whole = ak.partition_error(arrays.objective, proj, mk, arrays.points, arrays.conf,
+                                   arrays.offsets, obs3, 10.0, m0, m1, claimed, 0.0, np.inf,
+                                   False, nearest)
+        assert np.isfinite(e) and e == pytest.approx(whole, rel=1e-9, abs=1e-9)
+        assert (work != pr.start).any()
