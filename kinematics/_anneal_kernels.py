@@ -1204,22 +1204,8 @@ PER_MATCH = 4
 
 
 @njit(cache=True, nogil=True)
-def _first_joint(entries, j0, j1, elem_axis, elem_index, slide_index):
-    """The first joint of ``j0:j1`` that one of the state ``entries`` belongs to (an axis
-    of it, or a free root's translation); ``j0`` if none does."""
-    for j in range(j0, j1):
-        for i in entries:
-            k = slide_index[j]
-            if k >= 0 and k <= i < k + 3:
-                return j
-            for e in range(3):
-                if elem_axis[j, e] >= 0 and elem_index[j, e] == i:
-                    return j
-    return j0
-
-
-@njit(cache=True, nogil=True)
-def beam_start(work, s0, s1, stage_dof_off, stage_dofs, stage_mark, n_samples, state, hist,
+def beam_start(work, s0, s1, stage_dof_off, stage_dofs, stage_mark, stage_joint, n_samples,
+               state, hist,
                nbins, th, dof_kind, lo, hi, rp, rr, parent, chain, pre_rot, pre_trans,
                post_trans, elem_axis, elem_index, joint_flags, marker_joint, marker_local,
                slide_index, kind, P, K, dist, R, t, objective, points, conf, view_off, obs3,
@@ -1263,8 +1249,7 @@ def beam_start(work, s0, s1, stage_dof_off, stage_dofs, stage_mark, n_samples, s
         # and adds their E to the beam's, which is computed once per beam. With one-to-one
         # the markers' costs are not separable, so every draw scores them all.
         ms = m0 if (st == s0 or one) else min(stage_mark[st - 1], m_end)
-        jf = j0 if one else _first_joint(stage_dofs[d0:d1], j0, j1, elem_axis, elem_index,
-                                         slide_index)
+        jf = j0 if one else stage_joint[st]
         je = jf  # one past the last joint that carries a marker the stage places
         for m in range(ms, m_end):
             je = max(je, marker_joint[m] + 1)
@@ -1371,7 +1356,7 @@ def anneal_partitions(origin, state, rp, rr, body, cams, dofs, schedule, error, 
      _, _) = schedule
     bidirectional, weight, cap, penalty_cap, one = error
     (bounds, part_off, part_dofs, rounds, claim_gate, samples, stage_off, stage_dof_off,
-     stage_dofs, stage_mark, _) = parts
+     stage_dofs, stage_mark, stage_joint, _) = parts
     work[:] = origin
     its = 0
     rs = np.uint64(state)
@@ -1398,6 +1383,7 @@ def anneal_partitions(origin, state, rp, rr, body, cams, dofs, schedule, error, 
             rs, _ = next_uniform(rs)
             clear[p] = beam_start(
                 cur, stage_off[p], stage_off[p + 1], stage_dof_off, stage_dofs, stage_mark,
+                stage_joint,
                 samples, mix64(rs ^ _GOLDEN), hist, nbins, th, dof_kind, lo, hi, rp, rr,
                 parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index,
                 joint_flags, marker_joint, marker_local, slide_index, kind, P, K, dist, R, t,
@@ -1447,7 +1433,8 @@ def anneal_partitions(origin, state, rp, rr, body, cams, dofs, schedule, error, 
                     0.0, penalty_cap, one, nearest)
             if r == 0 and samples > 0 and not searched:
                 beam_start(work, stage_off[p], stage_off[p + 1], stage_dof_off, stage_dofs,
-                           stage_mark, samples, mix64(rs ^ _GOLDEN), hist, nbins, th,
+                           stage_mark, stage_joint, samples, mix64(rs ^ _GOLDEN), hist,
+                           nbins, th,
                            dof_kind, lo, hi, rp, rr, parent, chain, pre_rot, pre_trans,
                            post_trans, elem_axis, elem_index, joint_flags, marker_joint,
                            marker_local, slide_index, kind, P, K, dist, R, t, objective,
@@ -1639,7 +1626,7 @@ def fit_frames(seg_off, frame_ids, root_pos, root_rot, start, body, cams, dofs, 
      reanalysis_threshold, max_runs, _, _, start_previous, max_unexplained, min_runs) = schedule
     claim_gate = parts[4]
     partitioned = parts[0].shape[0] > 1 or parts[5] > 0
-    confirm = parts[10]
+    confirm = parts[11]
     bidirectional, weight, cap, penalty_cap, one = error
     objective, det_points, det_conf, det_off, obs3 = obs
     out_iterations, out_pairs, out_run_angles, out_run_error = out[4:]

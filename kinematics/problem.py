@@ -176,6 +176,7 @@ class Partitions(NamedTuple):
     stage_dof_off: np.ndarray = np.zeros(1, np.int64)
     stage_dofs: np.ndarray = np.zeros(0, np.int64)
     stage_mark: np.ndarray = np.zeros(0, np.int64)
+    stage_joint: np.ndarray = np.zeros(0, np.int64)  # the first joint a stage's entries move
     # Runs agree when every marker of one lies within this distance (length units) of the
     # other's; a frame runs until its best run is confirmed by another (0: not used).
     confirm: float = 0.0
@@ -218,23 +219,28 @@ def _first_moved(problem: FitProblem, n_postures: int = 4, step_deg: float = 1.0
     return moved
 
 
-def _stages(problem: FitProblem, parts) -> tuple[np.ndarray, ...]:
+def _stages(problem: FitProblem, parts, owner: np.ndarray) -> tuple[np.ndarray, ...]:
     """The start search's stages of each partition (:class:`Partitions`): its free entries
     grouped by the first marker they move, root side first; a stage is scored by the
     markers before the next stage's first (those the entries drawn so far place), the last
     by all of the partition's. An entry that moves no marker before a later stage's (a
-    joint's roll about the limb's own axis) is drawn with the stage that first shows it."""
+    joint's roll about the limb's own axis) is drawn with the stage that first shows it.
+    A stage's draws recompute the kinematics from its first joint (of ``owner``, the joint
+    of each state entry) on."""
     moved = _first_moved(problem)
-    stage_off, dof_off, dofs, mark = [0], [0], [], []
-    for (_, _, m0, m1, _), entries in parts:
+    stage_off, dof_off, dofs, mark, first_joint = [0], [0], [], [], []
+    for (j0, _, m0, m1, _), entries in parts:
         firsts = sorted({int(min(max(moved[i], m0), m1)) for i in entries})
         for k, first in enumerate(firsts):
-            dofs += [int(i) for i in entries if min(max(moved[i], m0), m1) == first]
+            stage = [int(i) for i in entries if min(max(moved[i], m0), m1) == first]
+            dofs += stage
             dof_off.append(len(dofs))
             mark.append(firsts[k + 1] if k + 1 < len(firsts) else m1)
+            first_joint.append(max(j0, min(int(owner[i]) for i in stage)))
         stage_off.append(len(mark))
     return (np.array(stage_off, np.int64), np.array(dof_off, np.int64),
-            np.array(dofs, np.int64), np.array(mark, np.int64))
+            np.array(dofs, np.int64), np.array(mark, np.int64),
+            np.array(first_joint, np.int64))
 
 
 def partitions_of(problem: FitProblem, mode: str = "auto", rounds: int = 2,
@@ -261,7 +267,7 @@ def partitions_of(problem: FitProblem, mode: str = "auto", rounds: int = 2,
     whole = Partitions(np.array([[0, nj, 0, nm, nm]], np.int64),
                        np.array([0, free.size], np.int64), free.copy(), int(rounds),
                        float(claim_gate), int(samples),
-                       *_stages(problem, [((0, nj, 0, nm, nm), [int(i) for i in free])]))
+                       *_stages(problem, [((0, nj, 0, nm, nm), [int(i) for i in free])], owner))
     if mode == "none":
         return whole
     children: list[list[int]] = [[] for _ in range(nj)]
@@ -298,7 +304,7 @@ def partitions_of(problem: FitProblem, mode: str = "auto", rounds: int = 2,
     off = np.r_[0, np.cumsum([len(d) for d in dofs])].astype(np.int64)
     return Partitions(np.array([b for b, _ in parts], np.int64), off,
                       np.concatenate(dofs).astype(np.int64), int(rounds), float(claim_gate),
-                      int(samples), *_stages(problem, parts))
+                      int(samples), *_stages(problem, parts, owner))
 
 
 def free_root_chains(body: Body) -> list[int]:

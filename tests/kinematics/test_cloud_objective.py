@@ -388,7 +388,8 @@ def test_the_start_search_scores_a_draw_from_its_beam(match):
         ak.project_posture(work, roots[0], rots[0], *args, cs, sn, rot, pos, mk, proj)
         j0, j1, m0, m1 = parts.bounds[p, :4]
         e = ak.beam_start(work, parts.stage_off[p], parts.stage_off[p + 1],
-                          parts.stage_dof_off, parts.stage_dofs, parts.stage_mark, 16,
+                          parts.stage_dof_off, parts.stage_dofs, parts.stage_mark,
+                          parts.stage_joint, 16,
                           np.uint64(ak.stream_state(0, p, 0)), hist, nbins, 1e-300, dof_kind,
                           lo, hi,
                           roots[0], rots[0], *args, arrays.objective, arrays.points,
