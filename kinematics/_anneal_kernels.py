@@ -34,6 +34,8 @@ Layout and conventions
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit, prange
 
@@ -102,6 +104,8 @@ def uniforms(state, out):
 # Cody-Waite reduction by π/2 and the fdlibm kernels on [-π/4, π/4]: within 2 ulp of libm
 # for |x| < 1e5 and twice as fast as np.sin + np.cos, which cost a fifth of an iteration.
 _TWO_OVER_PI = 6.36619772367581382433e-01
+_RINT = 6755399441055744.0  # 1.5 * 2**52: y + _RINT - _RINT rounds y to an integer, ties to
+# even, exactly as np.rint for |y| < 2**51 (and for ±inf, NaN)
 _PIO2_HI = 1.57079632673412561417e00
 _PIO2_LO = 6.07710050650619224932e-11
 _S1, _S2, _S3 = -1.66666666666666324348e-01, 8.33333333332248946124e-03, -1.98412698298579493134e-04
@@ -114,7 +118,7 @@ _C4, _C5, _C6 = -2.75573143513906633035e-07, 2.08757232129817482790e-09, -1.1359
 def sincos(x):
     """``(sin x, cos x)`` for radians x. The quadrant is picked by selects, not branches, so
     a loop over SIMD lanes vectorises (:mod:`kinematics._lane_kernels` uses it too)."""
-    k = np.rint(x * _TWO_OVER_PI)
+    k = (x * _TWO_OVER_PI + _RINT) - _RINT  # np.rint, which numba's CUDA target lacks
     r = (x - k * _PIO2_HI) - k * _PIO2_LO
     z = r * r
     s = r + r * z * (_S1 + z * (_S2 + z * (_S3 + z * (_S4 + z * (_S5 + z * _S6)))))
@@ -205,7 +209,7 @@ def hist_at(hist, nbins, i, x):
     nf = float(n)
     # floor((x_deg + 180) / (360 / n)) with multiplications only (a division per lookup
     # was a measurable part of the loop).
-    k = int(np.floor(x * (nf * (0.5 / np.pi)) + 0.5 * nf))
+    k = int(math.floor(x * (nf * (0.5 / np.pi)) + 0.5 * nf))  # noqa: RUF046 (a float on CUDA)
     if k < 0 or k >= n:
         k = k % n
     return hist[i, k]
@@ -495,7 +499,7 @@ def projection_error(proj, points, view_off, obs3, bidirectional, weight, cap, p
                 best, arg = nearest_in_view(proj[v, i, 0], proj[v, i, 1], points, a, b,
                                             NO_CLAIMS)
                 nearest[i] = arg
-                d = np.sqrt(best) if arg >= 0 else missing
+                d = math.sqrt(best) if arg >= 0 else missing
                 ev += min(d, cap)
             if one:
                 ev = one_to_one(proj[v], points, a, b, 0, nm, False, NO_CLAIMS, cap, nearest)
@@ -510,7 +514,7 @@ def projection_error(proj, points, view_off, obs3, bidirectional, weight, cap, p
                         seen = nearest[i] != UNSEEN
                         best = min(best, dx * dx + dy * dy) if seen else best
                     if not matched:
-                        d = np.sqrt(best) if best < np.inf else missing
+                        d = math.sqrt(best) if best < np.inf else missing
                         ev += weight * min(d, penalty_cap)
         per_view[v] = ev
         total += ev
@@ -583,7 +587,7 @@ def one_to_one(X, Y, a, b, m0, m1, scaled, claimed, cap, nearest):
     for i in range(m0, m1):
         c = nearest[i]
         if c >= 0:
-            total += min(np.sqrt(_dist2(X, i, Y, c, scaled)), cap)
+            total += min(math.sqrt(_dist2(X, i, Y, c, scaled)), cap)
         elif c == -1:
             total += min(missing, cap)
         elif c != UNSEEN:  # lost its point: the nearest one no marker has as its nearest
@@ -600,7 +604,7 @@ def one_to_one(X, Y, a, b, m0, m1, scaled, claimed, cap, nearest):
                         best = d2
                         arg = c2
             nearest[i] = -arg - 2 if arg >= 0 else -1
-            total += min(np.sqrt(best) if arg >= 0 else missing, cap)
+            total += min(math.sqrt(best) if arg >= 0 else missing, cap)
     return total
 
 
@@ -620,7 +624,7 @@ def _paper_error(proj, points, view_off, cap):
             for i in range(proj.shape[1]):
                 best, _ = nearest_sorted(proj[v, i, 0], proj[v, i, 1], points, a, b,
                                          NO_CLAIMS)
-                d = np.sqrt(best) if best < np.inf else missing
+                d = math.sqrt(best) if best < np.inf else missing
                 ev += min(d, cap)
         elif b > a:
             for i in range(proj.shape[1]):
@@ -651,7 +655,7 @@ def _paper_error(proj, points, view_off, cap):
                     m0 = min(m0, dx * dx + dy * dy)
                     c += 1
                 best = min(min(m0, m1), min(m2, m3))
-                d = np.sqrt(best) if best < np.inf else missing
+                d = math.sqrt(best) if best < np.inf else missing
                 ev += min(d, cap)
         total += ev
     return total
@@ -687,11 +691,11 @@ def labelled_error(proj, points, conf, view_off, cap, per_view):
                 w = conf[a + i]
                 kx = points[a + i, 0]
                 ky = points[a + i, 1]
-                if w > 0.0 and np.isfinite(kx) and np.isfinite(ky):
+                if w > 0.0 and math.isfinite(kx) and math.isfinite(ky):
                     dx = proj[v, i, 0] - kx
                     dy = proj[v, i, 1] - ky
-                    d = np.sqrt(dx * dx + dy * dy)
-                    ev += w * min(d if np.isfinite(d) else missing, cap)
+                    d = math.sqrt(dx * dx + dy * dy)
+                    ev += w * min(d if math.isfinite(d) else missing, cap)
         per_view[v] = ev
         total += ev
     return total
@@ -704,12 +708,12 @@ def points3d_error(mk, obs, cap):
     total = 0.0
     for i in range(mk.shape[0]):
         w = obs[i, 3]
-        if w > 0.0 and np.isfinite(obs[i, 0]) and np.isfinite(obs[i, 1]) and np.isfinite(
+        if w > 0.0 and math.isfinite(obs[i, 0]) and math.isfinite(obs[i, 1]) and math.isfinite(
                 obs[i, 2]):
             dx = mk[i, 0] - obs[i, 0]
             dy = mk[i, 1] - obs[i, 1]
             dz = mk[i, 2] - obs[i, 2]
-            total += w * min(np.sqrt(dx * dx + dy * dy + dz * dz), cap)
+            total += w * min(math.sqrt(dx * dx + dy * dy + dz * dz), cap)
     return total
 
 
@@ -731,7 +735,7 @@ def cloud_nearest(mk, i, cloud, claimed):
                 may_take(cloud, c, i)):
             best = d2
             arg = c
-    return np.sqrt(best), arg
+    return math.sqrt(best), arg
 
 
 @njit(cache=True, nogil=True)
@@ -766,7 +770,7 @@ def cloud_error(mk, cloud, m0, m1, claimed, penalty, cap, penalty_cap, one, near
                 if may_take(cloud, c, i):
                     best = min(best, dx * dx + dy * dy + dz * dz)
             if not taken and best < np.inf:
-                total += penalty * min(s * np.sqrt(best), penalty_cap)
+                total += penalty * min(s * math.sqrt(best), penalty_cap)
     return total
 
 
@@ -813,7 +817,7 @@ def count_unexplained_cloud(mk, cloud, gate):
             dx = mk[i, 0] - cloud[c, 0]
             dy = mk[i, 1] - cloud[c, 1]
             dz = mk[i, 2] - cloud[c, 2]
-            near = near or (s * np.sqrt(dx * dx + dy * dy + dz * dz) <= gate and
+            near = near or (s * math.sqrt(dx * dx + dy * dy + dz * dz) <= gate and
                             may_take(cloud, c, i))
         n += 0 if near else 1
     return n
@@ -822,7 +826,7 @@ def count_unexplained_cloud(mk, cloud, gate):
 @njit(cache=True, nogil=True, inline="always")
 def _nan_min(a, b):
     """``min`` as NumPy's ``min`` reduces: a NaN on either side wins."""
-    return a if np.isnan(a) or not (b < a or np.isnan(b)) else b
+    return a if math.isnan(a) or not (b < a or math.isnan(b)) else b
 
 
 @njit(cache=True, nogil=True)
@@ -843,7 +847,7 @@ def nearest_residuals(proj, points, view_off, seen, gate, out):
                 for c in range(a, b):
                     dx = proj[v, m, 0] - points[c, 0]
                     dy = proj[v, m, 1] - points[c, 1]
-                    d = np.sqrt(dx * dx + dy * dy)
+                    d = math.sqrt(dx * dx + dy * dy)
                     best = _nan_min(best, d)
                     near[c - a] = _nan_min(near[c - a], d)
                 out[v, m] = best
@@ -936,7 +940,7 @@ def partition_error(objective, proj, mk, points, conf, view_off, obs3, cap, m0, 
                 dx = mk[i, 0] - obs3[i, 0]
                 dy = mk[i, 1] - obs3[i, 1]
                 dz = mk[i, 2] - obs3[i, 2]
-                total += w * min(np.sqrt(dx * dx + dy * dy + dz * dz), cap)
+                total += w * min(math.sqrt(dx * dx + dy * dy + dz * dz), cap)
         return total
     nm = proj.shape[1]
     for v in range(proj.shape[0]):
@@ -948,11 +952,11 @@ def partition_error(objective, proj, mk, points, conf, view_off, obs3, cap, m0, 
             if b - a == nm:
                 for i in range(m0, m1):
                     w = conf[a + i]
-                    if w > 0.0 and np.isfinite(points[a + i, 0]):
+                    if w > 0.0 and math.isfinite(points[a + i, 0]):
                         dx = proj[v, i, 0] - points[a + i, 0]
                         dy = proj[v, i, 1] - points[a + i, 1]
-                        d = np.sqrt(dx * dx + dy * dy)
-                        total += w * min(d if np.isfinite(d) else missing, cap)
+                        d = math.sqrt(dx * dx + dy * dy)
+                        total += w * min(d if math.isfinite(d) else missing, cap)
             continue
         ev = 0.0
         n_seen = 0
@@ -963,7 +967,7 @@ def partition_error(objective, proj, mk, points, conf, view_off, obs3, cap, m0, 
             n_seen += 1
             best, arg = nearest_in_view(proj[v, i, 0], proj[v, i, 1], points, a, b, claimed)
             nearest[i] = arg
-            d = np.sqrt(best) if best < np.inf else missing
+            d = math.sqrt(best) if best < np.inf else missing
             ev += min(d, cap)
         if one:
             ev = one_to_one(proj[v], points, a, b, m0, m1, False, claimed, cap, nearest)
@@ -982,7 +986,7 @@ def partition_error(objective, proj, mk, points, conf, view_off, obs3, cap, m0, 
                     seen = nearest[i] != UNSEEN
                     best = min(best, dx * dx + dy * dy) if seen else best
                 if not taken:
-                    total += penalty * min(np.sqrt(best), penalty_cap)
+                    total += penalty * min(math.sqrt(best), penalty_cap)
     return total
 
 
@@ -1726,7 +1730,7 @@ def solve_spd(a, b, n):
         for k in range(j):
             d -= a[j, k] * a[j, k]
         ok = d > 1e-300
-        d = np.sqrt(d) if ok else 0.0
+        d = math.sqrt(d) if ok else 0.0
         a[j, j] = d
         for i in range(j + 1, n):
             s = a[i, j]

@@ -44,7 +44,7 @@ Layout (``L = LANES``): state ``cur``, ``cand``, ``best``, ``cs``, ``sn`` (n_sta
 (nv, nm, 2, L); detections ``dx``, ``dy`` (nv, c_max, L), padded with :data:`PAD` beyond the
 lane's own ``ndet`` (nv, L); for labelled keypoints row i is marker i's keypoint, of weight
 ``dw`` (nv, c_max, L); 3D points ``o3`` (nm, 4, L). The supported problems are those
-``Fitter._use_lanes`` accepts (unlabelled points, labelled 2D keypoints or 3D points, one
+``Fitter._backend`` accepts (unlabelled points, labelled 2D keypoints or 3D points, one
 partition, independent frames); the scalar kernel does the rest.
 """
 

@@ -58,6 +58,7 @@ import numba
 import numpy as np
 
 from kinematics import _anneal_kernels as _ak
+from kinematics import _cuda_kernels as _ck
 from kinematics import _lane_codegen as _codegen
 from kinematics import _lane_kernels as _lk
 from kinematics import _refine_kernels as _rk
@@ -958,8 +959,13 @@ class Fitter:
         n, ns, nv = len(frame_ids), pr.n_state, len(cams.kind)
         out = FitOutputs.empty(n, ns, nv, max(p.max_runs, p.candidates))
         parts = self._partitions(p)
-        if self._use_lanes(p, arrays.objective, parts, n,
-                           hidden=obs.hidden is not None or obs.unseen is not None):
+        backend = self._backend(p, arrays.objective, parts, n,
+                                hidden=obs.hidden is not None or obs.unseen is not None)
+        if backend == "cuda":
+            _ck.fit_frames_rounds(frame_ids, roots, rots, start, pr.folded, pr.cams, pr.dofs,
+                                  schedule_of(p), self._error_args(p, arrays.objective),
+                                  arrays, float(p.claim_gate_px), out)
+        elif backend == "lanes":
             threads = numba.get_num_threads()
             groups = np.unique(np.linspace(0, n, min(threads, n) + 1).astype(np.int64))
             error = self._error_args(p, arrays.objective)
@@ -1051,33 +1057,44 @@ class Fitter:
         return fn, _codegen.padded_detections(c_cap)
 
     def lane_frames(self) -> int:
-        """Frames whose runs fill the lanes of every numba thread once (the pipeline hands
-        the fitting thread blocks of a few times this)."""
-        return -(-_lk.LANES * numba.get_num_threads() // max(1, self.params.candidates))
+        """Frames whose runs fill the lanes of every numba thread once, or with backend
+        'cuda' the GPU's threads (:data:`kinematics._cuda_kernels.GPU_RUNS`); the pipeline
+        hands the fitting thread blocks of a few times this."""
+        runs = _ck.GPU_RUNS if self.params.backend == "cuda" else (
+            _lk.LANES * numba.get_num_threads())
+        return -(-runs // max(1, self.params.candidates))
 
     @staticmethod
-    def _use_lanes(p: AnnealParams, objective: int, parts, n_frames: int, *,
-                   hidden: bool = False) -> bool:
-        """Whether the lane kernel fits this block: it does what the scalar kernel does for
-        unlabelled points, labelled 2D keypoints or 3D points, one partition and independent
-        frames, without markers marked hidden (``hidden``); 'auto' also wants a few runs per thread
+    def _backend(p: AnnealParams, objective: int, parts, n_frames: int, *,
+                 hidden: bool = False) -> str:
+        """Which kernel fits this block: 'lanes' or 'cuda' where they do what the scalar
+        kernel does — unlabelled points, labelled 2D keypoints or 3D points, one partition
+        and independent frames, without markers marked hidden (``hidden``) — else 'scalar'.
+        'auto' also wants a few runs per thread for the lanes
         (:data:`kinematics._lane_kernels.MIN_RUNS_PER_THREAD`: a single frame, as the GUI
         fits, goes to the scalar kernel)."""
         valid = (objective in (_ak.OBJ_NEAREST, _ak.OBJ_LABELLED, _ak.OBJ_POINTS3D)
                  and parts.bounds.shape[0] == 1
                  and parts.samples == 0 and p.start == "mean" and not p.error.one_to_one
                  and parts.confirm == 0 and not hidden)
-        if p.backend == "lanes" and not valid:
-            raise KinematicsError("the lanes backend fits unlabelled points, labelled 2D "
-                                  "keypoints or 3D points with one partition, start "
+        if p.backend in ("lanes", "cuda") and not valid:
+            raise KinematicsError(f"the {p.backend} backend fits unlabelled points, labelled "
+                                  "2D keypoints or 3D points with one partition, start "
                                   "'mean', no start samples and no hidden markers (nor "
                                   "views that show only some: [[views]] model_markers); use "
                                   "backend 'auto' or 'scalar'",
                                   field="backend")
+        if p.backend == "cuda":
+            if not _ck.available():
+                raise KinematicsError("the cuda backend needs a CUDA GPU that numba can use "
+                                      "(numba.cuda.is_available() is False here); use "
+                                      "backend 'auto'", field="backend")
+            return "cuda"
         runs = n_frames * max(1, p.candidates)
-        return p.backend == "lanes" or (p.backend == "auto" and valid
+        lanes = p.backend == "lanes" or (p.backend == "auto" and valid
                                          and runs >= _lk.MIN_RUNS_PER_THREAD
                                          * numba.get_num_threads())
+        return "lanes" if lanes else "scalar"
 
     def _frame_result(self, obs: Observations, position: int, frame_id: int, state, root_pos,
                       root_rot, p: AnnealParams, *, runs: int, iterations: int, pairs: int,

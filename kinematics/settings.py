@@ -44,7 +44,7 @@ def setting(default, doc: str, *, min=None, max=None, choices=None, none=None):
 
 START_MODES = ("mean", "previous", "track")
 PARTITION_MODES = ("auto", "none")
-BACKENDS = ("auto", "scalar", "lanes")
+BACKENDS = ("auto", "scalar", "lanes", "cuda")
 PRECISIONS = ("float64", "float32")
 MATCH_MODES = ("auto", "views", "3d")
 THRESHOLD_MODES = ("absolute", "auto")

@@ -299,16 +299,20 @@ def test_auto_uses_lanes_only_where_valid(locust):
     f = Fitter(locust, locust_cameras(), AnnealParams())
     parts = partitions_of(f.problem)
     many = _lk.MIN_RUNS_PER_THREAD * numba.get_num_threads()  # runs, 2 per frame
-    assert f._use_lanes(f.params, _ak.OBJ_NEAREST, parts, many // 2)
-    assert not f._use_lanes(f.params, _ak.OBJ_NEAREST, parts, many // 2 - 1)
-    assert not f._use_lanes(f.params, _ak.OBJ_NEAREST, parts, 1)  # a single frame (GUI)
-    assert f._use_lanes(f.params, _ak.OBJ_LABELLED, parts, many)  # labelled 2D keypoints
-    assert f._use_lanes(f.params, _ak.OBJ_POINTS3D, parts, many)  # 3D points
-    assert not f._use_lanes(f.params, _ak.OBJ_CLOUD, parts, many)
-    assert not f._use_lanes(replace(f.params, backend="scalar"), _ak.OBJ_NEAREST, parts, many)
-    with pytest.raises(KinematicsError, match="backend"):
-        f._use_lanes(replace(f.params, backend="lanes", start="previous"), _ak.OBJ_NEAREST,
-                     parts, many)
+    def backend(params, objective, n):
+        return f._backend(params, objective, parts, n)
+
+    assert backend(f.params, _ak.OBJ_NEAREST, many // 2) == "lanes"
+    assert backend(f.params, _ak.OBJ_NEAREST, many // 2 - 1) == "scalar"
+    assert backend(f.params, _ak.OBJ_NEAREST, 1) == "scalar"  # a single frame (GUI)
+    assert backend(f.params, _ak.OBJ_LABELLED, many) == "lanes"  # labelled 2D keypoints
+    assert backend(f.params, _ak.OBJ_POINTS3D, many) == "lanes"  # 3D points
+    assert backend(f.params, _ak.OBJ_CLOUD, many) == "scalar"
+    assert backend(replace(f.params, backend="scalar"), _ak.OBJ_NEAREST, many) == "scalar"
+    for name in ("lanes", "cuda"):
+        with pytest.raises(KinematicsError, match=f"the {name} backend") as err:
+            backend(replace(f.params, backend=name, start="previous"), _ak.OBJ_NEAREST, many)
+        assert err.value.field == "backend"
 
 
 def test_bad_backend_is_named():
