@@ -19,6 +19,7 @@ taken in the same order. Valid for the problems the lanes take
 
 from __future__ import annotations
 
+import functools
 import inspect
 import threading
 
@@ -40,17 +41,22 @@ from kinematics._anneal_kernels import (
 THREADS = 128
 
 #: Runs a launch should hold to keep a GPU busy (``Fitter.lane_frames``: the frames a block
-#: of the pipeline holds).
+#: of the pipeline holds). The locust's paper protocol on an H100 (bench/bench_cuda.py):
+#: 16 384 runs 11 500 frames/s, 65 536 runs 15 800.
 GPU_RUNS = 16384
+
+#: Backend 'auto' fits a block on the GPU from this many runs.
+MIN_RUNS = 2048
 
 _lock = threading.Lock()
 _kernels: dict[tuple, object] = {}
 cuda = None  # numba.cuda, imported on first use (80 ms; most fits never need it)
 
 
+@functools.cache
 def available() -> bool:
     """Whether numba sees a CUDA GPU (or runs its CUDA simulator); False where numba's
-    CUDA target cannot even be imported."""
+    CUDA target cannot even be imported. Asked once per process."""
     try:
         from numba import cuda
         return bool(cuda.is_available())

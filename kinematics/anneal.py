@@ -962,10 +962,19 @@ class Fitter:
         backend = self._backend(p, arrays.objective, parts, n,
                                 hidden=obs.hidden is not None or obs.unseen is not None)
         if backend == "cuda":
-            _ck.fit_frames_rounds(frame_ids, roots, rots, start, pr.folded, pr.cams, pr.dofs,
-                                  schedule_of(p), self._error_args(p, arrays.objective),
-                                  arrays, float(p.claim_gate_px), out)
-        elif backend == "lanes":
+            try:
+                _ck.fit_frames_rounds(frame_ids, roots, rots, start, pr.folded, pr.cams,
+                                      pr.dofs, schedule_of(p),
+                                      self._error_args(p, arrays.objective), arrays,
+                                      float(p.claim_gate_px), out)
+            except Exception as exc:  # a CUDA toolkit numba cannot use: 'auto' goes on
+                if p.backend == "cuda":
+                    raise KinematicsError(f"the cuda backend failed ({exc}); use backend "
+                                          "'auto'", field="backend") from exc
+                warnings.warn(f"cuda: the GPU kernel failed ({exc}); fitting in lanes "
+                              "instead", stacklevel=2)
+                backend = "lanes"
+        if backend == "lanes":
             threads = numba.get_num_threads()
             groups = np.unique(np.linspace(0, n, min(threads, n) + 1).astype(np.int64))
             error = self._error_args(p, arrays.objective)
@@ -1057,11 +1066,12 @@ class Fitter:
         return fn, _codegen.padded_detections(c_cap)
 
     def lane_frames(self) -> int:
-        """Frames whose runs fill the lanes of every numba thread once, or with backend
-        'cuda' the GPU's threads (:data:`kinematics._cuda_kernels.GPU_RUNS`); the pipeline
+        """Frames whose runs fill the lanes of every numba thread once, or where the cuda
+        backend may fit them a GPU (:data:`kinematics._cuda_kernels.GPU_RUNS`); the pipeline
         hands the fitting thread blocks of a few times this."""
-        runs = _ck.GPU_RUNS if self.params.backend == "cuda" else (
-            _lk.LANES * numba.get_num_threads())
+        gpu = self.params.backend == "cuda" or (self.params.backend == "auto"
+                                                and _ck.available())
+        runs = _ck.GPU_RUNS if gpu else _lk.LANES * numba.get_num_threads()
         return -(-runs // max(1, self.params.candidates))
 
     @staticmethod
@@ -1091,6 +1101,8 @@ class Fitter:
                                       "backend 'auto'", field="backend")
             return "cuda"
         runs = n_frames * max(1, p.candidates)
+        if p.backend == "auto" and valid and runs >= _ck.MIN_RUNS and _ck.available():
+            return "cuda"
         lanes = p.backend == "lanes" or (p.backend == "auto" and valid
                                          and runs >= _lk.MIN_RUNS_PER_THREAD
                                          * numba.get_num_threads())
