@@ -71,6 +71,27 @@ def agreement(scalar, gpu, truth, free) -> str:
             f"{rmse(gpu):.3f}°")
 
 
+def launch_sweep(body, cams, dets, truth, params) -> int:
+    """The paper protocol's fitted frames/s on the GPU against the frames (runs) of one
+    launch, and the kernel's compile time (its first call)."""
+    fitter = Fitter(body, cams, replace(params, backend="cuda"))
+    t0 = time.perf_counter()
+    fitter.fit(dets[:2])
+    compile_s = time.perf_counter() - t0
+    rows = []
+    n = 256
+    while n <= len(dets):
+        t0 = time.perf_counter()
+        fitter.fit(dets[:n], chunk_size=n)
+        dt = time.perf_counter() - t0
+        rows.append((f"{n} frames in one launch: fitted frames/s", f"{n / dt:.0f}", ""))
+        n *= 4
+    print(f"machine: {machine()}; GPU: {gpu_name()}; the paper protocol (Table 1 schedule "
+          f"to the end, 1 run); the kernel compiled in {compile_s:.1f} s")
+    print_table(rows, results=("cuda",))
+    return 0
+
+
 def gpu_name() -> str:
     from numba import cuda
     return cuda.get_current_device().name.decode() if isinstance(
@@ -83,6 +104,8 @@ def main(argv=None) -> int:
     ap.add_argument("--check-frames", type=int, default=512,
                     help="frames the CPU backends fit (the GPU's first ones)")
     ap.add_argument("--threads", type=int, default=2, help="numba threads of the CPU rows")
+    ap.add_argument("--gpu-only", action="store_true",
+                    help="only the GPU's frames/s against frames per launch (no CPU rows)")
     args = ap.parse_args(argv)
     if args.frames < 1 or not 1 <= args.check_frames <= args.frames or args.threads < 1:
         ap.error("--frames >= --check-frames >= 1 and --threads >= 1 are needed")
@@ -106,6 +129,8 @@ def main(argv=None) -> int:
          AnnealParams.paper(refine=True, reanalysis_threshold=1.0).with_schedule(5000)),
         ("defaults", AnnealParams()),
     )
+    if args.gpu_only:
+        return launch_sweep(locust, cams, dets, truth, settings[0][1])
     rows = []
     for name, params in settings:
         out = {}
