@@ -4,17 +4,20 @@
 The GPU runs the scalar kernel itself: every thread calls
 :func:`kinematics._anneal_kernels.anneal_chain` (numba compiles it as a device function),
 with its scratch in the thread's local memory, on the random stream of its (seed, frame,
-run). There is no twin to keep in step: the arithmetic is the scalar kernel's, and the
-kernel is compiled without contracting products and sums into fused multiply-adds, so a
-run's result is the scalar kernel's to the last bit (tests/kinematics/test_cuda.py runs it
-in numba's CUDA simulator; ``bench/bench_lanes.py --cuda`` compares it on a GPU).
+run). There is no GPU twin to keep in step: the arithmetic is the scalar kernel's. NVVM
+fuses multiplies and adds (numba gives no switch to stop it), so a run's roundings differ
+from the CPU's in the last bit and its result equals the scalar kernel's to within
+rounding, unless an acceptance decision flips on one (tests/kinematics/test_cuda.py on a
+GPU; ``bench/bench_cuda.py``).
 
 The frame procedure (refinement, the re-analysis runs a frame's E asks for, the kept run)
 stays on the CPU, in rounds: every waiting run of every frame anneals in one launch, then
 the CPU finishes them (:func:`finish_tasks`, in parallel) and decides which frames want
 another run (:func:`next_tasks`) — the runs and the kept run of the scalar ``fit_frames``,
-taken in the same order. Valid for the problems the lanes take
-(``Fitter._backend``: independent frames, one partition, start 'mean').
+taken in the same order. With the kernel's CPU twin (:func:`anneal_tasks_cpu`) the rounds
+give ``fit_frames``' outputs to the last bit, which the tests check without a GPU. Valid
+for the problems the lanes take (``Fitter._backend``: independent frames, one partition,
+start 'mean').
 """
 
 from __future__ import annotations
@@ -50,16 +53,17 @@ MIN_RUNS = 2048
 
 _lock = threading.Lock()
 _kernels: dict[tuple, object] = {}
-cuda = None  # numba.cuda, imported on first use (80 ms; most fits never need it)
 
 
 @functools.cache
 def available() -> bool:
-    """Whether numba sees a CUDA GPU (or runs its CUDA simulator); False where numba's
-    CUDA target cannot even be imported. Asked once per process."""
+    """Whether numba sees a CUDA GPU; False where numba's CUDA target cannot even be
+    imported (numba.cuda is imported here, on first use: 80 ms most fits need not wait),
+    and under numba's CUDA simulator, which cannot call the CPU-compiled kernel. Asked once
+    per process."""
     try:
-        from numba import cuda
-        return bool(cuda.is_available())
+        from numba import config, cuda
+        return bool(cuda.is_available()) and not config.ENABLE_CUDASIM
     except Exception:  # no CUDA toolkit or driver: numba raises many kinds
         return False
 
@@ -108,9 +112,8 @@ def anneal_tasks_cpu(*args):
 def _kernel(na: int, nj: int, nm: int, nv: int):
     """The GPU kernel for ``na`` state entries, ``nj`` joints, ``nm`` markers and ``nv``
     views (the sizes of each thread's scratch, in its local memory): :func:`run_task` per
-    thread. Compiled once per shape, without contracting products and sums into fused
-    multiply-adds, so every rounding is the CPU's."""
-    global cuda
+    thread. Compiled on its first launch, once per process and shape; ``fastmath`` off
+    (IEEE division and square root, no flushing of subnormals)."""
     key = (na, nj, nm, nv)
     with _lock:
         if key in _kernels:
@@ -252,6 +255,7 @@ def fit_frames_rounds(frame_ids, root_pos, root_rot, start, body, cams, dofs, sc
               conf, det_off, obs3, bidirectional, weight, cap, penalty_cap,
               np.zeros(max(points.shape[0], obs3.shape[1], 1), np.bool_))
     if gpu:
+        from numba import cuda
         kernel = _kernel(na, nj, nm, nv)
         inputs = tuple(cuda.to_device(a) if isinstance(a, np.ndarray) else a for a in inputs)
     while frames.size:
