@@ -43,13 +43,14 @@ from kinematics._anneal_kernels import (
 #: Threads per block of the annealing kernel (each thread one run).
 THREADS = 128
 
-#: Runs a launch should hold to keep a GPU busy (``Fitter.lane_frames``: the frames a block
-#: of the pipeline holds). The locust's paper protocol on an H100 (bench/bench_cuda.py):
-#: 16 384 runs 11 500 frames/s, 65 536 runs 15 800.
+#: Half the runs of a launch (``Fitter.lane_frames``; ``iter_fit`` fits blocks of twice
+#: this). The locust's paper protocol on an H100 (bench/bench_cuda.py): one launch of
+#: 16 384 runs 11 500 frames/s, launches of 32 768 runs 15 800.
 GPU_RUNS = 16384
 
-#: Backend 'auto' fits a block on the GPU from this many runs.
-MIN_RUNS = 2048
+class GpuFailed(RuntimeError):
+    """The GPU could not compile or run the kernel (the reason in the message)."""
+
 
 _lock = threading.Lock()
 _kernels: dict[tuple, object] = {}
@@ -96,13 +97,10 @@ def run_task(r, task_frame, task_run, frame_ids, root_pos, root_rot, start, free
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def anneal_tasks_cpu(*args):
-    """:func:`run_task` for every task, on the CPU's threads: the GPU kernel's twin (the
-    rounds' test oracle, and their anneal step where no GPU is used)."""
-    na = args[5].shape[0]
-    nj = args[24].shape[0]  # parent
-    nm = args[32].shape[0]  # marker_joint
-    nv = args[35].shape[0]  # kind
+def anneal_tasks_cpu(na, nj, nm, nv, *args):
+    """:func:`run_task` for every task (``args``: its parameters after ``r`` and before the
+    scratch) on the CPU's threads, with scratch for ``na`` state entries, ``nj`` joints,
+    ``nm`` markers and ``nv`` views: the GPU kernel's twin (the rounds' test oracle)."""
     for r in prange(args[0].shape[0]):
         run_task(r, *args, np.empty(na), np.empty(na), np.empty(na), np.empty(na),
                  np.empty(na), np.empty((nj, 3, 3)), np.empty((nj, 3)), np.empty((nm, 3)),
@@ -255,23 +253,40 @@ def fit_frames_rounds(frame_ids, root_pos, root_rot, start, body, cams, dofs, sc
               conf, det_off, obs3, bidirectional, weight, cap, penalty_cap,
               np.zeros(max(points.shape[0], obs3.shape[1], 1), np.bool_))
     if gpu:
-        from numba import cuda
-        kernel = _kernel(na, nj, nm, nv)
-        inputs = tuple(cuda.to_device(a) if isinstance(a, np.ndarray) else a for a in inputs)
+        inputs = _on_gpu(inputs)
     while frames.size:
         t = frames.size
         best, e, its = np.empty((t, na)), np.empty(t), np.empty(t, np.int64)
         if gpu:
-            d_best, d_e, d_its = (cuda.device_array_like(best), cuda.device_array_like(e),
-                                  cuda.device_array_like(its))
-            kernel[-(-t // THREADS), THREADS](cuda.to_device(frames), cuda.to_device(runs),
-                                              *inputs, d_best, d_e, d_its)
-            d_best.copy_to_host(best)
-            d_e.copy_to_host(e)
-            d_its.copy_to_host(its)
+            _launch(_kernel(na, nj, nm, nv), frames, runs, inputs, best, e, its)
         else:
-            anneal_tasks_cpu(frames, runs, *inputs, best, e, its)
+            anneal_tasks_cpu(na, nj, nm, nv, frames, runs, *inputs, best, e, its)
         finish_tasks(frames, runs, best, e, root_pos, root_rot, body, cams, dofs, schedule,
                      error, obs, claim_gate, out, run_u, run_pairs)
         frames, runs = next_tasks(frames, runs, its, root_pos, root_rot, body, cams,
                                   schedule, error, obs, out, run_u, run_pairs)
+
+
+def _on_gpu(inputs: tuple) -> tuple:
+    """The kernel's inputs with every array copied to the GPU."""
+    from numba import cuda
+    try:
+        return tuple(cuda.to_device(a) if isinstance(a, np.ndarray) else a for a in inputs)
+    except Exception as exc:  # numba raises many kinds; the reason is in the message
+        raise GpuFailed(f"copying to the GPU failed ({type(exc).__name__}: {exc})") from exc
+
+
+def _launch(kernel, frames, runs, inputs, best, e, its) -> None:
+    """One launch of ``kernel`` over the tasks (``frames``, ``runs``); its outputs into
+    ``best``, ``e``, ``its``."""
+    from numba import cuda
+    try:
+        d_best, d_e, d_its = (cuda.device_array_like(best), cuda.device_array_like(e),
+                              cuda.device_array_like(its))
+        kernel[-(-frames.size // THREADS), THREADS](
+            cuda.to_device(frames), cuda.to_device(runs), *inputs, d_best, d_e, d_its)
+        d_best.copy_to_host(best)
+        d_e.copy_to_host(e)
+        d_its.copy_to_host(its)
+    except Exception as exc:  # compiling (the first launch) or running
+        raise GpuFailed(f"the GPU kernel failed ({type(exc).__name__}: {exc})") from exc

@@ -967,14 +967,10 @@ class Fitter:
                                       pr.dofs, schedule_of(p),
                                       self._error_args(p, arrays.objective), arrays,
                                       float(p.claim_gate_px), out)
-            except Exception as exc:  # a CUDA toolkit numba cannot use: 'auto' goes on
-                if p.backend == "cuda":
-                    raise KinematicsError(f"the cuda backend failed ({exc}); use backend "
-                                          "'auto'", field="backend") from exc
-                warnings.warn(f"cuda: the GPU kernel failed ({exc}); fitting in lanes "
-                              "instead", stacklevel=2)
-                backend = "lanes"
-        if backend == "lanes":
+            except _ck.GpuFailed as exc:
+                raise KinematicsError(f"the cuda backend failed: {exc}; use backend 'auto'",
+                                      field="backend") from exc
+        elif backend == "lanes":
             threads = numba.get_num_threads()
             groups = np.unique(np.linspace(0, n, min(threads, n) + 1).astype(np.int64))
             error = self._error_args(p, arrays.objective)
@@ -1066,12 +1062,11 @@ class Fitter:
         return fn, _codegen.padded_detections(c_cap)
 
     def lane_frames(self) -> int:
-        """Frames whose runs fill the lanes of every numba thread once, or where the cuda
-        backend may fit them a GPU (:data:`kinematics._cuda_kernels.GPU_RUNS`); the pipeline
-        hands the fitting thread blocks of a few times this."""
-        gpu = self.params.backend == "cuda" or (self.params.backend == "auto"
-                                                and _ck.available())
-        runs = _ck.GPU_RUNS if gpu else _lk.LANES * numba.get_num_threads()
+        """Frames whose runs fill the lanes of every numba thread once, or with backend
+        'cuda' half a GPU launch (:data:`kinematics._cuda_kernels.GPU_RUNS`); ``iter_fit``
+        fits blocks of twice this, the pipeline hands the fitting thread four times."""
+        runs = _ck.GPU_RUNS if self.params.backend == "cuda" else (
+            _lk.LANES * numba.get_num_threads())
         return -(-runs // max(1, self.params.candidates))
 
     @staticmethod
@@ -1082,7 +1077,9 @@ class Fitter:
         and independent frames, without markers marked hidden (``hidden``) — else 'scalar'.
         'auto' also wants a few runs per thread for the lanes
         (:data:`kinematics._lane_kernels.MIN_RUNS_PER_THREAD`: a single frame, as the GUI
-        fits, goes to the scalar kernel)."""
+        fits, goes to the scalar kernel), and never takes the GPU: its results equal the
+        scalar kernel's to within rounding only, and a result file should not depend on
+        the machine (docs/fitting.md, 'Reproducibility')."""
         valid = (objective in (_ak.OBJ_NEAREST, _ak.OBJ_LABELLED, _ak.OBJ_POINTS3D)
                  and parts.bounds.shape[0] == 1
                  and parts.samples == 0 and p.start == "mean" and not p.error.one_to_one
@@ -1096,13 +1093,12 @@ class Fitter:
                                   field="backend")
         if p.backend == "cuda":
             if not _ck.available():
-                raise KinematicsError("the cuda backend needs a CUDA GPU that numba can use "
-                                      "(numba.cuda.is_available() is False here); use "
-                                      "backend 'auto'", field="backend")
+                raise KinematicsError("the cuda backend needs an NVIDIA GPU that numba can "
+                                      "use (numba.cuda.is_available() is False here; pip "
+                                      "install \"videotrack[gpu]\"); use backend 'auto'",
+                                      field="backend")
             return "cuda"
         runs = n_frames * max(1, p.candidates)
-        if p.backend == "auto" and valid and runs >= _ck.MIN_RUNS and _ck.available():
-            return "cuda"
         lanes = p.backend == "lanes" or (p.backend == "auto" and valid
                                          and runs >= _lk.MIN_RUNS_PER_THREAD
                                          * numba.get_num_threads())

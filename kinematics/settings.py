@@ -285,13 +285,14 @@ class AnnealParams:
     backend: str = setting(
         "auto", "Which kernel anneals: 'scalar' one run at a time, 'lanes' many runs at once "
         "in SIMD lanes (the same results to the last bit; faster on many frames), 'cuda' one "
-        "run per thread of a CUDA GPU through numba (the scalar kernel's arithmetic, its "
-        "roundings fused by the GPU's compiler: the same results to within rounding; "
-        "docs/fitting.md, 'Backends'), 'auto' the GPU where there is one numba can use and "
-        "a block has at least 2048 runs, else lanes where there are at least 32 runs per "
-        "thread (half-empty lanes still beat the scalar kernel), else scalar — the GPU and "
-        "the lanes only where they are valid (unlabelled points, labelled 2D keypoints or "
-        "3D points, one partition, start 'mean').", choices=BACKENDS)
+        "run per thread of an NVIDIA GPU through numba (pip install \"videotrack[gpu]\"; "
+        "the scalar kernel's arithmetic with its roundings fused by the GPU's compiler: the "
+        "same fits to within rounding, not to the bit; docs/fitting.md, 'Backends'), 'auto' "
+        "lanes where they are valid (unlabelled points, labelled 2D keypoints or 3D points, "
+        "one partition, start 'mean') and there are at least 32 runs per thread (half-empty "
+        "lanes still beat the scalar kernel), else scalar; 'auto' never takes the GPU, so a "
+        "result file does not depend on the machine. 'cuda' is valid where the lanes are.",
+        choices=BACKENDS)
     precision: str = setting(
         "float64", "What the lanes' generated kernels compute E in: 'float64' gives the "
         "scalar kernel's results to the last bit; 'float32' is faster, but its results only "
