@@ -1502,6 +1502,20 @@ def keeps(e, u, e_keep, u_keep, max_unexplained):
     return u < u_keep or (u == u_keep and e < e_keep)
 
 
+@njit(cache=True, nogil=True)
+def take_runs(out, f, issued, run_u, run_pairs, max_unexplained):
+    """Frame ``f``'s first ``issued`` runs taken in run order, as :func:`fit_frames` takes
+    them after each (``run_u``, ``run_pairs``: each run's unexplained detections and
+    refinement pairs): the kept run's (E, unexplained, index); its pairs go into
+    ``out.pairs[f]``. For the backends that finish a frame's runs out of order."""
+    e_keep, u_keep, kept = np.inf, 1 << 30, 0
+    for r in range(issued):
+        if keeps(out.run_error[f, r], run_u[r], e_keep, u_keep, max_unexplained):
+            e_keep, u_keep, kept = out.run_error[f, r], run_u[r], r
+            out.pairs[f] = run_pairs[r]
+    return e_keep, u_keep, kept
+
+
 @njit(cache=True, nogil=True, inline="always")
 def same_markers(a, b, tol):
     """Whether every marker of ``a`` (n, 3) lies within ``tol`` of its place in ``b``."""

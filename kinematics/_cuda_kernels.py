@@ -33,9 +33,9 @@ from kinematics._anneal_kernels import (
     anneal_chain,
     clear_frame,
     finish_run,
-    keeps,
     observed,
     stream_state,
+    take_runs,
     wants_run,
     write_frame,
 )
@@ -213,11 +213,8 @@ def next_tasks(task_frame, task_run, its, root_pos, root_rot, body, cams, schedu
         if r + 1 < n_tasks and task_frame[r + 1] == f:
             continue  # the frame's last task of the round decides
         issued = task_run[r] + 1
-        e_keep, u_keep, kept = np.inf, 1 << 30, 0
-        for q in range(issued):
-            if keeps(out.run_error[f, q], run_u[f, q], e_keep, u_keep, max_unexplained):
-                e_keep, u_keep, kept = out.run_error[f, q], run_u[f, q], q
-        out.pairs[f] = run_pairs[f, kept]
+        e_keep, u_keep, kept = take_runs(out, f, issued, run_u[f], run_pairs[f],
+                                         max_unexplained)
         if wants_run(issued, min_runs, max_runs, e_keep, u_keep, threshold, max_unexplained):
             frames[k] = f
             runs[k] = issued

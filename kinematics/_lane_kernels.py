@@ -62,7 +62,6 @@ from kinematics._anneal_kernels import (
     evaluate,
     finish_run,
     hist_at,
-    keeps,
     log_unit,
     mul33,
     next_uniform,
@@ -70,6 +69,7 @@ from kinematics._anneal_kernels import (
     project_posture,
     sincos,
     stream_state,
+    take_runs,
     wants_run,
     write_frame,
 )
@@ -867,14 +867,9 @@ def _fit_group(f0, f1, frame_ids, root_pos, root_rot, start, body, cams, dofs, s
                 finished[fl] += 1
                 if finished[fl] == issued[fl]:
                     # the frame's runs so far are all done: take them in run order, as the
-                    # scalar kernel does after each (runs taken before change nothing)
-                    for r in range(issued[fl]):
-                        if keeps(out.run_error[f, r], run_u[fl, r], e_keep[fl], u_keep[fl],
-                                 max_unexplained):
-                            e_keep[fl] = out.run_error[f, r]
-                            u_keep[fl] = run_u[fl, r]
-                            keep_run[fl] = r
-                            out.pairs[f] = run_pairs[fl, r]
+                    # scalar kernel does after each
+                    e_keep[fl], u_keep[fl], keep_run[fl] = take_runs(
+                        out, f, issued[fl], run_u[fl], run_pairs[fl], max_unexplained)
                     nxt = issued[fl]
                     if wants_run(nxt, min_runs, max_runs, e_keep[fl], u_keep[fl],
                                  reanalysis_threshold, max_unexplained):
