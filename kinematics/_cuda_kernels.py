@@ -168,8 +168,9 @@ def finish_tasks(task_frame, task_run, best, e, root_pos, root_rot, body, cams, 
     nj = body[0].shape[0]
     nm = body[8].shape[0]
     na = best.shape[1]
-    run_angles, run_error = out.run_angles, out.run_error  # (written through out, a
-    # parallel loop's stores were lost)
+    # the arrays taken out of the namedtuple first: stores through ``out.run_angles`` in a
+    # prange were lost
+    run_angles, run_error = out.run_angles, out.run_error
     for r in prange(task_frame.shape[0]):
         f = task_frame[r]
         run = task_run[r]
@@ -264,13 +265,20 @@ def fit_frames_rounds(frame_ids, root_pos, root_rot, start, body, cams, dofs, sc
                                   schedule, error, obs, out, run_u, run_pairs)
 
 
+def _reason(what: str, exc: Exception) -> GpuFailed:
+    """A :class:`GpuFailed` of one line: numba's CUDA errors span many lines (a typing
+    error lists every candidate), so only the first line of the message is kept."""
+    lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
+    return GpuFailed(f"{what} ({type(exc).__name__}: {lines[0] if lines else 'no message'})")
+
+
 def _on_gpu(inputs: tuple) -> tuple:
     """The kernel's inputs with every array copied to the GPU."""
     from numba import cuda
     try:
         return tuple(cuda.to_device(a) if isinstance(a, np.ndarray) else a for a in inputs)
     except Exception as exc:  # numba raises many kinds; the reason is in the message
-        raise GpuFailed(f"copying to the GPU failed ({type(exc).__name__}: {exc})") from exc
+        raise _reason("copying to the GPU failed", exc) from exc
 
 
 def _launch(kernel, frames, runs, inputs, best, e, its) -> None:
@@ -286,4 +294,4 @@ def _launch(kernel, frames, runs, inputs, best, e, its) -> None:
         d_e.copy_to_host(e)
         d_its.copy_to_host(its)
     except Exception as exc:  # compiling (the first launch) or running
-        raise GpuFailed(f"the GPU kernel failed ({type(exc).__name__}: {exc})") from exc
+        raise _reason("the GPU kernel failed", exc) from exc

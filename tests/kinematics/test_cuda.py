@@ -131,6 +131,9 @@ def test_a_gpu_that_fails_is_named(locust, monkeypatch):
     with pytest.raises(KinematicsError, match="the cuda backend failed") as err:
         Fitter(locust, locust_cameras(), AnnealParams(backend="cuda")).fit(dets)
     assert err.value.field == "backend"
+    assert "\n" not in str(err.value)  # one line, whatever numba's message spans
+    many = _ck._reason("the GPU kernel failed", TypeError("first line\n\nsecond\nthird"))
+    assert str(many) == "the GPU kernel failed (TypeError: first line)"
 
 
 @pytest.mark.skipif(not GPU, reason="needs a CUDA GPU that numba can use")
