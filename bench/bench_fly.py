@@ -43,7 +43,8 @@ Protocol:
 5. Fits, all frame-independent (``start="mean"``), unlabelled markers, refinement on (and,
    where markers are matched in 3D, the final polish: ``--param final_polish_px=None`` for
    the fit without it), the
-   Table 1 schedule shortened to ``--n-end`` (N_l, N_tau scaled), re-analysis threshold
+   Table 1 schedule shortened to ``--n-end`` (N_l, N_tau scaled; with ``--profile best``
+   the defaults' schedule unless given), re-analysis threshold
    ``--threshold`` px per marker image (times markers x views of that fit; with
    ``--param match=3d`` times markers: E then sums one distance per marker), marker cost
    capped at ``--cap`` px (0: no cap; a 10-px cap ruins even the lone leg, whose correct
@@ -436,7 +437,11 @@ def build_params(args, threshold_px: float):
                                                                            **given_error))
         else:
             params = AnnealParams.paper(error=ErrorOptions(**error), **kw)
-        params = params.with_schedule(kw.get("n_end", args.n_end))
+        n_end = kw.get("n_end", args.n_end)
+        if n_end is None and not best:
+            n_end = 10000  # Table 1 shortened
+        if n_end is not None:
+            params = params.with_schedule(n_end)
         if params.match == "3d" and not best:  # E sums one distance per marker
             scheduled["reanalysis_threshold"] = threshold_px / args.cameras
         return dataclasses.replace(params, **scheduled)
@@ -525,7 +530,9 @@ def main() -> int:
     ap.add_argument("--frames", default="0:660:10",
                     help="frames of the clip to render and fit: A:B:S or a comma list "
                          "(default every 10th: 66 frames)")
-    ap.add_argument("--n-end", type=int, default=10000, help="annealing iterations per run")
+    ap.add_argument("--n-end", type=int, default=None,
+                    help="annealing iterations per run (default: the defaults' with "
+                         "--profile best, 10000 with --profile paper)")
     ap.add_argument("--threshold", type=float, default=4.0,
                     help="re-analysis threshold in px per marker image (E / (markers x "
                          "views)); the fit's reanalysis_threshold is this x markers x views")

@@ -1321,7 +1321,8 @@ def anneal_partitions(origin, state, rp, rr, body, cams, dofs, schedule, error, 
                       points, conf, view_off, obs3, parts, claimed, work, cur, cand, best, cs,
                       sn, rot, pos, mk, proj, per_view, nearest):
     """One annealing run over partitions, each in turn (partitioned sampling): partition p
-    moves only its own entries, with the schedule of ``schedule``, scored by
+    moves only its own entries, with its share of ``schedule`` (N_end, N_l and N_tau times
+    its share of the free entries: a round anneals N_end iterations in all), scored by
     :func:`partition_error` of the markers it reaches (in the first round a trunk by its own
     markers only: its limbs are not fitted yet). The first round fits every partition
     against all detections; later rounds (``rounds`` > 1) exclude the detections that the
@@ -1432,8 +1433,12 @@ def anneal_partitions(origin, state, rp, rr, body, cams, dofs, schedule, error, 
             cloud, free = obs3, claimed
             if objective == OBJ_CLOUD:  # the same E, without the claimed points
                 cloud, free = unclaimed_cloud(obs3, claimed)
+            # the run's schedule shared by axes: a round anneals N_end iterations in all
+            share = dofs_p.shape[0] / max(1, part_dofs.shape[0])
             _, n = anneal_chain(work, dofs_p, step, hist,
-                                nbins, th, dof_kind, lo, hi, max_redraws, n_end, n_l, n_tau,
+                                nbins, th, dof_kind, lo, hi, max_redraws,
+                                max(1, round(n_end * share)), max(1, round(n_l * share)),
+                                max(1, round(n_tau * share)),
                                 tau0, l0, c_l, c_tau, eps, mix64(rs), rp, rr, parent, chain,
                                 pre_rot, pre_trans, post_trans, elem_axis, elem_index,
                                 joint_flags, marker_joint, marker_local, slide_index, kind, P,

@@ -132,7 +132,9 @@ class AnnealParams:
     tune them.
     """
 
-    n_end: int = setting(35000, "N_end: iterations of one annealing run (Table 1).",
+    n_end: int = setting(35000, "N_end: iterations of one annealing run (Table 1); a body "
+                         "annealed in partitions shares them among its partitions by their "
+                         "free axes, in each round (N_l and N_τ likewise).",
                          min=1, max=10**8)
     n_l: int = setting(3500, "N_l: the step length is multiplied by c_l every N_l iterations.",
                        min=1, max=10**8)
