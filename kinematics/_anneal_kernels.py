@@ -1322,7 +1322,7 @@ def anneal_partitions(origin, state, rp, rr, body, cams, dofs, schedule, error, 
                       sn, rot, pos, mk, proj, per_view, nearest):
     """One annealing run over partitions, each in turn (partitioned sampling): partition p
     moves only its own entries, with its share of ``schedule`` (N_end, N_l and N_tau times
-    its share of the free entries: a round anneals N_end iterations in all), scored by
+    its share of the free entries, at least 1: a round anneals about N_end), scored by
     :func:`partition_error` of the markers it reaches (in the first round a trunk by its own
     markers only: its limbs are not fitted yet). The first round fits every partition
     against all detections; later rounds (``rounds`` > 1) exclude the detections that the
@@ -1433,7 +1433,7 @@ def anneal_partitions(origin, state, rp, rr, body, cams, dofs, schedule, error, 
             cloud, free = obs3, claimed
             if objective == OBJ_CLOUD:  # the same E, without the claimed points
                 cloud, free = unclaimed_cloud(obs3, claimed)
-            # the run's schedule shared by axes: a round anneals N_end iterations in all
+            # the run's schedule shared by axes: a round anneals about N_end in all
             share = dofs_p.shape[0] / max(1, part_dofs.shape[0])
             _, n = anneal_chain(work, dofs_p, step, hist,
                                 nbins, th, dof_kind, lo, hi, max_redraws,

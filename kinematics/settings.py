@@ -228,8 +228,8 @@ class AnnealParams:
     start_samples: int | None = setting(
         None, "Start search: before a partition is annealed in a run's first round, its axes "
         "are drawn joint by joint from its base outward (32 x this many draws per joint, "
-        "uniform within the ranges, plausible by the histograms), each joint's best postures "
-        "kept and polished, and the best of all starts the annealing; in that round a "
+        "uniform within the ranges, plausible by the histograms), each joint's 32 best postures "
+        "kept, and the best of all, polished, starts the annealing; in that round a "
         "partition may not use the detections the partitions fitted before it explain. A "
         "limb then starts on its own markers instead of wherever the start posture puts it "
         "(docs/fitting.md, 'Many limbs'). 0: every run starts from the start posture (the "
