@@ -748,7 +748,8 @@ class Fitter:
             runs=1, iterations=counted[0], pairs=0, error=None, candidates=(found,)))
 
     def iter_fit(self, detections, frames=None, *, chunk_size: int | None = None,
-                 sequence_starts: Iterable[int] = (), previous: FrameResult | None = None,
+                 sequence_starts: Iterable[int] = (),
+                 previous: FrameResult | Sequence[FrameResult] | None = None,
                  cancel: Callable[[], bool] | None = None) -> Iterator[FrameResult]:
         """Fit frames of a video; yields one :class:`FrameResult` per frame, in order.
 
@@ -770,12 +771,15 @@ class Fitter:
             Frames where a new, independent sequence starts (concatenated recordings): the
             path through time (``candidates`` > 1) never links across them. Gaps in
             ``frames`` and jumps of the movement itself are found without help.
-        previous : FrameResult, optional
-            The result chosen just before the first of ``frames`` (a resumed fit): the path
-            continues from it, so a fit resumed where it stopped chooses as the whole would
-            (with the final polish, ``final_polish_px``, it continues from the polished
-            posture, where the whole continued from the fitted one: a choice between
-            candidates that nearly tie can differ at the seam).
+        previous : FrameResult or sequence of FrameResult, optional
+            The results chosen just before the first of ``frames`` (a resumed fit; the last
+            :data:`CUT_CONTEXT` are used, the last one is where the path continues from). The
+            path decides frames in windows of 2 x :data:`PATH_LAG` frames that start every
+            PATH_LAG frames, so a fit resumed at a multiple of PATH_LAG, with the results
+            before it, chooses as the whole would (with the final polish,
+            ``final_polish_px``, it continues from the polished postures, where the whole
+            continued from the fitted ones: a choice between candidates that nearly tie can
+            differ at the seam).
         cancel : callable, optional
             Asked before each batch; once it returns True no further batch is fitted and
             the frames fitted so far are yielded (the path through time holds back up to 64
@@ -789,8 +793,14 @@ class Fitter:
         obs = self.observations(detections)
         idx = self._frame_indices(frames, obs.n_frames)
         starts = np.asarray(list(sequence_starts), np.int64)
-        return self._final_polish(obs, idx, self._iter(obs, idx, chunk_size, starts,
-                                                       previous, cancel))
+        out = self._final_polish(obs, idx, self._iter(obs, idx, chunk_size, starts, previous,
+                                                      cancel))
+        p = self.params
+        if p.candidates > 1 and p.start != "track":  # the frames to look at, after the polish
+            before = () if previous is None else (
+                [previous] if isinstance(previous, FrameResult) else list(previous))
+            out = flag_misplaced(out, p.claim_gate_px, before=before[-MISPLACED_HALF:])
+        return out
 
     def _iter(self, obs: Observations, idx: np.ndarray, chunk_size: int | None,
               starts: np.ndarray | None = None, previous: FrameResult | None = None,
@@ -1253,14 +1263,15 @@ class Fitter:
     def _over_time(self, obs: Observations, idx, roots, rots, chunks, starts, previous,
                    p: AnnealParams) -> Iterator[FrameResult]:
         """Choose one candidate per frame by the path through time (fixed-lag: a frame is
-        decided once ``LAG`` later frames are fitted), re-fit implausible frames from their
+        decided once :data:`PATH_LAG` later frames are fitted), re-fit implausible frames from their
         neighbours' postures, and flag ambiguous ones."""
-        lag = 32
+        lag = PATH_LAG
         scale = self._posture_scale()
         images = marker_images(obs, idx, len(self.body.marker_names))
         pending: list[FrameResult] = []
         # the last frames decided: the left anchor, and context for finding cuts
-        history = [] if previous is None else [previous]
+        history = ([] if previous is None else [previous] if isinstance(previous, FrameResult)
+                   else list(previous)[-CUT_CONTEXT:])
         done = 0  # frames of idx already yielded
         for chunk in chunks:
             pending.extend(chunk)
@@ -1334,11 +1345,13 @@ class Fitter:
         # six legs at 330 Hz change by ~10 squared spreads per frame, every frame).
         n_parts = self._partitions(p, search=False).bounds.shape[0]
 
-        def jumping(cap: float = REDO_JUMP * n_parts, stretches: bool = False) -> set[int]:
+        def jumping(cap: float = REDO_JUMP * n_parts, seen_ratio: float = 0.0,
+                    stretches: bool = False) -> set[int]:
             """Frames next to a jump of the chosen path: larger than REDO_JUMP_RATIO times the
-            window's typical change (at least REDO_JUMP_MIN, at most ``cap``); with
-            ``stretches``, two jumps at most ``temporal.WRONG_STRETCH`` apart give the
-            frames between them instead."""
+            window's typical change (at least REDO_JUMP_MIN, at most ``cap``) where some
+            marker moves more than ``seen_ratio`` times the window's typical largest marker
+            move; with ``stretches``, two jumps at most ``temporal.WRONG_STRETCH`` apart give
+            the frames between them instead."""
             jumps = np.full(len(window), np.nan)
             if anchor is not None and choice[0] >= 0 and not breaks[0]:
                 jumps[0] = temporal.transition_costs(anchor[None], post[0, choice[0]][None],
@@ -1351,7 +1364,13 @@ class Fitter:
                 jumps[1:] = np.where(made, steps, np.nan)
             typical = np.nanmedian(jumps) if np.isfinite(jumps).any() else 0.0
             limit = min(cap, max(REDO_JUMP_MIN, REDO_JUMP_RATIO * typical))
-            at = [int(i) for i in np.flatnonzero(jumps > limit)]
+            big = jumps > limit
+            if seen_ratio > 0:  # ... that the markers show
+                steps = marker_steps()
+                seen = np.nanmedian(steps) if np.isfinite(steps).any() else 0.0
+                with np.errstate(invalid="ignore"):
+                    big &= ~(steps <= seen_ratio * seen)
+            at = [int(i) for i in np.flatnonzero(big)]
             if not stretches:
                 return {k for i in at for k in (i - 1, i) if k >= 0}
             # a short stretch between two jumps is what is suspect, not the frames around it
@@ -1361,6 +1380,25 @@ class Fitter:
                     out.update(range(a, b))
                     bounds |= {a, b}
             return out | {k for i in at if i not in bounds for k in (i - 1, i) if k >= 0}
+
+        def path_markers() -> np.ndarray:
+            """(n + 1, n_markers, 3) model markers along the chosen path, the frame before the
+            window first (NaN where the path has no posture)."""
+            first = previous if previous is not None and not breaks[0] else None
+            chosen = [first, *(r.candidates[c] if c >= 0 else None
+                               for r, c in zip(window, choice, strict=True))]
+            have = np.array([c is not None for c in chosen])
+            mk = np.full((len(chosen), len(self.body.marker_names), 3), np.nan)
+            if have.any():
+                mk[have] = self._markers([c for c in chosen if c is not None])
+            return mk
+
+        def marker_steps() -> np.ndarray:
+            """Per frame of the window, the largest move of a model marker from the frame
+            before along the chosen path (length units; NaN where the path has no step)."""
+            mk = path_markers()
+            moved = np.linalg.norm(mk[1:] - mk[:-1], axis=-1).max(axis=-1)
+            return np.where(breaks, np.nan, moved)
 
         tried: set[tuple[int, int]] = set()
 
@@ -1444,7 +1482,10 @@ class Fitter:
                 pool.shutdown()
         # a jump the re-fits could not remove: the frames on both sides need a look (relative
         # to the window's own movement only: a fast or coarsely sampled one jumps throughout)
-        still_jumping = jumping(cap=np.inf, stretches=True)
+        # if the markers show it: a change of axes the markers barely see (a fly's coxa roll,
+        # which its other axes nearly undo) is nothing a person could correct (fly 0:660: 142
+        # frames ambiguous, 7 of them off, before)
+        still_jumping = jumping(cap=np.inf, seen_ratio=JUMP_SEEN_RATIO, stretches=True)
         # ... and a frame off the line through its neighbours (a jump too small to see
         # against the movement, e.g. a marker a ghost took for a frame or two)
         chosen = np.array([post[i, c] if c >= 0 else np.full(len(scale), np.nan)
@@ -1454,6 +1495,15 @@ class Fitter:
                                     np.r_[False, breaks])[1:]
         else:
             kinked = temporal.kinks(chosen, scale, n_angles, breaks)
+        if kinked.any():  # ... that the markers show, as for the jumps
+            mk = path_markers()
+            off_line = np.full(len(window), np.nan)
+            off_line[:-1] = np.linalg.norm(mk[1:-1] - (mk[:-2] + mk[2:]) / 2.0,
+                                           axis=-1).max(axis=-1)
+            off_line[breaks | np.r_[breaks[1:], False]] = np.nan
+            typical_off = np.nanmedian(off_line) if np.isfinite(off_line).any() else 0.0
+            with np.errstate(invalid="ignore"):
+                kinked &= ~(off_line <= JUMP_SEEN_RATIO * typical_off)
         still_jumping |= set(np.flatnonzero(kinked).tolist())
         # "about as well": within ambiguous_px per marker image, and within half the typical
         # E per image of the window (on a clean video a posture 60x worse than the chosen
@@ -1739,10 +1789,14 @@ class Fitter:
     def _marker_moves(self, chosen: Candidate, cands: Sequence[Candidate]) -> np.ndarray:
         """Per candidate, the largest distance of a model marker from where the chosen
         posture puts it (length units)."""
-        angles = np.array([chosen.angles_deg, *(c.angles_deg for c in cands)])
-        roots = np.array([chosen.root_positions, *(c.root_positions for c in cands)])
-        mk = forward_kinematics(self.body, angles, roots).markers
+        mk = self._markers([chosen, *cands])
         return np.linalg.norm(mk[1:] - mk[0], axis=-1).max(axis=-1)
+
+    def _markers(self, cands: Sequence[Candidate]) -> np.ndarray:
+        """(n, n_markers, 3) model markers of candidate postures (or results)."""
+        angles = np.array([c.angles_deg for c in cands])
+        roots = np.array([c.root_positions for c in cands])
+        return forward_kinematics(self.body, angles, roots).markers
 
     @property
     def _segment_scale(self) -> float:
@@ -1817,6 +1871,60 @@ def _reanalysed(r: FrameResult) -> FrameResult:
     return replace(r, status="reanalysed" if r.status == "ok" else r.status)
 
 
+def misplaced(results: Sequence[FrameResult], gate: float) -> np.ndarray:
+    """Per result: a marker lies off every detection of its view (``worst_px`` above the
+    results' median + :data:`MISPLACED_K` robust SDs, and above ``gate``) while the frame
+    leaves more detections unexplained than these frames do (above their median +
+    :data:`MISPLACED_UNEXPLAINED_K` robust SDs): a limb on another limb's points, its own
+    left over. A marker off its point alone is an occluded one, a frame's unexplained
+    detections alone its ghosts."""
+    worst = np.array([r.worst_px if r.runs else np.nan for r in results], float)
+    left = np.array([r.unexplained for r in results], float)
+    fitted = np.isfinite(worst)
+    out = np.zeros(len(results), bool)
+    if fitted.sum() < 3:  # no statistics of a video
+        return out
+    limit = max(gate, auto_threshold(worst[fitted], MISPLACED_K, 0.0))
+    # a count: where over half the frames share one value its MAD is 0, so the spread is at
+    # least half the 10-90 % range (a ghost that flickers in half the frames: 1)
+    counts = left[fitted]
+    med = float(np.median(counts))
+    lo, hi = np.percentile(counts, [10.0, 90.0])
+    spread = max(1.4826 * float(np.median(np.abs(counts - med))), float(hi - lo) / 2.0)
+    usual = med + MISPLACED_UNEXPLAINED_K * spread
+    with np.errstate(invalid="ignore"):
+        return (worst > limit) & (left > usual)
+
+
+def flag_misplaced(results: Iterable[FrameResult], gate: float,
+                   before: Sequence[FrameResult] = ()) -> Iterator[FrameResult]:
+    """``results`` (frames in order), each ``ok`` or ``reanalysed`` one that :func:`misplaced`
+    finds among the :data:`MISPLACED_HALF` results on either side and itself made
+    ``ambiguous``; a result is yielded once MISPLACED_HALF later ones are known. ``before``:
+    results just before the first (a resumed fit's), counted but not yielded."""
+    window = list(before)[-MISPLACED_HALF:]
+    done = len(window)  # how many of ``window`` are yielded (or were before)
+
+    def flagged(k: int) -> FrameResult:
+        r = window[k]
+        lo = max(0, k - MISPLACED_HALF)
+        if r.status in ("ok", "reanalysed") and misplaced(
+                window[lo: k + MISPLACED_HALF + 1], gate)[k - lo]:
+            return replace(r, status="ambiguous")
+        return r
+
+    for r in results:
+        window.append(r)
+        while len(window) - done > MISPLACED_HALF:
+            yield flagged(done)
+            done += 1
+            if done > MISPLACED_HALF:
+                window.pop(0)
+                done -= 1
+    for k in range(done, len(window)):
+        yield flagged(k)
+
+
 def flag_e_spikes(results: Iterable[FrameResult], ratio: float | None = None,
                   half: int | None = None) -> Iterator[FrameResult]:
     """``results`` (frames in order), each ``ok`` or ``reanalysed`` one whose E is above
@@ -1871,6 +1979,14 @@ def concurrent_fits() -> bool:
 REDO_JUMP = 1.0
 #: ... or larger than this many times the window's median change (at least REDO_JUMP_MIN).
 REDO_JUMP_RATIO, REDO_JUMP_MIN = 16.0, 0.02
+#: A jump the re-fits leave (or a kink) makes frames ``ambiguous`` only where some model
+#: marker moves more than this many times the window's median largest marker move per frame
+#: (off its neighbours' midpoint: that distance's median); a distance, where the ratios
+#: above are of squared changes. Fly 0:660 at 2 / 4 / 8 / 16: 21 / 14 / 12 / 12 frames
+#: flagged, 8 of them off each time; locust clutter (bench_status, 8 seeds): 18 / 17 / 16 /
+#: 14 flagged, 3 of 5 off frames each. Not for the re-fits: a rat's femur roll 29° off with
+#: every marker where it was (0.7-0.9 of the median move) is found by them.
+JUMP_SEEN_RATIO = 8.0
 #: A re-fit from a neighbour becomes a candidate only within this E per marker image (px)
 #: of the frame's best ...
 REFIT_KEEP_PX = 1.0
@@ -1906,8 +2022,20 @@ TRACK_SPIKE_HALF = 8
 #: (px per marker image, :meth:`Fitter._part_scores`) to their detections (fly 0:660: 94.2 %
 #: at 0.25, 95.2 % at 0.5 and 1.0).
 TRACK_MERGE_PX = 0.5
+#: A frame whose worst marker residual lies this many robust SDs above its window's median
+#: (:func:`misplaced`) ... (fly 0:660, k = 3 / 4 / 5 / 6 / 8: 22 / 11 / 8 / 5 / 3 frames, of
+#: them 9 / 8 / 8 / 5 / 3 of the 10 off by > 0.2 mm)
+MISPLACED_K = 5.0
+#: ... and leaves more detections unexplained than its window's median + this many robust SDs
+#: (locust clutter: 3-7 ghosts unexplained a frame, median 5, robust SD 1.5) is ``ambiguous``.
+MISPLACED_UNEXPLAINED_K = 2.0
+#: ... both among the results this many frames on either side of it and itself.
+MISPLACED_HALF = 32
 #: Decided frames kept before a window: the cut rule (:func:`temporal.cuts`) looks 2 back.
 CUT_CONTEXT = 2
+#: The path through time decides a window of 2 x PATH_LAG frames and keeps its first
+#: PATH_LAG (fixed lag: a frame is decided once PATH_LAG later frames are fitted).
+PATH_LAG = 32
 #: A candidate whose smoothest path moves more than this (squared histogram spreads, the
 #: path's units) beyond the chosen candidate's smoothest is ruled out by the movement and
 #: makes no frame ambiguous.

@@ -10,10 +10,13 @@ parameters) once; :func:`fit_project` drives the fitter's generator with progres
 resumable, atomic writing.
 
 Resuming: while fitting, finished frames are checkpointed every few seconds to
-``<results>.partial`` (with its own sidecar). A run that is killed and started again with the
-same inputs and parameters keeps those frames and fits only the rest; the final file is the
-same as an uninterrupted run's because frames are fitted independently from their own random
-streams (with ``start = "previous"`` the checkpoint is not used).
+``<results>.partial`` (with its own sidecar and the threshold that judged them). A run that is
+killed and started again with the same inputs and parameters keeps those frames and fits only
+the rest; the final file is the same as an uninterrupted run's because frames are fitted
+independently from their own random streams, the rest is judged by the kept threshold, and
+with the path through time only the leading whole windows (multiples of
+``anneal.PATH_LAG``, 32 frames) are kept, so the rest is decided in the windows the whole run
+decided it in (with ``start = "previous"`` the checkpoint is not used).
 
 Fitting while detecting: when every record is fitted on its own (:func:`not_streamable`: one
 candidate per frame, an absolute re-analysis threshold, start from the means, fixed roots),
@@ -58,6 +61,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from kinematics import anneal
 from kinematics.anneal import AnnealParams, Fitter, FrameResult
 from kinematics.model import Body
 from videotrack.config import anneal_from_table
@@ -108,10 +112,10 @@ class ProjectModel:
     def view_names(self) -> list[str]:
         return list(self.cameras)
 
-    def fitter(self, body: Body | None = None) -> Fitter:
+    def fitter(self, body: Body | None = None, params: AnnealParams | None = None) -> Fitter:
         """The fitter of this project (optionally of an edited ``body`` with the same
-        markers)."""
-        return Fitter(body or self.body, self.cameras, self.params,
+        markers, or with other ``params``)."""
+        return Fitter(body or self.body, self.cameras, params or self.params,
                       view_markers=self.view_markers)
 
     def signature(self, base: str | os.PathLike | None = None) -> dict:
@@ -354,14 +358,18 @@ def fit_project(
     fitting every record while they were detected; its results are taken (when there is no
     checkpoint to resume from) instead of fitting them again.
     """
-    fitter = model.fitter()
     results_path = Path(results_path)
     idx = np.arange(detections.n_records) if frames is None else np.asarray(list(frames))
     sidecar = results_sidecar(model, _source(detections, detections_path), results_path)
     partial = _partial_path(results_path)
-    done = _resume(partial, sidecar) if model.params.start == "mean" else {}
-    wanted = set(idx.tolist())
-    done = {k: r for k, r in done.items() if k in wanted}
+    done, threshold = _resume(partial, sidecar) if model.params.start == "mean" else ({}, None)
+    done = _resumable(done, idx, model.params)
+    params = model.params
+    if done and params.threshold_mode == "auto" and threshold is not None:
+        # the threshold the checkpoint's frames were judged by, not one measured again on
+        # the frames left (another sample: another threshold)
+        params = replace(params, threshold_mode="absolute", reanalysis_threshold=threshold)
+    fitter = model.fitter(params=params)
     if done and resumed is not None:
         resumed(len(done), len(idx))
     for r in done.values():
@@ -370,9 +378,9 @@ def fit_project(
     todo = np.array([f for f in idx if int(f) not in done], dtype=np.int64)
     results: dict[int, FrameResult] = dict(done)
     last = time.monotonic()
-    # the path through time continues from the last frame kept from the checkpoint
+    # the path through time continues from the last frames kept from the checkpoint
     before = [int(f) for f in idx[: len(idx) - len(todo)]]
-    previous = results.get(before[-1]) if before and len(todo) and all(
+    previous = [results[f] for f in before] if before and len(todo) and all(
         int(f) in done for f in before) else None
     observed = detections.observations if isinstance(detections, KeypointInput) else detections
     if stream is not None and not done and frames is None:
@@ -583,21 +591,39 @@ def _checkpoint(partial: Path, model: ProjectModel, results: dict, detections, s
     # candidates first: a checkpoint's results never go without them
     write_candidates(partial, model.body, ordered)
     write_results(partial, results_from_fit(model.body, ordered, model.view_names, detections),
-                  sidecar)
+                  {**sidecar, **threshold_entry(ordered)})
 
 
-def _resume(partial: Path, sidecar: dict) -> dict[int, FrameResult]:
-    """Frames of a checkpoint made with the same inputs and parameters ({} otherwise)."""
+def _resume(partial: Path, sidecar: dict) -> tuple[dict[int, FrameResult], float | None]:
+    """Frames of a checkpoint made with the same inputs and parameters ({} otherwise), and
+    the re-analysis threshold that judged them (None if it has none)."""
     if not partial.exists():
-        return {}
+        return {}, None
     try:
         meta = read_sidecar(partial)
         if changed_inputs(meta, sidecar):
-            return {}
+            return {}, None
         table = read_results(partial)
-        return attach_candidates(frame_results(table, int(meta["seed"])), partial)
+        threshold = meta.get("threshold")
+        return (attach_candidates(frame_results(table, int(meta["seed"])), partial),
+                float(threshold) if isinstance(threshold, int | float) else None)
     except VideoTrackError:
-        return {}
+        return {}, None
+
+
+def _resumable(done: dict[int, FrameResult], idx: np.ndarray,
+               params: AnnealParams) -> dict[int, FrameResult]:
+    """The checkpoint's frames a resumed fit keeps: those of ``idx``; with the path through
+    time (``candidates`` > 1), only the leading whole windows' (multiples of
+    ``anneal.PATH_LAG`` frames of ``idx``, all kept), so the rest is decided in the windows
+    the whole fit decided it in."""
+    wanted = set(idx.tolist())
+    done = {k: r for k, r in done.items() if k in wanted}
+    if params.candidates <= 1 or not done:
+        return done
+    lead = next((i for i, f in enumerate(idx) if int(f) not in done), len(idx))
+    keep = lead - lead % anneal.PATH_LAG
+    return {int(f): done[int(f)] for f in idx[:keep]}
 
 
 # -- the workflow -----------------------------------------------------------------------------

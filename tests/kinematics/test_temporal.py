@@ -5,13 +5,14 @@ from __future__ import annotations
 
 import itertools
 import threading
+from dataclasses import replace
 
 import numba
 import numpy as np
 import pytest
 
 from kinematics._temporal_kernels import path_dp
-from kinematics.anneal import AnnealParams, Candidate, Fitter
+from kinematics.anneal import JUMP_SEEN_RATIO, AnnealParams, Candidate, Fitter
 from kinematics.cameras import OrthographicCamera
 from kinematics.fk import forward_kinematics
 from kinematics.model import Body, Chain, Marker, Root, Segment
@@ -426,6 +427,63 @@ def test_limbs_moving_at_once_are_no_jump(monkeypatch):
     assert err < 2.0
 
 
+def redundant_arm() -> tuple[Body, dict]:
+    """An arm turned by two coaxial hinges, seen from above: only the sum of their angles
+    moves a marker (as a fly's coxa roll is nearly undone by its other axes)."""
+    arm = Segment("arm", 50.0, markers=(Marker("M0", (-25.0, 0.0, 0.0)), Marker("M1")))
+    hub = Segment("hub", 0.0, joints=(hinge("J2", "b", -60, 60, arm),))
+    body = Body("arm", (Chain("arm", hinge("J1", "a", -60, 60, hub), Root("fixed")),),
+                units="px")
+    cam = OrthographicCamera.from_axes("top", 2.0, ("x", "y"), (150.0, 100.0),
+                                       size=(300, 200))
+    return body, {"top": cam}
+
+
+@pytest.mark.parametrize("seen_ratio", [0.0, JUMP_SEEN_RATIO])
+def test_a_jump_the_markers_do_not_show_is_not_flagged(monkeypatch, seen_ratio):
+    """In frames 10-13 the arm's turn is split 30° differently between its two hinges and
+    no re-fit finds a posture that continues the angles: the chosen path jumps into that
+    stretch and out, but no marker moves more than the movement does, so no frame is flagged
+    (on the fly such jumps of the coxa roll made 142 of 660 frames ambiguous, 7 of them off).
+    Counting every jump and kink (``seen_ratio`` 0, as before) flags the stretch and the
+    frames around it."""
+    from kinematics import anneal
+
+    monkeypatch.setattr(anneal, "JUMP_SEEN_RATIO", seen_ratio)
+    body, cams = redundant_arm()
+    turn = np.linspace(0.0, 23.0, 24)  # 1° per frame
+    rng = np.random.default_rng(0)
+    frames = [[cams["top"].project(forward_kinematics(
+        body, np.array([0, 0, t / 2, 0, 0, t / 2])).markers) + rng.normal(0, 0.05, (2, 2))]
+        for t in turn]
+    split = np.zeros(6)
+    split[[2, 5]] = 30.0, -30.0
+    fit_block = Fitter._fit_block
+
+    def planted(self, obs, sel, *args, **kwargs):
+        """The fit's results, every candidate's turn split at a/2 - 15, b/2 + 15 (an own
+        split of each run would make the path jump every frame); in frames 10-13 at
+        a/2 + 15, b/2 - 45."""
+        out = []
+        for r in fit_block(self, obs, sel, *args, **kwargs):
+            def plant(a, r=r):
+                total = a[2] + a[5]
+                new = np.array(a, float)
+                new[2], new[5] = total / 2 - 15.0, total / 2 + 15.0
+                return new + (split if 10 <= r.frame < 14 else 0.0)
+            cands = tuple(c._replace(angles_deg=plant(c.angles_deg)) for c in r.candidates)
+            out.append(replace(r, angles_deg=plant(r.angles_deg), candidates=cands))
+        return out
+    monkeypatch.setattr(Fitter, "_fit_block", planted)
+    monkeypatch.setattr(Fitter, "_refit_from", lambda *a, **k: None)
+    res = Fitter(body, cams, AnnealParams(candidates=2, **FAST)).fit(frames)
+    a = np.array([r.angles_deg for r in res])
+    np.testing.assert_allclose(a[:, 2] + a[:, 5], turn, atol=0.5)
+    assert (np.abs(np.diff(a[:, 2]))[[9, 13]] > 25.0).all()  # the premise: jumps
+    flagged = [r.frame for r in res if r.status != "ok"]
+    assert flagged == ([] if seen_ratio else list(range(9, 15)))
+
+
 def test_re_fits_keep_a_bounded_number_of_candidates(monkeypatch):
     """Postures 5° apart on any axis are distinct, so on a body of many axes almost every
     re-fit is a new candidate, and each seeds the next frame's re-fits: a fly's 20-frame
@@ -721,3 +779,71 @@ def test_path_kernel_equals_its_numpy_twin(seed):
     _path_numpy(unary, trans, bounds, start0, use, *want)
     np.testing.assert_array_equal(got[0], want[0])
     np.testing.assert_array_equal(got[1], want[1])
+
+
+def scored(worst: list[float], left: list[int]) -> list:
+    """Fitted frames' results with these worst marker residuals and unexplained counts."""
+    from kinematics.anneal import FrameResult
+
+    return [FrameResult(frame=k, angles_deg=np.zeros(3), error=1.0,
+                        error_per_view=np.zeros(1), runs=2, iterations=1, seed=0, status="ok",
+                        root_positions=np.zeros((1, 3)), worst_px=w, unexplained=u)
+            for k, (w, u) in enumerate(zip(worst, left, strict=True))]
+
+
+def test_a_marker_off_its_point_with_a_detection_left_over_is_misplaced():
+    """A marker far off every detection flags a frame only when the frame also leaves more
+    detections unexplained than its neighbours do: a limb on another limb's points leaves
+    its own over; an occluded marker leaves nothing, ghosts are unexplained in every
+    frame."""
+    from kinematics.anneal import misplaced
+
+    rng = np.random.default_rng(1)
+    worst = list(8.0 + rng.normal(0, 1.0, 40))  # a fly: residuals of ~8 px, no ghosts
+    left = [0] * 40
+    worst[5], left[5] = 30.0, 2  # a leg on another's points, its own left over
+    worst[9], left[9] = 30.0, 0  # an occluded marker
+    worst[13], left[13] = 9.0, 3  # detections left over, every marker on one
+    left[20] = 1
+    assert np.flatnonzero(misplaced(scored(worst, left), gate=10.0)).tolist() == [5]
+    # with ghosts: 4-6 unexplained in every frame (one flickers), an occluded marker in
+    # frames with 6, a frame that leaves a real detection over on top of them
+    ghosts = [4 + int(k % 2) + int(k % 3 == 0) for k in range(40)]
+    worst = [0.5] * 40
+    for k in (6, 12, 18):
+        worst[k] = 40.0
+    worst[25], ghosts[25] = 40.0, 9
+    assert np.flatnonzero(misplaced(scored(worst, ghosts), gate=10.0)).tolist() == [25]
+    # within the gate a marker is on a point, however the others fit
+    assert not misplaced(scored([0.1] * 39 + [9.0], [0] * 39 + [3]), gate=10.0).any()
+
+
+def test_misplaced_frames_are_flagged_as_they_stream_and_when_resumed():
+    """``flag_misplaced`` yields every result in order, judged among the results on either
+    side; resumed with the results before it, it judges the rest as the whole stream did."""
+    from kinematics.anneal import MISPLACED_HALF, flag_misplaced
+
+    rng = np.random.default_rng(2)
+    n = 3 * MISPLACED_HALF
+    worst = 8.0 + rng.normal(0, 1.0, n)
+    left = (rng.uniform(size=n) < 0.1).astype(int)
+    for k in (3, 40, n - 2):
+        worst[k], left[k] = 30.0, 2
+    res = scored(list(worst), list(left))
+    res[40] = replace(res[40], status="failed")  # a failed frame stays failed
+    out = list(flag_misplaced(res, gate=10.0))
+    assert [r.frame for r in out] == list(range(n))
+    assert [r.frame for r in out if r.status == "ambiguous"] == [3, n - 2]
+    assert out[40].status == "failed"
+    # from frame 50 on every marker fits worse (20 px): frame 50's 30 px stands out from the
+    # frames after it alone, not from those on both sides
+    cut = 50
+    worst[cut:] += 12.0
+    worst[cut] = 30.0
+    left[cut] = 2
+    res = scored(list(worst), list(left))
+    out = list(flag_misplaced(res, gate=10.0))
+    assert out[cut].status == "ok"
+    rest = list(flag_misplaced(res[cut:], gate=10.0, before=out[:cut]))
+    assert [r.status for r in rest] == [r.status for r in out[cut:]]
+    assert next(flag_misplaced(res[cut:], gate=10.0)).status == "ambiguous"

@@ -5,6 +5,7 @@ a file that changed."""
 
 import csv
 import os
+import re
 import shutil
 import time
 from pathlib import Path
@@ -20,6 +21,9 @@ from videotrack.project import open_project
 from videotrack.video import VideoSource
 
 ANNEAL = {"n_end": 2000, "n_l": 200, "n_tau": 86}
+# a trial's state, with or without warnings (the short schedule misfits a frame or two,
+# which the status flags): these tests are about what is up to date
+DONE, UP_TO_DATE = "done(-with-warnings)?", "(up to date|up-to-date-with-warnings)"
 TRIALS = ["s1/t1", "s1/t2"]
 
 
@@ -91,7 +95,7 @@ def test_a_different_video_of_the_same_size_is_not_up_to_date(project, capsys):
     assert "detect + fit" in line and "another video of the same size" in line
     assert plan_trial(open_project(project).trials[1]) == ("up to date", "")
     code, out, _ = batch(capsys, project)
-    assert code == 0 and "1 done, 1 up to date" in out
+    assert code == 0 and re.search(f"1 {DONE}, 1 {UP_TO_DATE}", out), out
     assert results.read_bytes() != before
     # and back: the content, not the dates, decides
     video.write_bytes((project.parent / "raw" / "A.avi").read_bytes())
@@ -114,7 +118,7 @@ def test_a_copied_or_moved_project_stays_up_to_date(project, tmp_path, capsys, h
     code, out, _ = batch(capsys, other, "--dry-run")
     assert code == 0 and "2 trials: 0 to process, 2 up to date" in out, out
     code, out, _ = batch(capsys, other)
-    assert code == 0 and "2 up to date" in out and "no log (nothing to do)" in out
+    assert code == 0 and re.search(f"2 {UP_TO_DATE}", out) and "no log (nothing to do)" in out
     assert {p.relative_to(other): p.read_bytes()
             for p in other.rglob("*.results.csv*")} == before
     sidecar = (other / "s1" / "t1" / "video.results.csv.json").read_text()
