@@ -1902,27 +1902,14 @@ def flag_misplaced(results: Iterable[FrameResult], gate: float,
     finds among the :data:`MISPLACED_HALF` results on either side and itself made
     ``ambiguous``; a result is yielded once MISPLACED_HALF later ones are known. ``before``:
     results just before the first (a resumed fit's), counted but not yielded."""
-    window = list(before)[-MISPLACED_HALF:]
-    done = len(window)  # how many of ``window`` are yielded (or were before)
-
-    def flagged(k: int) -> FrameResult:
+    def judge(window: list[FrameResult], k: int) -> FrameResult:
         r = window[k]
         lo = max(0, k - MISPLACED_HALF)
         if r.status in ("ok", "reanalysed") and misplaced(
                 window[lo: k + MISPLACED_HALF + 1], gate)[k - lo]:
             return replace(r, status="ambiguous")
         return r
-
-    for r in results:
-        window.append(r)
-        while len(window) - done > MISPLACED_HALF:
-            yield flagged(done)
-            done += 1
-            if done > MISPLACED_HALF:
-                window.pop(0)
-                done -= 1
-    for k in range(done, len(window)):
-        yield flagged(k)
+    return _judged(results, MISPLACED_HALF, judge, before)
 
 
 def flag_e_spikes(results: Iterable[FrameResult], ratio: float | None = None,
@@ -1937,10 +1924,8 @@ def flag_e_spikes(results: Iterable[FrameResult], ratio: float | None = None,
     flagged of 660, 11 of them off by > 0.2 mm; 9 of the 10 frames off by > 0.3 mm)."""
     ratio = TRACK_SPIKE if ratio is None else ratio
     half = TRACK_SPIKE_HALF if half is None else half
-    window: list[FrameResult] = []  # up to ``half`` yielded results, then those waiting
-    done = 0  # how many of ``window`` are yielded
 
-    def flagged(k: int) -> FrameResult:
+    def judge(window: list[FrameResult], k: int) -> FrameResult:
         r = window[k]
         lo = max(0, k - half)  # the same run of consecutive frames only
         around = [w.error for j, w in enumerate(window[lo: k + half + 1], lo)
@@ -1951,17 +1936,28 @@ def flag_e_spikes(results: Iterable[FrameResult], ratio: float | None = None,
                 and r.error > ratio * float(np.median(around)) + TRACK_JUMP_PX * images):
             return replace(r, status="ambiguous")
         return r
+    return _judged(results, half, judge)
 
+
+def _judged(results: Iterable[FrameResult], half: int,
+            judge: Callable[[list[FrameResult], int], FrameResult],
+            before: Sequence[FrameResult] = ()) -> Iterator[FrameResult]:
+    """``judge(window, k)`` of each of ``results``, in order, where ``window[k]`` is that
+    result and ``window`` holds up to ``half`` results on either side of it; each is yielded
+    once ``half`` later ones are known. ``before``: results just before the first, in the
+    window but not judged."""
+    window = list(before)[len(before) - half:] if half and len(before) else []
+    done = len(window)  # how many of ``window`` are yielded (or came before)
     for r in results:
         window.append(r)
         while len(window) - done > half:
-            yield flagged(done)
+            yield judge(window, done)
             done += 1
             if done > half:
                 window.pop(0)
                 done -= 1
     for k in range(done, len(window)):
-        yield flagged(k)
+        yield judge(window, k)
 
 
 def concurrent_fits() -> bool:
