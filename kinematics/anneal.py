@@ -783,7 +783,8 @@ class Fitter:
         cancel : callable, optional
             Asked before each batch; once it returns True no further batch is fitted and
             the frames fitted so far are yielded (the path through time holds back up to 64
-            of them, so closing the generator alone can wait that long).
+            of them and the misplaced-marker flag 32 more, so closing the generator alone
+            can wait that long).
 
         Raises
         ------
@@ -1490,20 +1491,22 @@ class Fitter:
         # against the movement, e.g. a marker a ghost took for a frame or two)
         chosen = np.array([post[i, c] if c >= 0 else np.full(len(scale), np.nan)
                            for i, c in enumerate(choice)])
+        # ... that the markers show, as for the jumps: off its neighbours' midpoint by more
+        # than JUMP_SEEN_RATIO x the window's median such distance
+        mk = path_markers()
+        off_line = np.full(len(mk), np.nan)  # the frame before the window first
+        off_line[1:-1] = np.linalg.norm(mk[1:-1] - (mk[:-2] + mk[2:]) / 2.0,
+                                        axis=-1).max(axis=-1)
+        cut = np.r_[breaks, False]  # not across a cut in the movement
+        off_line[1:][cut[:-1] | cut[1:]] = np.nan
+        typical_off = np.nanmedian(off_line) if np.isfinite(off_line).any() else 0.0
+        with np.errstate(invalid="ignore"):
+            seen = ~(off_line <= JUMP_SEEN_RATIO * typical_off)
         if anchor is not None and not breaks[0]:
             kinked = temporal.kinks(np.r_[anchor[None], chosen], scale, n_angles,
-                                    np.r_[False, breaks])[1:]
+                                    np.r_[False, breaks], seen)[1:]
         else:
-            kinked = temporal.kinks(chosen, scale, n_angles, breaks)
-        if kinked.any():  # ... that the markers show, as for the jumps
-            mk = path_markers()
-            off_line = np.full(len(window), np.nan)
-            off_line[:-1] = np.linalg.norm(mk[1:-1] - (mk[:-2] + mk[2:]) / 2.0,
-                                           axis=-1).max(axis=-1)
-            off_line[breaks | np.r_[breaks[1:], False]] = np.nan
-            typical_off = np.nanmedian(off_line) if np.isfinite(off_line).any() else 0.0
-            with np.errstate(invalid="ignore"):
-                kinked &= ~(off_line <= JUMP_SEEN_RATIO * typical_off)
+            kinked = temporal.kinks(chosen, scale, n_angles, breaks, seen[1:])
         still_jumping |= set(np.flatnonzero(kinked).tolist())
         # "about as well": within ambiguous_px per marker image, and within half the typical
         # E per image of the window (on a clean video a posture 60x worse than the chosen
@@ -1900,13 +1903,16 @@ def flag_misplaced(results: Iterable[FrameResult], gate: float,
                    before: Sequence[FrameResult] = ()) -> Iterator[FrameResult]:
     """``results`` (frames in order), each ``ok`` or ``reanalysed`` one that :func:`misplaced`
     finds among the :data:`MISPLACED_HALF` results on either side and itself made
-    ``ambiguous``; a result is yielded once MISPLACED_HALF later ones are known. ``before``:
-    results just before the first (a resumed fit's), counted but not yielded."""
+    ``ambiguous`` (neighbours in the same run of consecutive frames only); a result is
+    yielded once MISPLACED_HALF later ones are known. ``before``: results just before the
+    first (a resumed fit's), counted but not yielded."""
     def judge(window: list[FrameResult], k: int) -> FrameResult:
         r = window[k]
-        lo = max(0, k - MISPLACED_HALF)
-        if r.status in ("ok", "reanalysed") and misplaced(
-                window[lo: k + MISPLACED_HALF + 1], gate)[k - lo]:
+        lo = max(0, k - MISPLACED_HALF)  # the same run of consecutive frames only
+        around = [w for j, w in enumerate(window[lo: k + MISPLACED_HALF + 1], lo)
+                  if w.frame - r.frame == j - k]
+        if r.status in ("ok", "reanalysed") and misplaced(around, gate)[
+                next(j for j, w in enumerate(around) if w is r)]:
             return replace(r, status="ambiguous")
         return r
     return _judged(results, MISPLACED_HALF, judge, before)
@@ -1946,7 +1952,7 @@ def _judged(results: Iterable[FrameResult], half: int,
     result and ``window`` holds up to ``half`` results on either side of it; each is yielded
     once ``half`` later ones are known. ``before``: results just before the first, in the
     window but not judged."""
-    window = list(before)[len(before) - half:] if half and len(before) else []
+    window = list(before)[-half:] if half else []
     done = len(window)  # how many of ``window`` are yielded (or came before)
     for r in results:
         window.append(r)

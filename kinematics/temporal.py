@@ -143,14 +143,16 @@ def cuts(postures, scale, n_angles: int, before: int = 0) -> np.ndarray:
     return out[before:]
 
 
-def kinks(postures, scale, n_angles: int, breaks=None) -> np.ndarray:
+def kinks(postures, scale, n_angles: int, breaks=None, seen=None) -> np.ndarray:
     """Frames where a chosen path kinks: ``(n,)`` bool (constants :data:`KINK_RATIO`, ...).
 
     Smooth movement passes close to the midpoint of its neighbours; a wrong frame in a right
     stretch (a marker taken by a ghost for a frame or two) does not, however small the jump
     it makes, so this finds wrong frames that the first difference, which carries the
     movement itself, misses. ``postures`` (n, d) is one posture per frame (NaN rows: none);
-    ``breaks`` marks frames that start a new stretch (no kink is measured across one)."""
+    ``breaks`` marks frames that start a new stretch (no kink is measured across one);
+    ``seen`` (n,) bool, where given, the frames whose kink may count (before the frames
+    between two kinks are added)."""
     postures = np.asarray(postures, float)
     n = postures.shape[0]
     cut = np.zeros(n, bool) if breaks is None else np.asarray(breaks, bool)
@@ -165,6 +167,8 @@ def kinks(postures, scale, n_angles: int, breaks=None) -> np.ndarray:
     side = np.fmax(np.r_[np.nan, kink[:-1]], np.r_[kink[1:], np.nan])
     with np.errstate(invalid="ignore"):
         out = (kink > limit) & ~(kink < KINK_OWN * side)
+    if seen is not None:
+        out &= np.asarray(seen, bool)
     # a short wrong stretch kinks where it starts and ends, not inside: the frames between
     # two kinks at most KINK_GAP apart go with them
     at = np.flatnonzero(out)

@@ -90,9 +90,9 @@ class FitWorker(QThread):
     """Drives the fitter's generator over frames, handing results on in small batches.
 
     Cancelling stops the fitter before its next chunk (``iter_fit``'s ``cancel``: the path
-    through time would otherwise hold up to 64 frames back) and closes the generator; the
-    results that arrived before are kept. ``chunk_size`` frames are computed per parallel
-    batch, so a cancel takes effect within one batch.
+    through time and its flags would otherwise hold up to 96 frames back) and closes the
+    generator; the results that arrived before are kept. ``chunk_size`` frames are computed
+    per parallel batch, so a cancel takes effect within one batch.
     """
 
     resultsReady = Signal(object)  # list[FrameResult]

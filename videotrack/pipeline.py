@@ -364,6 +364,8 @@ def fit_project(
     partial = _partial_path(results_path)
     done, threshold = _resume(partial, sidecar) if model.params.start == "mean" else ({}, None)
     done = _resumable(done, idx, model.params)
+    if threshold is not None:  # the sidecar's threshold, as the whole run's, if all is kept
+        done = {k: replace(r, threshold=threshold) for k, r in done.items()}
     params = model.params
     if done and params.threshold_mode == "auto" and threshold is not None:
         # the threshold the checkpoint's frames were judged by, not one measured again on

@@ -835,6 +835,13 @@ def test_misplaced_frames_are_flagged_as_they_stream_and_when_resumed():
     assert [r.frame for r in out] == list(range(n))
     assert [r.frame for r in out if r.status == "ambiguous"] == [3, n - 2]
     assert out[40].status == "failed"
+    for cut in (1, 20, 33):  # resumed with fewer or more results before than its half
+        rest = list(flag_misplaced(res[cut:], gate=10.0, before=out[:cut]))
+        assert [r.status for r in rest] == [r.status for r in out[cut:]], cut
+    # after a gap in the frame numbers, a run of frames is judged among itself: 5 frames that
+    # all fit worse than the frames before the gap are ordinary among themselves
+    later = [replace(r, frame=r.frame + 100, worst_px=30.0, unexplained=2) for r in res[:5]]
+    assert all(r.status == "ok" for r in list(flag_misplaced(res[:40] + later, 10.0))[40:])
     # from frame 50 on every marker fits worse (20 px): frame 50's 30 px stands out from the
     # frames after it alone, not from those on both sides
     cut = 50
@@ -847,3 +854,19 @@ def test_misplaced_frames_are_flagged_as_they_stream_and_when_resumed():
     rest = list(flag_misplaced(res[cut:], gate=10.0, before=out[:cut]))
     assert [r.status for r in rest] == [r.status for r in out[cut:]]
     assert next(flag_misplaced(res[cut:], gate=10.0)).status == "ambiguous"
+
+
+def test_a_kink_the_markers_do_not_show_leaves_the_stretch_between_two_kinks_whole():
+    """``seen`` drops a frame's own kink before the frames between two kinks are added: the
+    middle of a short wrong stretch lies on the line through its (wrong) neighbours, so its
+    markers show no kink of its own, yet it goes with the stretch."""
+    postures = np.linspace(0.0, 20.0, 24)[:, None]
+    postures[10:13] += 30.0  # a wrong stretch of 3 frames
+    scale = np.ones(1)
+    every = kinks(postures, scale, 0)
+    assert np.flatnonzero(every).tolist() == [9, 10, 11, 12, 13]
+    seen = np.ones(24, bool)
+    seen[11] = False
+    assert np.flatnonzero(kinks(postures, scale, 0, seen=seen)).tolist() == [9, 10, 11, 12, 13]
+    seen[9] = False
+    assert np.flatnonzero(kinks(postures, scale, 0, seen=seen)).tolist() == [10, 11, 12, 13]
