@@ -800,7 +800,8 @@ class Fitter:
         if p.candidates > 1 and p.start != "track":  # the frames to look at, after the polish
             before = () if previous is None else (
                 [previous] if isinstance(previous, FrameResult) else list(previous))
-            out = flag_misplaced(out, p.claim_gate_px, before=before[-MISPLACED_HALF:])
+            out = flag_misplaced(out, p.claim_gate_px, before=before[-MISPLACED_HALF:],
+                                 starts=starts)
         return out
 
     def _iter(self, obs: Observations, idx: np.ndarray, chunk_size: int | None,
@@ -1900,17 +1901,22 @@ def misplaced(results: Sequence[FrameResult], gate: float) -> np.ndarray:
 
 
 def flag_misplaced(results: Iterable[FrameResult], gate: float,
-                   before: Sequence[FrameResult] = ()) -> Iterator[FrameResult]:
+                   before: Sequence[FrameResult] = (), starts=()) -> Iterator[FrameResult]:
     """``results`` (frames in order), each ``ok`` or ``reanalysed`` one that :func:`misplaced`
     finds among the :data:`MISPLACED_HALF` results on either side and itself made
-    ``ambiguous`` (neighbours in the same run of consecutive frames only); a result is
-    yielded once MISPLACED_HALF later ones are known. ``before``: results just before the
-    first (a resumed fit's), counted but not yielded."""
+    ``ambiguous`` (neighbours in the same run of consecutive frames only, not across a frame
+    of ``starts``, where a new sequence starts); a result is yielded once MISPLACED_HALF
+    later ones are known. ``before``: results just before the first (a resumed fit's),
+    counted but not yielded."""
+    starts = np.asarray(list(starts), np.int64)
+
     def judge(window: list[FrameResult], k: int) -> FrameResult:
         r = window[k]
         lo = max(0, k - MISPLACED_HALF)  # the same run of consecutive frames only
         around = [w for j, w in enumerate(window[lo: k + MISPLACED_HALF + 1], lo)
-                  if w.frame - r.frame == j - k]
+                  if w.frame - r.frame == j - k and not (
+                      (starts > min(w.frame, r.frame)) & (starts <= max(w.frame, r.frame))
+                  ).any()]
         if r.status in ("ok", "reanalysed") and misplaced(around, gate)[
                 next(j for j, w in enumerate(around) if w is r)]:
             return replace(r, status="ambiguous")

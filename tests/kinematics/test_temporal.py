@@ -842,6 +842,10 @@ def test_misplaced_frames_are_flagged_as_they_stream_and_when_resumed():
     # all fit worse than the frames before the gap are ordinary among themselves
     later = [replace(r, frame=r.frame + 100, worst_px=30.0, unexplained=2) for r in res[:5]]
     assert all(r.status == "ok" for r in list(flag_misplaced(res[:40] + later, 10.0))[40:])
+    # ... and so is a new sequence (concatenated recordings, frame numbers continuing)
+    joined = res[:40] + [replace(r, frame=40 + k) for k, r in enumerate(later[:2])]
+    assert all(r.status == "ambiguous" for r in list(flag_misplaced(joined, 10.0))[40:])
+    assert all(r.status == "ok" for r in list(flag_misplaced(joined, 10.0, starts=[40]))[40:])
     # from frame 50 on every marker fits worse (20 px): frame 50's 30 px stands out from the
     # frames after it alone, not from those on both sides
     cut = 50
