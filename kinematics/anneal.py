@@ -794,18 +794,17 @@ class Fitter:
         obs = self.observations(detections)
         idx = self._frame_indices(frames, obs.n_frames)
         starts = np.asarray(list(sequence_starts), np.int64)
-        out = self._final_polish(obs, idx, self._iter(obs, idx, chunk_size, starts, previous,
+        before = ([] if previous is None else [previous] if isinstance(previous, FrameResult)
+                  else list(previous))
+        out = self._final_polish(obs, idx, self._iter(obs, idx, chunk_size, starts, before,
                                                       cancel))
         p = self.params
         if p.candidates > 1 and p.start != "track":  # the frames to look at, after the polish
-            before = () if previous is None else (
-                [previous] if isinstance(previous, FrameResult) else list(previous))
-            out = flag_misplaced(out, p.claim_gate_px, before=before[-MISPLACED_HALF:],
-                                 starts=starts)
+            out = flag_misplaced(out, p.claim_gate_px, before=before, starts=starts)
         return out
 
     def _iter(self, obs: Observations, idx: np.ndarray, chunk_size: int | None,
-              starts: np.ndarray | None = None, previous: FrameResult | None = None,
+              starts: np.ndarray | None = None, before: Sequence[FrameResult] = (),
               cancel: Callable[[], bool] | None = None) -> Iterator[FrameResult]:
         starts = np.zeros(0, np.int64) if starts is None else starts
         roots, rots = self._place(obs, idx)
@@ -841,7 +840,7 @@ class Fitter:
                                       self.problem.start, seg_off, params)
 
         if params.candidates > 1:
-            yield from self._over_time(obs, idx, roots, rots, chunks(), starts, previous,
+            yield from self._over_time(obs, idx, roots, rots, chunks(), starts, before,
                                        params)
         else:
             for block in chunks():
@@ -1262,18 +1261,18 @@ class Fitter:
         return np.r_[spread[self._joint_axes()], turn,
                      np.full(3 * self.problem.n_chains, length / 4.0)]
 
-    def _over_time(self, obs: Observations, idx, roots, rots, chunks, starts, previous,
-                   p: AnnealParams) -> Iterator[FrameResult]:
+    def _over_time(self, obs: Observations, idx, roots, rots, chunks, starts,
+                   before: Sequence[FrameResult], p: AnnealParams) -> Iterator[FrameResult]:
         """Choose one candidate per frame by the path through time (fixed-lag: a frame is
-        decided once :data:`PATH_LAG` later frames are fitted), re-fit implausible frames from their
-        neighbours' postures, and flag ambiguous ones."""
+        decided once :data:`PATH_LAG` later frames are fitted), re-fit implausible frames from
+        their neighbours' postures, and flag ambiguous ones; ``before``: the results decided
+        just before ``idx`` (a resumed fit's)."""
         lag = PATH_LAG
         scale = self._posture_scale()
         images = marker_images(obs, idx, len(self.body.marker_names))
         pending: list[FrameResult] = []
         # the last frames decided: the left anchor, and context for finding cuts
-        history = ([] if previous is None else [previous] if isinstance(previous, FrameResult)
-                   else list(previous)[-CUT_CONTEXT:])
+        history = list(before)[-CUT_CONTEXT:]
         done = 0  # frames of idx already yielded
         for chunk in chunks:
             pending.extend(chunk)

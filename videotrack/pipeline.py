@@ -607,8 +607,10 @@ def _resume(partial: Path, sidecar: dict) -> tuple[dict[int, FrameResult], float
             return {}, None
         table = read_results(partial)
         threshold = meta.get("threshold")
+        usable = (isinstance(threshold, int | float) and not isinstance(threshold, bool)
+                  and 0 < threshold < float("inf"))  # else measured again
         return (attach_candidates(frame_results(table, int(meta["seed"])), partial),
-                float(threshold) if isinstance(threshold, int | float) else None)
+                float(threshold) if usable else None)
     except VideoTrackError:
         return {}, None
 

@@ -1,12 +1,14 @@
 """The markerless route through a project: `videotrack fit project.toml` with [keypoints]
 files fits the chain to DeepLabCut keypoints (2D) or to their triangulation (3D)."""
 
+import json
+
 import numpy as np
 import pytest
 
 from videotrack.cli import main
 from videotrack.config import load_config
-from videotrack.results import read_results, read_sidecar
+from videotrack.results import read_results, read_sidecar, sidecar_path
 from videotrack.synth_keypoints import write_session
 
 N_FRAMES = 16
@@ -136,6 +138,17 @@ def test_resume_after_interruption_gives_identical_file(tmp_path, monkeypatch):
     with pytest.raises(KeyboardInterrupt):
         pipeline.fit_project(model, data, None, cut, progress=killer)
     assert not cut.exists() and (tmp_path / "cut.csv.partial").exists()
+    # a checkpoint's threshold that is no finite positive number (an edited or old sidecar)
+    # is measured again; the checkpoint's frames are kept either way
+    partial = tmp_path / "cut.csv.partial"
+    side = sidecar_path(partial)
+    meta = read_sidecar(partial)
+    assert meta["threshold"] > 0
+    for bad in (True, "12", -1.0, float("inf"), None):
+        side.write_text(json.dumps({**meta, "threshold": bad}))
+        frames, threshold = pipeline._resume(partial, meta)
+        assert threshold is None and len(frames) == 5, bad
+    side.write_text(json.dumps(meta))
     kept = []
     pipeline.fit_project(model, data, None, cut, resumed=lambda n, of: kept.append(n))
     assert kept == [4]  # 6 frames checkpointed, one window's 4 kept
