@@ -25,11 +25,14 @@ from kinematics._anneal_kernels import (
     OBJ_CLOUD_VIEWS,
     OBJ_LABELLED,
     OBJ_POINTS3D,
+    _has_pinhole,
+    _project_cs,
     cloud_nearest,
     hidden_in,
     one_to_one,
     point_of,
     project_posture,
+    sincos,
     solve_spd,
 )
 
@@ -168,12 +171,21 @@ def fill_residuals(objective, proj, mk, points, conf, obs3, pair, res):
     """Residuals of the pairs of :func:`assign_pairs` into ``res`` (zero where unpaired;
     weighted by the square root of the confidence); returns their sum of squares."""
     res[:] = 0.0
+    return fill_rows(objective, proj, mk, points, conf, obs3, pair, res, 0, mk.shape[0])
+
+
+@njit(cache=True, nogil=True)
+def fill_rows(objective, proj, mk, points, conf, obs3, pair, res, m0, m1):
+    """The rows of :func:`fill_residuals` of markers ``m0:m1`` only (zero where unpaired; the
+    other rows untouched); returns their sum of squares."""
     s = 0.0
     nm = mk.shape[0]
     off = 0  # the rows and pairs before the views' (OBJ_CLOUD_VIEWS: the cloud's)
     if objective in (OBJ_POINTS3D, OBJ_CLOUD, OBJ_CLOUD_ONE, OBJ_CLOUD_VIEWS):
-        for i in range(nm):
+        for i in range(m0, m1):
             c = pair[i]
+            for k in range(3):
+                res[3 * i + k] = 0.0
             if c >= 0:  # a cloud point's weight is its px per unit, labelled ones' a variance
                 w = np.sqrt(obs3[c, 3]) if objective == OBJ_POINTS3D else obs3[c, 3]
                 for k in range(3):
@@ -183,16 +195,77 @@ def fill_residuals(objective, proj, mk, points, conf, obs3, pair, res):
         if objective != OBJ_CLOUD_VIEWS:
             return s
         off = nm
-    for k in range(proj.shape[0] * nm):
-        c = pair[off + k]
-        if c >= 0:
-            w = np.sqrt(conf[c]) if objective == OBJ_LABELLED else 1.0
-            rx = w * (proj[k // nm, k % nm, 0] - points[c, 0])
-            ry = w * (proj[k // nm, k % nm, 1] - points[c, 1])
+    for v in range(proj.shape[0]):
+        for m in range(m0, m1):
+            k = v * nm + m
+            c = pair[off + k]
+            rx = ry = 0.0
+            if c >= 0:
+                w = np.sqrt(conf[c]) if objective == OBJ_LABELLED else 1.0
+                rx = w * (proj[v, m, 0] - points[c, 0])
+                ry = w * (proj[v, m, 1] - points[c, 1])
+                s += rx * rx + ry * ry
             res[3 * off + 2 * k] = rx
             res[3 * off + 2 * k + 1] = ry
-            s += rx * rx + ry * ry
     return s
+
+
+@njit(cache=True, nogil=True)
+def entry_spans(free_idx, parent, elem_axis, elem_index, slide_index, marker_joint):
+    """(n_free, 4) ``(j0, j1, m0, m1)`` per free state entry: the joints and markers it
+    moves, its joint's subtree (contiguous in depth-first order) and that subtree's markers;
+    the whole body where the joints or markers are not in that order (always correct:
+    recomputing an unmoved joint or marker changes nothing)."""
+    nj, nm, nf = parent.shape[0], marker_joint.shape[0], free_idx.shape[0]
+    end = np.arange(1, nj + 1)  # one past each joint's subtree, if depth-first
+    for j in range(nj - 1, -1, -1):
+        if parent[j] >= 0:
+            end[parent[j]] = max(end[parent[j]], end[j])
+    ordered = True
+    for j in range(nj):
+        ordered = ordered and parent[j] < j
+        for k in range(j + 1, end[j]):  # a subtree holds only descendants
+            ordered = ordered and j <= parent[k] < k
+    out = np.empty((nf, 4), np.int64)
+    for q in range(nf):
+        i = free_idx[q]
+        owner = -1
+        for j in range(nj):
+            for e in range(3):
+                if elem_axis[j, e] >= 0 and elem_index[j, e] == i:
+                    owner = j
+            if slide_index[j] >= 0 and slide_index[j] <= i < slide_index[j] + 3:
+                owner = j
+        out[q, 0], out[q, 1], out[q, 2], out[q, 3] = 0, nj, 0, nm
+        if ordered and owner >= 0:
+            m0, m1, inside = nm, 0, 0
+            for m in range(nm):
+                if owner <= marker_joint[m] < end[owner]:
+                    m0, m1, inside = min(m0, m), max(m1, m + 1), inside + 1
+            out[q, 0], out[q, 1] = owner, end[owner]
+            if inside == 0:
+                out[q, 2], out[q, 3] = 0, 0
+            elif inside == m1 - m0:  # contiguous
+                out[q, 2], out[q, 3] = m0, m1
+    return out
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _row_block(objective, nv, nm, a, b, k):
+    """The k-th contiguous block of residual rows (:func:`fill_residuals`' layout) of markers
+    ``a:b``: the 3D rows first (objectives with 3D points), then one block per view; ``(0,
+    0)`` past the last."""
+    has3d = objective in (OBJ_POINTS3D, OBJ_CLOUD, OBJ_CLOUD_ONE, OBJ_CLOUD_VIEWS)
+    if has3d:
+        if k == 0:
+            return 3 * a, 3 * b
+        if objective != OBJ_CLOUD_VIEWS:
+            return 0, 0
+        k -= 1
+    if k >= nv:
+        return 0, 0
+    base = 3 * nm if has3d else 0
+    return base + 2 * (k * nm + a), base + 2 * (k * nm + b)
 
 
 @njit(cache=True, nogil=True)
@@ -216,6 +289,17 @@ def _pair_rows(objective, pair, nv, nm, rows):
             rows[n + 1] = 3 * off + 2 * k + 1
             n += 2
     return n
+
+
+@njit(cache=True, nogil=True)
+def _packed_index(rows, n_rows, pk):
+    """``pk[row]``: how many of the used ``rows[:n_rows]`` (ascending) come before original
+    row ``row``, for row 0..len(pk) - 1."""
+    k = 0
+    for row in range(pk.shape[0]):
+        while k < n_rows and rows[k] < row:
+            k += 1
+        pk[row] = k
 
 
 @njit(cache=True, nogil=True)
@@ -262,6 +346,16 @@ def refine_posture(angles, free_idx, lo, hi, dof_kind, n_steps, gate, root_pos, 
     jtr = np.empty(nf)
     a = np.empty((nf, nf))
     g = np.empty(nf)
+    # Each free entry moves only its joint's subtree: its Jacobian column is computed from
+    # that subtree's joints and markers and is zero elsewhere, and J^T J sums only the rows
+    # two columns share (a fly's six legs: a sixth of the work; the sums' order, and so
+    # every bit of the result, as over all rows)
+    span = entry_spans(free_idx, parent, elem_axis, elem_index, slide_index, marker_joint)
+    pinhole = _has_pinhole(kind)
+    rot0, pos0, mk0, proj0 = np.empty_like(rot), np.empty_like(pos), np.empty_like(mk), \
+        np.empty_like(proj)
+    nb = nv + 1  # row blocks of a marker range at most (:func:`_row_block`)
+    pk = np.empty(nr + 1, np.int64)  # pk[row]: the used rows before original row ``row``
     project_posture(angles, root_pos, root_rot, parent, chain, pre_rot, pre_trans, post_trans,
                     elem_axis, elem_index, joint_flags, marker_joint, marker_local, slide_index,
                     kind, P, K, dist, R, t, cs, sn, rot, pos, mk, proj)
@@ -278,30 +372,47 @@ def refine_posture(angles, free_idx, lo, hi, dof_kind, n_steps, gate, root_pos, 
     lam = 1e-3
     step = 0
     while step < n_steps and n_pairs > 0 and cost > 0.0:
+        _packed_index(rows, n_rows, pk)
+        # rot, pos, mk, proj, cs and sn hold the posture ``angles``: kept, and each column's
+        # subtree put back after it
+        rot0[:], pos0[:], mk0[:], proj0[:] = rot, pos, mk, proj
         for q in range(nf):
             i = free_idx[q]
-            x = angles[i]
+            j0, j1, m0, m1 = span[q, 0], span[q, 1], span[q, 2], span[q, 3]
+            x, s0, c0 = angles[i], sn[i], cs[i]
             angles[i] = x + FD_STEP
-            project_posture(angles, root_pos, root_rot, parent, chain, pre_rot, pre_trans,
-                            post_trans, elem_axis, elem_index, joint_flags, marker_joint,
-                            marker_local, slide_index, kind, P, K, dist, R, t, cs, sn, rot, pos,
-                            mk, proj)
-            angles[i] = x
-            fill_residuals(objective, proj, mk, points, conf, obs3, pair, res1)
-            for kk in range(n_rows):  # the Jacobian's rows of the pairs, packed
-                jac[kk, q] = (res1[rows[kk]] - res[rows[kk]]) / FD_STEP
+            sn[i], cs[i] = sincos(angles[i])
+            _project_cs(angles, cs, sn, root_pos, root_rot, parent, chain, pre_rot, pre_trans,
+                        post_trans, elem_axis, elem_index, joint_flags, marker_joint,
+                        marker_local, slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj,
+                        pinhole, (j0, j1, m0, m1), mk[:0])
+            angles[i], sn[i], cs[i] = x, s0, c0
+            fill_rows(objective, proj, mk, points, conf, obs3, pair, res1, m0, m1)
+            for b in range(nb):  # the Jacobian's rows of the pairs, packed
+                r0, r1 = _row_block(objective, nv, nm, m0, m1, b)
+                for kk in range(pk[r0], pk[r1]):
+                    jac[kk, q] = (res1[rows[kk]] - res[rows[kk]]) / FD_STEP
+            rot[j0:j1], pos[j0:j1] = rot0[j0:j1], pos0[j0:j1]
+            mk[m0:m1], proj[:, m0:m1] = mk0[m0:m1], proj0[:, m0:m1]
         for kk in range(n_rows):
             packed[kk] = res[rows[kk]]
-        # J^T J and -J^T r once per Jacobian (symmetric: each product computed once)
+        # J^T J and -J^T r once per Jacobian (symmetric: each product computed once), over
+        # the rows the columns share
         for r in range(nf):
             s = 0.0
-            for k in range(n_rows):
-                s -= jac[k, r] * packed[k]
+            for b in range(nb):
+                r0, r1 = _row_block(objective, nv, nm, span[r, 2], span[r, 3], b)
+                for k in range(pk[r0], pk[r1]):
+                    s -= jac[k, r] * packed[k]
             jtr[r] = s
             for c in range(r, nf):
                 s = 0.0
-                for k in range(n_rows):
-                    s += jac[k, r] * jac[k, c]
+                ma, mb = max(span[r, 2], span[c, 2]), min(span[r, 3], span[c, 3])
+                if ma < mb:
+                    for b in range(nb):
+                        r0, r1 = _row_block(objective, nv, nm, ma, mb, b)
+                        for k in range(pk[r0], pk[r1]):
+                            s += jac[k, r] * jac[k, c]
                 jtj[r, c] = s
                 jtj[c, r] = s
         # Damped Gauss-Newton steps with growing damping until one lowers the cost.

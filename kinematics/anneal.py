@@ -1808,14 +1808,16 @@ class Fitter:
         return float(np.median([v for v in lengths if v > 0] or [1.0]))
 
     def _refit_from(self, obs: Observations, position: int, neighbour: Candidate,
-                    p: AnnealParams, polish: bool = False, share: float = 0.25,
+                    p: AnnealParams, polish: bool = False, share: float | None = None,
                     counted: list | None = None) -> Candidate | None:
         """Anneal frame ``position`` again, cold and locally, from a neighbour's posture;
         with ``polish``, only refine the neighbour's posture there (one annealing step too
         small to move it, then the refinement): a posture a wrong minimum with a lower E
         would draw even a cold anneal into (a ghost in an occluded marker's place) stays
         where the movement has it. ``share``: the part of the schedule the cold anneal
-        runs; ``counted``, if given, gets the iterations it ran appended."""
+        runs (default :data:`REFIT_SHARE`); ``counted``, if given, gets the iterations it ran
+        appended."""
+        share = REFIT_SHARE if share is None else share
         state, pos, rot = self.problem.state(neighbour.angles_deg, neighbour.root_positions)
         if polish:
             local = replace(p, candidates=1, max_runs=1, tau0=p.tau0 * 1e-6, l0=p.l0 * 1e-6,
@@ -2001,6 +2003,11 @@ REFIT_KEEP_PX = 1.0
 #: first; postures 5° apart on any axis count as distinct, which on a 42-axis body is almost
 #: any two: unbounded, a fly's 20-frame window grew from 40 to 3 627 candidates).
 REFIT_CANDIDATES = 4
+#: The part of the schedule a cold re-fit from a neighbour anneals (it starts close). Fly
+#: 0:200, one thread: 0.25 / 0.1 / 0.05 took 69.5 / 50.8 / 44.7 s, 99.0 % of the frames
+#: right each time (femur-tibia 3.04 / 3.02 / 3.00°); the rat of docs/markerless.md 2.02°
+#: at 0.25 and 0.05; the locust (bench_temporal) the same to the last figure.
+REFIT_SHARE = 0.05
 
 #: ``start="track"``: the part of the schedule a frame's cold anneal from the previous frame
 #: runs. On the fly's contiguous frames 0-65 a tenth kept every frame a full fit got right

@@ -178,3 +178,54 @@ def test_fit_with_refinement_never_has_a_worse_error_than_without(locust):
     refined = Fitter(locust, cams, replace(base, refine=True, refine_gate_px=20.0)).fit(dets)
     for p, r in zip(plain, refined, strict=True):
         assert r.error <= p.error + 1e-9
+
+
+def test_kernel_equals_scipy_on_a_branched_body():
+    """Each entry's Jacobian column is computed from its own subtree only (entry_spans):
+    on a body whose legs hang off a trunk the kernel still solves the twin's problem."""
+    from tests.kinematics.test_partitions import planted, three_legs, top_and_side
+
+    body, cams = three_legs(), top_and_side()
+    fitter = Fitter(body, cams)
+    angles, frames = planted(body, cams, 6, seed=4)
+    free = ~body.locked_mask()
+    rng = np.random.default_rng(1)
+    for truth, det in zip(angles, frames, strict=True):
+        start = truth + np.where(free, rng.normal(0, 1.0, truth.size), 0.0)
+        got = refine(fitter, start, det, steps=30, gate_px=20.0)
+        want = refine_reference(fitter, start, det, gate_px=20.0)
+        assert got.n_pairs == want.n_pairs == 2 * len(body.marker_names)
+        np.testing.assert_allclose(got.angles_deg, want.angles_deg, atol=2e-4)
+        assert got.sse == pytest.approx(want.sse, rel=1e-6, abs=1e-9)
+
+
+def test_entry_spans_are_subtrees_or_the_whole_body():
+    """A free entry moves its joint's subtree (joints and markers contiguous in depth-first
+    order); where the order breaks that, the whole body (never too little)."""
+    from kinematics._refine_kernels import entry_spans
+    from kinematics.problem import FitProblem
+    from tests.kinematics.test_partitions import three_legs, top_and_side
+
+    body = three_legs()
+    pr = FitProblem.build(body, top_and_side())
+    f = pr.folded
+    spans = entry_spans(pr.free_idx, f.parent, f.elem_axis, f.elem_index, f.slide_index,
+                        f.marker_joint)
+    names = body.joint_names
+    marks = body.marker_names
+    got = {}
+    for j0, j1, m0, m1 in spans:
+        got.setdefault(names[j0], set()).add(
+            (tuple(names[j0:j1]), tuple(marks[m0:m1])))
+    assert got["body"] == {(tuple(names), tuple(marks))}  # the trunk reaches everything
+    assert got["a_hip"] == {(("a_hip", "a_knee"), ("a_knee_mk", "a_tip"))}
+    assert got["b_knee"] == {(("b_knee",), ("b_tip",))}
+    # a joint listed before its parent: every entry gets the whole body
+    parent = f.parent.copy()
+    order = np.arange(len(parent))
+    order[[1, 2]] = [2, 1]  # swap two joints' places
+    swapped = np.argsort(order)
+    parent = np.array([swapped[parent[k]] if parent[k] >= 0 else -1 for k in order])
+    spans = entry_spans(pr.free_idx, parent, f.elem_axis[order], f.elem_index[order],
+                        f.slide_index[order], swapped[f.marker_joint])
+    assert (spans == [0, len(parent), 0, len(marks)]).all()
