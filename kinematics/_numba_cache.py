@@ -28,12 +28,13 @@ def default_cache_dir() -> Path:
 
 def kernels_digest() -> str:
     """A digest of the source of every kernel module of the package."""
+    paths = sorted(Path(__file__).parent.glob("_*kernels.py"))
     try:
-        return hashlib.sha256(b"".join(
-            path.read_bytes() for path in sorted(Path(__file__).parent.glob("_*kernels.py"))
-        )).hexdigest()[:12]
-    except OSError:  # sources not shipped (a frozen app): numba cannot cache them either
-        return "unknown"
+        if paths:
+            return hashlib.sha256(b"".join(path.read_bytes() for path in paths)).hexdigest()[:12]
+    except OSError:
+        pass
+    return "unknown"  # sources not shipped (a frozen app): numba cannot cache them either
 
 
 if not config.CACHE_DIR:  # must run before any kernel module is decorated
