@@ -2004,10 +2004,11 @@ REFIT_KEEP_PX = 1.0
 #: any two: unbounded, a fly's 20-frame window grew from 40 to 3 627 candidates).
 REFIT_CANDIDATES = 4
 #: The part of the schedule a cold re-fit from a neighbour anneals (it starts close). Fly
-#: 0:200, one thread: 0.25 / 0.1 / 0.05 took 69.5 / 50.8 / 44.7 s, 99.0 % of the frames
-#: right each time (femur-tibia 3.04 / 3.02 / 3.00°); the rat of docs/markerless.md 2.02°
-#: at 0.25 and 0.05; the locust (bench_temporal) the same to the last figure.
-REFIT_SHARE = 0.05
+#: over the whole clip, 6 cameras, at 0.25 / 0.1 / 0.05: 98.5 % right each time at 5.2 /
+#: 7.1 / 7.8 frames/s, 12 / 11 / 17 frames flagged, 8 of them off each time; 3 cameras
+#: 96.5 / 97.0 / 97.1 %. The rat of docs/markerless.md 2.02 / 2.03 / 2.02°; the locust
+#: (bench_temporal, bench_status) the same (docs/benchmarks.md, session 24).
+REFIT_SHARE = 0.1
 
 #: ``start="track"``: the part of the schedule a frame's cold anneal from the previous frame
 #: runs. On the fly's contiguous frames 0-65 a tenth kept every frame a full fit got right
