@@ -1346,13 +1346,14 @@ class Fitter:
         # six legs at 330 Hz change by ~10 squared spreads per frame, every frame).
         n_parts = self._partitions(p, search=False).bounds.shape[0]
 
-        def jumping(cap: float = REDO_JUMP * n_parts, seen_ratio: float = 0.0,
-                    stretches: bool = False) -> set[int]:
+        def jumping(cap: float = REDO_JUMP * n_parts, markers: np.ndarray | None = None,
+                    seen_ratio: float = 0.0, stretches: bool = False) -> set[int]:
             """Frames next to a jump of the chosen path: larger than REDO_JUMP_RATIO times the
-            window's typical change (at least REDO_JUMP_MIN, at most ``cap``) where some
-            marker moves more than ``seen_ratio`` times the window's typical largest marker
-            move; with ``stretches``, two jumps at most ``temporal.WRONG_STRETCH`` apart give
-            the frames between them instead."""
+            window's typical change (at least REDO_JUMP_MIN, at most ``cap``); with
+            ``markers`` (:func:`path_markers`), only where some marker moves more than
+            ``seen_ratio`` times the window's typical largest marker move; with
+            ``stretches``, two jumps at most ``temporal.WRONG_STRETCH`` apart give the frames
+            between them instead."""
             jumps = np.full(len(window), np.nan)
             if anchor is not None and choice[0] >= 0 and not breaks[0]:
                 jumps[0] = temporal.transition_costs(anchor[None], post[0, choice[0]][None],
@@ -1366,11 +1367,12 @@ class Fitter:
             typical = np.nanmedian(jumps) if np.isfinite(jumps).any() else 0.0
             limit = min(cap, max(REDO_JUMP_MIN, REDO_JUMP_RATIO * typical))
             big = jumps > limit
-            if seen_ratio > 0:  # ... that the markers show
-                steps = marker_steps()
-                seen = np.nanmedian(steps) if np.isfinite(steps).any() else 0.0
+            if markers is not None:  # ... that the markers show
+                moves = np.linalg.norm(markers[1:] - markers[:-1], axis=-1).max(axis=-1)
+                moves[breaks] = np.nan  # no move across a cut
+                seen = np.nanmedian(moves) if np.isfinite(moves).any() else 0.0
                 with np.errstate(invalid="ignore"):
-                    big &= ~(steps <= seen_ratio * seen)
+                    big &= ~(moves <= seen_ratio * seen)
             at = [int(i) for i in np.flatnonzero(big)]
             if not stretches:
                 return {k for i in at for k in (i - 1, i) if k >= 0}
@@ -1393,13 +1395,6 @@ class Fitter:
             if have.any():
                 mk[have] = self._markers([c for c in chosen if c is not None])
             return mk
-
-        def marker_steps() -> np.ndarray:
-            """Per frame of the window, the largest move of a model marker from the frame
-            before along the chosen path (length units; NaN where the path has no step)."""
-            mk = path_markers()
-            moved = np.linalg.norm(mk[1:] - mk[:-1], axis=-1).max(axis=-1)
-            return np.where(breaks, np.nan, moved)
 
         tried: set[tuple[int, int]] = set()
 
@@ -1486,14 +1481,15 @@ class Fitter:
         # if the markers show it: a change of axes the markers barely see (a fly's coxa roll,
         # which its other axes nearly undo) is nothing a person could correct (fly 0:660: 142
         # frames ambiguous, 7 of them off, before)
-        still_jumping = jumping(cap=np.inf, seen_ratio=JUMP_SEEN_RATIO, stretches=True)
+        mk = path_markers()  # the path is final: its markers, for the jumps and the kinks
+        still_jumping = jumping(cap=np.inf, markers=mk, seen_ratio=JUMP_SEEN_RATIO,
+                                stretches=True)
         # ... and a frame off the line through its neighbours (a jump too small to see
         # against the movement, e.g. a marker a ghost took for a frame or two)
         chosen = np.array([post[i, c] if c >= 0 else np.full(len(scale), np.nan)
                            for i, c in enumerate(choice)])
         # ... that the markers show, as for the jumps: off its neighbours' midpoint by more
         # than JUMP_SEEN_RATIO x the window's median such distance
-        mk = path_markers()
         off_line = np.full(len(mk), np.nan)  # the frame before the window first
         off_line[1:-1] = np.linalg.norm(mk[1:-1] - (mk[:-2] + mk[2:]) / 2.0,
                                         axis=-1).max(axis=-1)
