@@ -1327,17 +1327,21 @@ class Fitter:
             return choice, unary, post
 
         frames = np.array([r.frame for r in window])
-        breaks = np.r_[False, np.diff(frames) != 1] | np.isin(frames, starts)
-        # cuts in the movement, from every candidate of the window and the decided context
-        k = max((len(r.candidates) for r in window), default=0)
-        cands = np.full((len(context) + len(window), max(k, 1), len(scale)), np.nan)
-        for i, r in enumerate(context):
-            cands[i, 0] = self._posture_vector(r)
-        for i, r in enumerate(window, len(context)):
-            for j, c in enumerate(r.candidates):
-                cands[i, j] = self._posture_vector(c)
-        breaks |= temporal.cuts(cands, scale, n_angles, before=len(context))
+        given = np.r_[False, np.diff(frames) != 1] | np.isin(frames, starts)
 
+        def cut() -> np.ndarray:
+            """The given breaks and the cuts in the movement, found from every candidate of
+            the window and the decided context."""
+            k = max((len(r.candidates) for r in window), default=0)
+            cands = np.full((len(context) + len(window), max(k, 1), len(scale)), np.nan)
+            for i, r in enumerate(context):
+                cands[i, 0] = self._posture_vector(r)
+            for i, r in enumerate(window, len(context)):
+                for j, c in enumerate(r.candidates):
+                    cands[i, j] = self._posture_vector(c)
+            return given | temporal.cuts(cands, scale, n_angles, before=len(context))
+
+        breaks = cut()
         choice, unary, post = path()
         # Re-analysis seeded by neighbours: a frame where the chosen path jumps (to or from
         # it) is fitted again, cold and locally, from every candidate of both neighbours;
@@ -1346,14 +1350,13 @@ class Fitter:
         # six legs at 330 Hz change by ~10 squared spreads per frame, every frame).
         n_parts = self._partitions(p, search=False).bounds.shape[0]
 
-        def jumping(cap: float = REDO_JUMP * n_parts, markers: np.ndarray | None = None,
-                    seen_ratio: float = 0.0, stretches: bool = False) -> set[int]:
-            """Frames next to a jump of the chosen path: larger than REDO_JUMP_RATIO times the
-            window's typical change (at least REDO_JUMP_MIN, at most ``cap``); with
-            ``markers`` (:func:`path_markers`), only where some marker moves more than
-            ``seen_ratio`` times the window's typical largest marker move; with
-            ``stretches``, two jumps at most ``temporal.WRONG_STRETCH`` apart give the frames
-            between them instead."""
+        def jumps_over(cap: float, markers: np.ndarray | None = None,
+                       seen_ratio: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+            """Where the chosen path jumps into frame i, (n,) bool: larger than
+            REDO_JUMP_RATIO times the window's typical change (at least REDO_JUMP_MIN, at most
+            ``cap``); with ``markers`` (:func:`path_markers`), only where some marker moves
+            more than ``seen_ratio`` times the window's typical largest marker move. Second,
+            the same with at most EDGE_SEEN_RATIO for that ratio."""
             jumps = np.full(len(window), np.nan)
             if anchor is not None and choice[0] >= 0 and not breaks[0]:
                 jumps[0] = temporal.transition_costs(anchor[None], post[0, choice[0]][None],
@@ -1367,22 +1370,62 @@ class Fitter:
             typical = np.nanmedian(jumps) if np.isfinite(jumps).any() else 0.0
             limit = min(cap, max(REDO_JUMP_MIN, REDO_JUMP_RATIO * typical))
             big = jumps > limit
+            edge = big.copy()
             if markers is not None:  # ... that the markers show
                 moves = np.linalg.norm(markers[1:] - markers[:-1], axis=-1).max(axis=-1)
                 moves[breaks] = np.nan  # no move across a cut
                 seen = np.nanmedian(moves) if np.isfinite(moves).any() else 0.0
                 with np.errstate(invalid="ignore"):
                     big &= ~(moves <= seen_ratio * seen)
+                    edge &= ~(moves <= min(seen_ratio, EDGE_SEEN_RATIO) * seen)
+            return big, edge
+
+        def jumping() -> set[int]:
+            """Frames next to a jump of the chosen path (:func:`jumps_over` within
+            REDO_JUMP per partition): re-fitted."""
+            at = np.flatnonzero(jumps_over(REDO_JUMP * n_parts)[0])
+            return {int(k) for i in at for k in (i - 1, i) if k >= 0}
+
+        def still_jumping(markers: np.ndarray) -> tuple[set[int], set[int]]:
+            """Frames next to a jump the re-fits left that the markers show, or, where two
+            jumps at most ``temporal.WRONG_STRETCH`` apart bound a stretch, the frames
+            between them instead: those to flag, and the frames on the right side of such a
+            bound (which a kink there must not flag)."""
+            big, edge = jumps_over(np.inf, markers, JUMP_SEEN_RATIO)
             at = [int(i) for i in np.flatnonzero(big)]
-            if not stretches:
-                return {k for i in at for k in (i - 1, i) if k >= 0}
             # a short stretch between two jumps is what is suspect, not the frames around it
             out, bounds = set(), set()
             for a, b in itertools.pairwise(at):
                 if b - a <= temporal.WRONG_STRETCH and not breaks[a + 1:b].any():
                     out.update(range(a, b))
                     bounds |= {a, b}
-            return out | {k for i in at if i not in bounds for k in (i - 1, i) if k >= 0}
+            # ... and so is a short stretch between a jump and where the movement starts (a
+            # cut, or the window's first frame with nothing decided before it) or ends (a
+            # cut): the first frames of a sequence, fitted wrong in the same way while a
+            # marker is occluded, jump only where they end (a jump the markers show less,
+            # EDGE_SEEN_RATIO: the locust's were 5x the typical move)
+            ends = np.flatnonzero(breaks)
+            begins = ends if anchor is not None and not breaks[0] else np.r_[0, ends]
+            at_edge = np.flatnonzero(edge)
+            for i in at_edge:
+                if i in bounds:
+                    continue
+                s = begins[begins < i].max(initial=-1)
+                e = ends[ends > i].min(initial=len(window))
+                # the shorter side, where both are short (both where they are as long)
+                head = i - s if s >= 0 and not ((at_edge > s) & (at_edge < i)).any() \
+                    else np.inf
+                tail = e - i if e < len(window) and not (
+                    (at_edge > i) & (at_edge < e)).any() else np.inf
+                if min(head, tail) > temporal.WRONG_STRETCH:
+                    continue
+                if head <= tail:
+                    out.update(range(s, i))
+                if tail <= head:
+                    out.update(range(i, e))
+                bounds.add(int(i))
+            right = {k for i in bounds for k in (i - 1, i) if k >= 0 and k not in out}
+            return out | {k for i in at if i not in bounds for k in (i - 1, i) if k >= 0}, right
 
         def path_markers() -> np.ndarray:
             """(n + 1, n_markers, 3) model markers along the chosen path, the frame before the
@@ -1433,6 +1476,7 @@ class Fitter:
             return out
 
         pools: list[ThreadPoolExecutor] = []  # for the re-fits, made when first needed
+        changed_any = False
         try:
             for _ in range(2):
                 redo = jumping()
@@ -1471,19 +1515,24 @@ class Fitter:
                             changed = True
                 if changed:  # the path's choice indexes the candidates as they are now
                     choice, unary, post = path()
+                    changed_any = True
                 if not grown:
                     break
         finally:
             for pool in pools:
                 pool.shutdown()
+        # a cut whose first frames had only wrong candidates until the re-fits (no frame
+        # before the cut moved little then): found now, so its jump is no jump to flag
+        if changed_any:
+            breaks = cut()
+            choice, unary, post = path()
         # a jump the re-fits could not remove: the frames on both sides need a look (relative
         # to the window's own movement only: a fast or coarsely sampled one jumps throughout)
         # if the markers show it: a change of axes the markers barely see (a fly's coxa roll,
         # which its other axes nearly undo) is nothing a person could correct (fly 0:660: 142
         # frames ambiguous, 7 of them off, before)
         mk = path_markers()  # the path is final: its markers, for the jumps and the kinks
-        still_jumping = jumping(cap=np.inf, markers=mk, seen_ratio=JUMP_SEEN_RATIO,
-                                stretches=True)
+        flagged, beside = still_jumping(mk)
         # ... and a frame off the line through its neighbours (a jump too small to see
         # against the movement, e.g. a marker a ghost took for a frame or two)
         chosen = np.array([post[i, c] if c >= 0 else np.full(len(scale), np.nan)
@@ -1503,7 +1552,7 @@ class Fitter:
                                     np.r_[False, breaks], seen)[1:]
         else:
             kinked = temporal.kinks(chosen, scale, n_angles, breaks, seen[1:])
-        still_jumping |= set(np.flatnonzero(kinked).tolist())
+        flagged |= set(np.flatnonzero(kinked).tolist()) - beside
         # "about as well": within ambiguous_px per marker image, and within half the typical
         # E per image of the window (on a clean video a posture 60x worse than the chosen
         # one is a poor local minimum, not an ambiguity)
@@ -1530,7 +1579,7 @@ class Fitter:
             # about as little as the smoothest through the chosen one (a mirror branch as
             # smooth as the chosen one costs nothing more, a flip for one frame two jumps)
             near &= moved[i] - moved[i, choice[i]] <= AMBIGUOUS_MOVEMENT
-            ambiguous = bool(near.any()) or i in still_jumping
+            ambiguous = bool(near.any()) or i in flagged
             cands = (chosen, *(c for k, c in enumerate(r.candidates) if k != choice[i]))
             if np.array_equal(chosen.angles_deg, r.angles_deg) and np.array_equal(
                     chosen.root_positions, r.root_positions):
@@ -1992,6 +2041,9 @@ REDO_JUMP_RATIO, REDO_JUMP_MIN = 16.0, 0.02
 #: 14 flagged, 3 of 5 off frames each. Not for the re-fits: a rat's femur roll 29° off with
 #: every marker where it was (0.7-0.9 of the median move) is found by them.
 JUMP_SEEN_RATIO = 8.0
+#: ... except next to a cut, where a jump within ``temporal.WRONG_STRETCH`` frames of it
+#: counts where some marker moves more than this many times that typical move
+EDGE_SEEN_RATIO = 3.0
 #: A re-fit from a neighbour becomes a candidate only within this E per marker image (px)
 #: of the frame's best ...
 REFIT_KEEP_PX = 1.0

@@ -41,6 +41,9 @@ JUMP_CAP = 4.0
 #: A jump of the best candidates larger than CUT_RATIO x the typical change (at least
 #: CUT_MIN) between stretches that each move by at most STILL_RATIO x it is a cut.
 CUT_RATIO, CUT_MIN, STILL_RATIO, STILL_MIN = 50.0, 1.0, 4.0, 0.05
+#: ... or where the stretch before it moves more, by at most 1 / CUT_DWARF of the jump (a
+#: wrong frame's return just before the cut: a cut that went unseen flagged both its sides)
+CUT_DWARF = 10.0
 #: A large jump is no cut when within WRONG_STRETCH frames after it, on two frames running, a
 #: candidate lies within RETURN_RATIO x the jump of where the movement before it was heading
 #: (or, before it, of where the movement after it came from): a wrong stretch. Two jumps at
@@ -112,8 +115,9 @@ def cuts(postures, scale, n_angles: int, before: int = 0) -> np.ndarray:
     lowest-E candidate is wrong but another is right does not hide a cut next to it. The
     first ``before`` frames are context only (frames decided earlier): they are never cuts,
     but let a cut be found at the first frames after them. A cut needs a jump from t-1 to t
-    much larger than the typical frame-to-frame change while the two frames before and the
-    three from t on move little: an isolated wrong frame, or a short run of them, is not a
+    much larger than the typical frame-to-frame change while the two frames before (or by a
+    :data:`CUT_DWARF` th of the jump at most) and the three from t on move little: an
+    isolated wrong frame, or a short run of them, is not a
     cut (the path is what sorts those out); nor is a jump after which, within
     :data:`WRONG_STRETCH` frames, two frames running have a candidate where the movement
     before the jump was heading (a longer wrong stretch, e.g. a marker lost for a while)."""
@@ -131,7 +135,9 @@ def cuts(postures, scale, n_angles: int, before: int = 0) -> np.ndarray:
     hi = max(CUT_MIN, CUT_RATIO * typical)
     lo = max(STILL_MIN, STILL_RATIO * typical)
     for t in range(max(2, before), n - 2):
-        if jump[t] > hi and jump[t - 1] <= lo and jump[t + 1] <= lo and jump[t + 2] <= lo:
+        # the step before may be a wrong frame's return, where the cut dwarfs it
+        before_t = jump[t - 1] <= lo or jump[t - 1] * CUT_DWARF <= jump[t]
+        if jump[t] > hi and before_t and jump[t + 1] <= lo and jump[t + 2] <= lo:
             out[t] = True
     # a jump into (or out of) a wrong stretch, e.g. a marker lost for a while, is no cut:
     # within WRONG_STRETCH frames after (before) it, two frames running have a candidate
