@@ -703,9 +703,9 @@ class Fitter:
             start = self.problem.state(self._posture_deg(start_deg), roots[0])[0]
             for q in range(len(self.problem.free_chains)):
                 start[self.problem.root_axes[q]] = 0.0  # the seed holds the root's rotation
-        return self._polished(obs, 0, self._fit_block(
+        return _held(*self._polished(obs, 0, self._fit_block(
             obs, np.zeros(1, np.int64), np.array([int(frame)], np.int64), roots, rots, start,
-            np.array([0, 1], np.int64))[0])
+            np.array([0, 1], np.int64))[0]), self._held_apart)
 
     def _one_frame(self, detections_frame, frame, root_positions, caller: str):
         """The observations of one frame, its roots (1, n_chains, 3) and root rotations:
@@ -743,9 +743,10 @@ class Fitter:
         found = self._refit_from(obs, 0, seed, self.params, polish=True, counted=counted)
         if found is None:
             return None
-        return self._polished(obs, 0, self._frame_result(
+        return _held(*self._polished(obs, 0, self._frame_result(
             obs, 0, int(frame), found.state, found.seed_pos, found.seed_rot, self.params,
-            runs=1, iterations=counted[0], pairs=0, error=None, candidates=(found,)))
+            runs=1, iterations=counted[0], pairs=0, error=None, candidates=(found,))),
+            self._held_apart)
 
     def iter_fit(self, detections, frames=None, *, chunk_size: int | None = None,
                  sequence_starts: Iterable[int] = (),
@@ -849,11 +850,30 @@ class Fitter:
     def _final_polish(self, obs: Observations, idx, results: Iterable[FrameResult]
                       ) -> Iterator[FrameResult]:
         """``results`` (one per frame of ``idx``, in order) as :meth:`_polished` leaves
-        them."""
+        them, a frame with a held limb ``ambiguous`` where its runs put that limb apart or
+        the next frame's runs do (:func:`_held`): a wrong stretch that every run fits alike
+        (a fly's hind leg through 6 cameras, frames 357-360) ends where they part. The next
+        frame only, so a fit resumed from a checkpoint decides every frame as the whole fit
+        did."""
+        apart = self._held_apart
+        pending = None
         for position, r in zip(idx, results, strict=False):  # a cancelled fit yields fewer
-            yield self._polished(obs, int(position), r)
+            r, spread = self._polished(obs, int(position), r)
+            if pending is not None:
+                follows = r.frame == pending[0].frame + 1
+                yield _held(*pending, apart, spread if follows else None)
+            pending = r, spread
+        if pending is not None:
+            yield _held(*pending, apart)
 
-    def _polished(self, obs: Observations, position: int, r: FrameResult) -> FrameResult:
+    @property
+    def _held_apart(self) -> float:
+        """How far apart (model units) a held limb's runs put one of its markers for the
+        frame to be ``ambiguous``: ``ambiguous_move`` segment lengths, as for candidates."""
+        return self.params.ambiguous_move * self._segment_scale
+
+    def _polished(self, obs: Observations, position: int, r: FrameResult
+                  ) -> tuple[FrameResult, float | None]:
         """The chosen posture of frame ``position`` fitted by least squares to its cloud
         points within ``final_polish_px``, each point paired with one marker at most
         (Levenberg-Marquardt, the refinement's kernel), and kept though its E grows a
@@ -864,12 +884,13 @@ class Fitter:
         :func:`_placed` finds two, and its limb is held if the polished marker is not
         explained (within ``cap_px``) in two views. Only the partitions whose own markers
         are all paired or placed move: a limb missing one would be pulled by the others
-        alone, and a frame with such a held limb is ``ambiguous`` (:func:`_unplaced`).
-        Matching in 3D only; the status is otherwise the one decided on the fit, and a
-        posture whose E the polish would take above the threshold stays as fitted."""
+        alone. Returns the result and how far apart the frame's runs put the held limbs'
+        markers (None: no limb held; :func:`_held` flags the frame). Matching in 3D only;
+        the status is otherwise the one decided on the fit, and a posture whose E the polish
+        would take above the threshold stays as fitted."""
         p = self.params
         if p.final_polish_px is None or obs.kind != "cloud" or not r.runs:
-            return r
+            return r, None
         pr = self.problem
         arrays = obs.arrays(np.array([position], np.int64))  # with the views' detections
         state, pos, rot = self.state(r.angles_deg, r.root_positions)
@@ -909,15 +930,21 @@ class Fitter:
             if ok.all():
                 break
             covered[placed[~ok]] = False
-        if any(not covered[m0:m_own].all() for _, _, m0, _, m_own in parts.bounds):
-            r = _unplaced(r)  # a limb held
+        held = [np.arange(m0, m_own) for _, _, m0, _, m_own in parts.bounds
+                if not covered[m0:m_own].all()]
+        spread = None  # how far apart the frame's runs put the held limbs' markers
+        if held:
+            spread = np.inf
+            if len(r.candidates) > 1:
+                mk_c = self._markers(r.candidates)[:, np.concatenate(held)]
+                spread = float(np.linalg.norm(mk_c - mk_c[0], axis=-1).max())
         if moved.size == 0:
-            return r
+            return r, spread
         new = self._frame_result(obs, position, r.frame, state, pos, rot, p, runs=r.runs,
                                  iterations=r.iterations, pairs=r.refined_pairs or 0,
                                  arrays=arrays)
         if r.error <= r.threshold < new.error:  # E grows a little: never across the threshold
-            return r
+            return r, spread
         # the chosen candidate is the polished posture too (cycling back to it in the GUI)
         cands = tuple(Candidate(new.angles_deg, new.root_positions, new.error, state, pos, rot)
                       if np.array_equal(c.angles_deg, r.angles_deg)
@@ -925,7 +952,7 @@ class Fitter:
                       for c in r.candidates)
         return replace(r, candidates=cands, **{k: getattr(new, k) for k in (
             "angles_deg", "root_positions", "error", "error_per_view", "marker_residuals",
-            "matched", "unexplained", "worst_px")})
+            "matched", "unexplained", "worst_px")}), spread
 
     def _video_threshold(self, obs: Observations, idx, roots, rots) -> float:
         """The re-analysis threshold on E measured on the video itself (threshold_mode
@@ -2291,11 +2318,20 @@ def _placed(proj: np.ndarray, points: np.ndarray, offsets: np.ndarray, own: np.n
     return (both >= 2) & (alone >= 1)
 
 
-def _unplaced(r: FrameResult) -> FrameResult:
+def _held(r: FrameResult, spread: float | None, apart: float,
+          next_spread: float | None = None) -> FrameResult:
     """A fit within the threshold whose limb has a marker that neither a cloud point nor two
-    views place: ``ambiguous``, as nothing in the frame says where that limb is (on the fly
-    through 6 cameras every such frame was off, docs/benchmarks.md)."""
-    return replace(r, status="ambiguous") if r.status in ("ok", "reanalysed") else r
+    views place (``spread`` not None: how far apart its runs put that limb's markers, inf
+    with one run): ``ambiguous`` where the runs put it more than ``apart`` apart, or the next
+    frame's runs do (``next_spread``, where it holds a limb too): nothing in the frame says
+    where that limb is, unless every run found it in one place (through 3 cameras 120 of
+    the fly's 660 frames held a limb, 104 of them right, most with runs within 0.07 mm;
+    docs/benchmarks.md, session 25)."""
+    if spread is None or r.status not in ("ok", "reanalysed"):
+        return r
+    if spread > apart or (next_spread is not None and next_spread > apart):
+        return replace(r, status="ambiguous")
+    return r
 
 
 def _covered_partitions(parts, folded, covered: np.ndarray):
