@@ -184,7 +184,9 @@ class AnnealParams:
         "least squares to its cloud points within this distance (px-equivalents), each "
         "point paired with one marker; a marker without a point is placed by its "
         "detections in two views, and a limb with a marker nothing places is held and makes "
-        "the frame 'ambiguous'. Kept though E grows a little (not across the threshold). "
+        "the frame 'ambiguous' where the frame's runs, or the next frame's, put that limb "
+        "ambiguous_move segment lengths apart. Kept though E grows a little (not across the "
+        "threshold). "
         "Annealing minimises a sum of distances, which leaves the whole misfit of a limb "
         "the rigid chain cannot fit on one joint; least squares spreads it over the limb "
         "(docs/fitting.md, 'The final polish'). None, written 0 in a project file: off "
@@ -263,7 +265,9 @@ class AnnealParams:
         "ambiguous only if it moves some model marker by more than this fraction of the "
         "body's median segment length; 0: any candidate ambiguous_deg away does (axes that "
         "barely move a marker then flag frames). Also how close two runs must put every "
-        "marker to confirm each other (confirm_runs).", min=0.0, max=1e6)
+        "marker to confirm each other (confirm_runs), and how far apart a held limb's "
+        "runs must put it for the frame to be ambiguous (final_polish_px).", min=0.0,
+        max=1e6)
     ambiguous_deg: float = setting(
         5.0, "With candidates > 1: candidates nearer than this on every axis (degrees, or "
         "length units for translations) are the same posture.", min=1e-6, max=360.0)
