@@ -1415,9 +1415,9 @@ class Fitter:
 
         def still_jumping(markers: np.ndarray) -> tuple[set[int], set[int]]:
             """Frames next to a jump the re-fits left that the markers show, or, where two
-            jumps at most ``temporal.WRONG_STRETCH`` apart bound a stretch, the frames
-            between them instead: those to flag, and the frames on the right side of such a
-            bound (which a kink there must not flag)."""
+            jumps at most ``temporal.WRONG_STRETCH`` apart (or a jump and a sequence's start
+            or end) bound a stretch, the stretch's frames instead: those to flag, and the
+            frame just outside each such bound (which a kink there must not flag)."""
             big, edge = jumps_over(np.inf, markers, JUMP_SEEN_RATIO)
             at = [int(i) for i in np.flatnonzero(big)]
             # a short stretch between two jumps is what is suspect, not the frames around it
@@ -1451,8 +1451,9 @@ class Fitter:
                 if tail <= head:
                     out.update(range(i, e))
                 bounds.add(int(i))
-            right = {k for i in bounds for k in (i - 1, i) if k >= 0 and k not in out}
-            return out | {k for i in at if i not in bounds for k in (i - 1, i) if k >= 0}, right
+            outside = {k for i in bounds for k in (i - 1, i) if k >= 0 and k not in out}
+            return (out | {k for i in at if i not in bounds for k in (i - 1, i) if k >= 0},
+                    outside)
 
         def path_markers() -> np.ndarray:
             """(n + 1, n_markers, 3) model markers along the chosen path, the frame before the

@@ -115,9 +115,9 @@ def cuts(postures, scale, n_angles: int, before: int = 0) -> np.ndarray:
     lowest-E candidate is wrong but another is right does not hide a cut next to it. The
     first ``before`` frames are context only (frames decided earlier): they are never cuts,
     but let a cut be found at the first frames after them. A cut needs a jump from t-1 to t
-    much larger than the typical frame-to-frame change while the two frames before (or by a
-    :data:`CUT_DWARF` th of the jump at most) and the three from t on move little: an
-    isolated wrong frame, or a short run of them, is not a
+    much larger than the typical frame-to-frame change while the two frames before (or, a
+    wrong frame's return, by at most 1 / :data:`CUT_DWARF` of the jump) and the three from
+    t on move little: an isolated wrong frame, or a short run of them, is not a
     cut (the path is what sorts those out); nor is a jump after which, within
     :data:`WRONG_STRETCH` frames, two frames running have a candidate where the movement
     before the jump was heading (a longer wrong stretch, e.g. a marker lost for a while)."""
