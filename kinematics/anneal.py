@@ -1550,9 +1550,10 @@ class Fitter:
             for pool in pools:
                 pool.shutdown()
         # a cut whose first frames had only wrong candidates until the re-fits (no frame
-        # before the cut moved little then): found now, so its jump is no jump to flag
-        if changed_any:
-            breaks = cut()
+        # before the cut moved little then): found now, so its jump is no jump to flag (the
+        # path, chosen already on these candidates, again only where the cuts changed)
+        if changed_any and ((found := cut()) != breaks).any():
+            breaks = found
             choice, unary, post = path()
         # a jump the re-fits could not remove: the frames on both sides need a look (relative
         # to the window's own movement only: a fast or coarsely sampled one jumps throughout)

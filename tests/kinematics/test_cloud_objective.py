@@ -12,7 +12,7 @@ import pytest
 from kinematics import _anneal_kernels as ak
 from kinematics import _refine_kernels as rk
 from kinematics import anneal
-from kinematics.anneal import AnnealParams, Fitter
+from kinematics.anneal import AnnealParams, Candidate, Fitter
 from kinematics.cameras import PinholeCamera
 from kinematics.error_function import cloud_error
 from kinematics.errors import KinematicsError
@@ -346,6 +346,51 @@ def test_a_held_limb_is_ambiguous_where_its_runs_put_it_apart(monkeypatch):
     # frame 7 does not count; 8: one run; 9: the last frame, its own runs only
     assert [r.status for r in out] == ["ok", "ambiguous", "ambiguous", "ok", "failed", "ok",
                                        "ambiguous", "ambiguous", "reanalysed"]
+
+
+def test_a_held_limbs_runs_are_measured_on_its_own_markers():
+    """How far apart a frame's runs put its held limb is measured on that limb's markers
+    only: runs that differ in another leg leave it 0 (the frame stays ``ok``), runs that
+    differ in the held leg by more than ``ambiguous_move`` segment lengths make it
+    ``ambiguous``; a frame without a held limb has none (None). a's tip is seen by one
+    camera only, so nothing places it and its leg is held."""
+    body = three_legs()
+    cams = ring()
+    angles, _ = planted(body, cams, 2, seed=7)
+    tip = body.marker_names.index("a_tip")
+    frames = [[c.project(forward_kinematics_reference(body, a).markers) for c in cams.values()]
+              for a in angles]
+    frames[0] = [v if k == len(cams) - 1 else np.delete(v, tip, axis=0)
+                 for k, v in enumerate(frames[0])]
+    params = AnnealParams(match="3d", candidates=1, threshold_mode="absolute",
+                          reanalysis_threshold=1e6, final_polish_px=200.0).with_schedule(3000)
+    fitter = Fitter(body, cams, params)
+    obs = fitter.observations(frames)
+    held, whole = fitter.fit(obs)
+    assert held.status == "ambiguous" and whole.status == "ok"  # one run: always flagged
+    labels = body.axis_labels
+
+    def own(r):  # the result as a candidate (one run keeps none)
+        return Candidate(r.angles_deg, r.root_positions, r.error,
+                         *fitter.state(r.angles_deg, r.root_positions))
+
+    def moved(r, leg, by):
+        a = r.angles_deg.copy()
+        a[[i for i, lab in enumerate(labels) if lab.startswith(leg + "_")
+           and not body.locked_mask()[i]]] += by
+        return own(r)._replace(angles_deg=a)
+
+    for leg, by, spread, status in (("b", 20.0, 0.0, "ok"), ("a", 20.0, None, "ambiguous"),
+                                    ("a", 0.01, None, "ok")):
+        r = replace(held, status="ok", candidates=(own(held), moved(held, leg, by)))
+        out, got = fitter._polished(obs, 0, r)
+        if spread is None:
+            assert got > 0.0 and (got > fitter._held_apart) == (status == "ambiguous")
+        else:
+            assert got == spread
+        assert anneal._held(out, got, fitter._held_apart).status == status
+    r = replace(whole, candidates=(own(whole), moved(whole, "a", 20.0)))
+    assert fitter._polished(obs, 1, r)[1] is None
 
 
 @pytest.mark.parametrize("case, dets, own, placed", [
