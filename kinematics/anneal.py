@@ -1791,20 +1791,25 @@ class Fitter:
         :data:`TRACK_JUMP_PX` per marker image) is fitted in full too (:meth:`_fit_again`).
         Where that replaces the track of a body of several partitions, the frames before
         are tracked back from it (:meth:`_retrack`): a track that crept off a leg until E
-        jumped gets it back."""
+        jumped gets it back. So are they from a tracked frame whose E falls below
+        :data:`TRACK_DROP` times that median: a track that lost a leg and found it again."""
         out = [self._fit_full(obs, idx, roots, rots, lo, p)]
         kept_e = [out[0].error] if np.isfinite(out[0].error) else []
         limbs = self._limbs(p)
         for i in range(lo + 1, hi):
             r = self._step(obs, int(idx[i]), out[-1], p)
             images = int(marker_images(obs, idx[i:i + 1], len(self.body.marker_names))[0])
-            jump = (TRACK_JUMP * float(np.median(kept_e[-TRACK_MEMORY:]))
-                    + TRACK_JUMP_PX * max(images, 1)) if kept_e else np.inf
+            # (NaN before any E is kept: then E neither jumps nor falls)
+            recent = float(np.median(kept_e[-TRACK_MEMORY:])) if kept_e else np.nan
+            jump = TRACK_JUMP * recent + TRACK_JUMP_PX * max(images, 1)
             if r is None or not r.error <= p.reanalysis_threshold or r.error > jump:
                 tracked, r = r, self._fit_again(obs, idx, roots, rots, i, p, r)
                 if r is not tracked and limbs:  # a cut: mend the frames that led to it
                     self._retrack_back(obs, p, out, r)
                     kept_e = [q.error for q in out if np.isfinite(q.error)]
+            elif limbs and r.error < TRACK_DROP * recent:  # found a leg it had lost?
+                self._retrack_back(obs, p, out, r)
+                kept_e = [q.error for q in out if np.isfinite(q.error)]
             out.append(r)
             if np.isfinite(r.error):
                 kept_e.append(r.error)
@@ -1850,18 +1855,50 @@ class Fitter:
     def _retrack(self, obs: Observations, p: AnnealParams, results: list[FrameResult],
                  seed: FrameResult) -> None:
         """``results`` (consecutive frames, in the order to track them) tracked again from
-        ``seed``, the result of the frame before the first, while the step, or its merge
-        with the result there, has an E below :data:`TRACK_PREFER` times the result's (in
-        place)."""
+        ``seed``, the result of the frame before the first (in place). Each frame takes the
+        step, or its merge with the result there, whichever has the lower E; a stretch of
+        such frames replaces the results once its summed E is below :data:`TRACK_PREFER`
+        times theirs, or below theirs where the re-track then meets the results (every
+        model marker within ``ambiguous_move`` segment lengths of the result's, and E not
+        below TRACK_PREFER times its); it stops there, or after :data:`TRACK_WINDOW` frames
+        not taken. One frame's E is noise: a
+        leg on a neighbour's points can fit a frame as well as the right posture and the
+        next frames worse (fly, 3 cameras, frames 224-253)."""
+        near = p.ambiguous_move * self._segment_scale
+        taken = 0  # results[:taken] are decided
+        pending: list[FrameResult] = []
+        alt_e = res_e = 0.0
         for k, result in enumerate(results):
-            step = self._step(obs, int(result.frame), seed if k == 0 else results[k - 1], p)
+            prev = pending[-1] if pending else seed if k == 0 else results[k - 1]
+            step = self._step(obs, int(result.frame), prev, p)
             if step is None:
                 return
             merged = self._merged(obs, int(result.frame), result, step, p)
             best = step if merged is None else min((merged, step), key=lambda r: r.error)
-            if not best.error < TRACK_PREFER * result.error:
+            if (self._marker_moves(result, [best])[0] <= near
+                    and not best.error < TRACK_PREFER * result.error):
+                # met: the stretch before joins the results here without their jump, so it
+                # need only fit better
+                if pending and alt_e < res_e:
+                    self._take(results, taken, pending)
                 return
-            results[k] = self._taken(result, best)
+            pending.append(best)
+            alt_e += best.error
+            res_e += result.error
+            if alt_e < TRACK_PREFER * res_e:
+                taken = self._take(results, taken, pending)
+                pending, alt_e, res_e = [], 0.0, 0.0
+            elif len(pending) >= TRACK_WINDOW:
+                return
+
+    @staticmethod
+    def _take(results: list[FrameResult], first: int, stretch: list[FrameResult]) -> int:
+        """``results[first:]`` replaced by ``stretch`` (:meth:`_taken`), in place; returns
+        the index after it."""
+        end = first + len(stretch)
+        results[first:end] = [Fitter._taken(r, s) for r, s in
+                              zip(results[first:end], stretch, strict=True)]
+        return end
 
     def _marker_moves(self, chosen: Candidate, cands: Sequence[Candidate]) -> np.ndarray:
         """Per candidate, the largest distance of a model marker from where the chosen
@@ -2104,6 +2141,15 @@ TRACK_JUMP_PX = 0.05
 #: better by as much: on the fly the lower E of two fits often has a leg on a neighbour's
 #: points (0:660: 95.2 % within 0.2 mm at 0.9, 94.5 % at 0.95, 94.8 % at 0.85).
 TRACK_PREFER = 0.9
+#: ... compared over stretches of up to this many frames: a re-track gives up after as many
+#: frames it has not taken.
+TRACK_WINDOW = 8
+#: A tracked frame whose E falls below this times the median of the last TRACK_MEMORY kept
+#: is tracked back (``Fitter._retrack``): a track that lost a leg finds it again with a
+#: lower E, and the frames before are mended from it (fly, 3 cameras, 0:660: 93.3 % within
+#: 0.2 mm without, 95.9 / 95.9 / 96.2 / 96.5 % at 0.8 / 0.85 / 0.9 / 1.0, 96.7 % tracking
+#: every frame back at 0.9 times the frames/s of 1.0).
+TRACK_DROP = 1.0
 #: A tracked frame whose E is above this times the median E of the TRACK_SPIKE_HALF frames
 #: on either side (and itself), plus TRACK_JUMP_PX per marker image, is ``ambiguous`` (fly
 #: 0:660, 32 frames off by > 0.2 mm: 1.2 flagged 35 frames, 13 of them off; 1.3 16 with 11;

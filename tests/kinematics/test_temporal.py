@@ -715,9 +715,12 @@ def test_a_merge_takes_each_limb_from_the_fit_that_explains_its_markers():
     assert fitter._merged(obs, 0, lost_a, right, p) is not None
 
 
-def test_track_mends_a_segment_start_from_the_segment_before():
+def test_track_mends_a_segment_start_from_the_segment_before(monkeypatch):
     """A segment's first frame is fitted alone; where that fit lost a leg, the previous
     segment's track, one step on, explains it better and takes it over."""
+    from kinematics import anneal
+
+    monkeypatch.setattr(anneal, "TRACK_DROP", 0.0)  # frame 13 would track it back too
     body, cams, angles, frames = legs_walking(24, 1.0)
     p = AnnealParams(start="track", segment_length=12, **FAST)
     full = Fitter._fit_full
@@ -770,6 +773,92 @@ def test_track_cut_by_a_full_fit_mends_the_frames_that_led_to_it(monkeypatch):
     knee = body.axis_labels.index("b_knee.flex")
     assert all(abs(unmended[k].angles_deg[knee] - angles[k, knee]) > 5 for k in range(5, 9))
     assert [r.status for r in res[5:10]] == ["reanalysed"] * 5
+    np.testing.assert_allclose([r.angles_deg for r in res], angles, atol=2.0)
+
+
+def _planted_retrack(monkeypatch, wrong_e, alt_e, n_wrong):
+    """:meth:`Fitter._retrack` of results 1..11 of a three-legged walk from result 0, the
+    first ``n_wrong`` with leg b's knee 35° off and E ``wrong_e``, the rest right; the step
+    to frame k returns the right posture with E ``alt_e(k)`` (no merges). Returns the results after
+    it, the right results and the frames the steps were asked for."""
+    from kinematics import anneal
+
+    body, cams, angles, frames = legs_walking(12, 1.0)
+    fitter = Fitter(body, cams, AnnealParams(**FAST))
+    obs = fitter.observations(frames)
+    right = [fitter.refine_frame(frames[k], k, angles[k]) for k in range(12)]
+    results = [replace(_bent(fitter, obs, right[k], fitter.params, "b_knee.flex", 35.0),
+                       error=wrong_e) if k <= n_wrong else right[k] for k in range(1, 12)]
+    asked = []
+
+    def step(self, obs, position, prev, p):
+        asked.append(position)
+        return replace(right[position], error=alt_e(position))
+    monkeypatch.setattr(Fitter, "_step", step)
+    monkeypatch.setattr(Fitter, "_merged", lambda *a: None)
+    out = list(results)
+    fitter._retrack(obs, fitter.params, out, right[0])
+    assert anneal.TRACK_WINDOW == 8 and anneal.TRACK_PREFER == 0.9  # the cases below
+    return out, right, asked
+
+
+def _is_right(r, right) -> bool:
+    return np.abs(r.angles_deg - right[r.frame].angles_deg).max() < 1e-9
+
+
+def test_a_retrack_takes_a_stretch_that_fits_better_over_several_frames(monkeypatch):
+    """Each step only 3 % better than a wrong result (one frame's E is noise): the stretch
+    is taken once its summed E is 10 % lower, then frame by frame; the re-track stops where
+    it meets the right results (fly, 3 cameras, frames 224-253: the first frame's E was
+    4 % lower, the next ones 10-20 %)."""
+    # frame 1 at 9.7, the next at 8.5: 18.2 / 20 for frames 1-2, 26.7 / 30 for 1-3
+    out, right, asked = _planted_retrack(monkeypatch, 10.0, lambda k: 9.7 if k == 1 else 8.5,
+                                         8)
+    assert all(_is_right(r, right) and r.status == "reanalysed" for r in out[:8])
+    assert asked == list(range(1, 10))  # frame 9 met the right result: stop
+    assert all(r is q for r, q in zip(out[8:], right[9:], strict=True))
+    # every step 3 % better: never taken, given up after TRACK_WINDOW frames
+    out, right, asked = _planted_retrack(monkeypatch, 10.0, lambda k: 9.7, 8)
+    assert not any(_is_right(r, right) for r in out[:8]) and asked == list(range(1, 9))
+
+
+def test_a_retrack_that_meets_the_results_need_only_fit_better(monkeypatch):
+    """Frames 1-4 wrong, 5 on right: a re-track from frame 0 that joins them at frame 5
+    takes 1-4 where its summed E is lower at all (5 % here), not 10 %; where it is higher,
+    nothing. A re-track that never meets the results gives up after TRACK_WINDOW frames."""
+    out, right, asked = _planted_retrack(monkeypatch, 10.0, lambda k: 9.5, 4)
+    assert all(_is_right(r, right) for r in out[:4]) and asked == [1, 2, 3, 4, 5]
+    out, right, asked = _planted_retrack(monkeypatch, 10.0, lambda k: 10.5, 4)
+    assert not any(_is_right(r, right) for r in out[:4]) and asked == [1, 2, 3, 4, 5]
+    out, right, asked = _planted_retrack(monkeypatch, 10.0, lambda k: 9.5, 11)
+    assert not any(_is_right(r, right) for r in out) and asked == list(range(1, 9))
+
+
+def test_a_track_that_finds_a_lost_leg_again_mends_the_frames_before(monkeypatch):
+    """A track that crept off a leg over frames 3-8 without E jumping (nor reaching the
+    threshold) finds it again at frame 9, where E falls below the median of the frames
+    before (TRACK_DROP): frames 3-8 are tracked back from it."""
+    from kinematics import anneal
+
+    monkeypatch.setattr(anneal, "TRACK_JUMP", 1e9)
+    body, cams, angles, frames = legs_walking(16, 1.0)
+    p = AnnealParams(start="track", segment_length=32,
+                     **{**FAST, "reanalysis_threshold": 1e9})
+    step = Fitter._step
+
+    def creeping(self, obs, position, prev, q):
+        r = step(self, obs, position, prev, q)
+        if r is not None and position == prev.frame + 1 and 3 <= position <= 8:
+            return _bent(self, obs, r, q, "b_knee.flex", 8.0)
+        return r
+    monkeypatch.setattr(Fitter, "_step", creeping)
+    fitter = Fitter(body, cams, p)
+    res = fitter.fit(frames)
+    monkeypatch.setattr(anneal, "TRACK_DROP", 0.0)
+    unmended = fitter.fit(frames)
+    knee = body.axis_labels.index("b_knee.flex")
+    assert all(abs(unmended[k].angles_deg[knee] - angles[k, knee]) > 5 for k in range(3, 9))
+    assert [r.status for r in res[3:9]] == ["reanalysed"] * 6
     np.testing.assert_allclose([r.angles_deg for r in res], angles, atol=2.0)
 
 
