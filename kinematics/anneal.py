@@ -1855,15 +1855,20 @@ class Fitter:
     def _retrack(self, obs: Observations, p: AnnealParams, results: list[FrameResult],
                  seed: FrameResult) -> None:
         """``results`` (consecutive frames, in the order to track them) tracked again from
-        ``seed``, the result of the frame before the first (in place). Each frame takes the
-        step, or its merge with the result there, whichever has the lower E; a stretch of
-        such frames replaces the results once its summed E is below :data:`TRACK_PREFER`
-        times theirs, or below theirs where the re-track then meets the results (every
-        model marker within ``ambiguous_move`` segment lengths of the result's, and E not
-        below TRACK_PREFER times its); it stops there, or after :data:`TRACK_WINDOW` frames
-        not taken. One frame's E is noise: a
-        leg on a neighbour's points can fit a frame as well as the right posture and the
-        next frames worse (fly, 3 cameras, frames 224-253)."""
+        ``seed``, the result of the frame before the first (in place).
+
+        - Each frame takes the step, or its merge with the result there where that has an
+          E below :data:`TRACK_PREFER` times the step's: a merge keeps the result's wrong
+          leg where that leg scores well on a neighbour's points (fly, 3 cameras, frame 224).
+        - A stretch of such frames replaces the results once its summed E is below
+          TRACK_PREFER times theirs. One frame's E is noise: a leg on a neighbour's points
+          can fit a frame as well as the right posture and the next frames worse (fly,
+          3 cameras, frames 224-253).
+        - Where the re-track meets the results (every model marker within
+          ``ambiguous_move`` segment lengths of the result's, and E not below TRACK_PREFER
+          times its), the stretch before is taken where its summed E is below theirs at
+          all, and the re-track stops. It also stops after :data:`TRACK_WINDOW` frames not
+          taken."""
         near = p.ambiguous_move * self._segment_scale
         taken = 0  # results[:taken] are decided
         pending: list[FrameResult] = []
@@ -1874,7 +1879,8 @@ class Fitter:
             if step is None:
                 return
             merged = self._merged(obs, int(result.frame), result, step, p)
-            best = step if merged is None else min((merged, step), key=lambda r: r.error)
+            best = (merged if merged is not None and merged.error < TRACK_PREFER * step.error
+                    else step)
             if (self._marker_moves(result, [best])[0] <= near
                     and not best.error < TRACK_PREFER * result.error):
                 # met: the stretch before joins the results here without their jump, so it
