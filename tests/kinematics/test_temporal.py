@@ -748,6 +748,19 @@ def test_track_mends_a_segment_start_from_the_segment_before(monkeypatch):
     assert [r.angles_deg.tolist() for r in alone] == [r.angles_deg.tolist() for r in res]
 
 
+def _creep(monkeypatch, first: int, last: int, deg) -> None:
+    """``Fitter._step`` made to creep off: a step forward to a frame ``first``..``last``
+    bends leg b's knee by ``deg(frame)`` after it."""
+    step = Fitter._step
+
+    def creeping(self, obs, position, prev, q):
+        r = step(self, obs, position, prev, q)
+        if r is not None and position == prev.frame + 1 and first <= position <= last:
+            return _bent(self, obs, r, q, "b_knee.flex", deg(position))
+        return r
+    monkeypatch.setattr(Fitter, "_step", creeping)
+
+
 def test_track_cut_by_a_full_fit_mends_the_frames_that_led_to_it(monkeypatch):
     """A track that crept off a leg over frames 5-8 (below the threshold) until frame 9
     was fitted in full: the frames before it are tracked back from the full fit."""
@@ -758,14 +771,7 @@ def test_track_cut_by_a_full_fit_mends_the_frames_that_led_to_it(monkeypatch):
     # E: ~1 px right, 8-9 px with the leg 8° off, 46 px 60° off
     p = AnnealParams(start="track", segment_length=32,
                      **{**FAST, "reanalysis_threshold": 20.0})
-    step = Fitter._step
-
-    def creeping(self, obs, position, prev, q):
-        r = step(self, obs, position, prev, q)
-        if r is not None and position == prev.frame + 1 and 5 <= position <= 9:
-            return _bent(self, obs, r, q, "b_knee.flex", 8.0 if position < 9 else 60.0)
-        return r
-    monkeypatch.setattr(Fitter, "_step", creeping)
+    _creep(monkeypatch, 5, 9, lambda position: 8.0 if position < 9 else 60.0)
     fitter = Fitter(body, cams, p)
     res = fitter.fit(frames)
     monkeypatch.setattr(Fitter, "_retrack", lambda *a: None)
@@ -860,14 +866,7 @@ def test_a_track_that_finds_a_lost_leg_again_mends_the_frames_before(monkeypatch
     body, cams, angles, frames = legs_walking(16, 1.0)
     p = AnnealParams(start="track", segment_length=32,
                      **{**FAST, "reanalysis_threshold": 1e9})
-    step = Fitter._step
-
-    def creeping(self, obs, position, prev, q):
-        r = step(self, obs, position, prev, q)
-        if r is not None and position == prev.frame + 1 and 3 <= position <= 8:
-            return _bent(self, obs, r, q, "b_knee.flex", 8.0)
-        return r
-    monkeypatch.setattr(Fitter, "_step", creeping)
+    _creep(monkeypatch, 3, 8, lambda position: 8.0)
     fitter = Fitter(body, cams, p)
     res = fitter.fit(frames)
     monkeypatch.setattr(anneal, "TRACK_DROP", 0.0)
