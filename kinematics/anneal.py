@@ -452,7 +452,7 @@ class Fitter:
         confirm = p.confirm_runs == "on" or (p.confirm_runs == "auto" and (
             parts.bounds.shape[0] > 1 or p.match == "3d"))
         return parts._replace(samples=int(samples) if search else 0,
-                              confirm=float(p.ambiguous_move * self._segment_scale)
+                              confirm=float(self._apart(p))
                               if confirm and search else 0.0)
 
     def observations(self, data) -> Observations:
@@ -705,7 +705,7 @@ class Fitter:
                 start[self.problem.root_axes[q]] = 0.0  # the seed holds the root's rotation
         return _held(*self._polished(obs, 0, self._fit_block(
             obs, np.zeros(1, np.int64), np.array([int(frame)], np.int64), roots, rots, start,
-            np.array([0, 1], np.int64))[0]), self._held_apart)
+            np.array([0, 1], np.int64))[0]), self._apart(self.params))
 
     def _one_frame(self, detections_frame, frame, root_positions, caller: str):
         """The observations of one frame, its roots (1, n_chains, 3) and root rotations:
@@ -746,7 +746,7 @@ class Fitter:
         return _held(*self._polished(obs, 0, self._frame_result(
             obs, 0, int(frame), found.state, found.seed_pos, found.seed_rot, self.params,
             runs=1, iterations=counted[0], pairs=0, error=None, candidates=(found,))),
-            self._held_apart)
+            self._apart(self.params))
 
     def iter_fit(self, detections, frames=None, *, chunk_size: int | None = None,
                  sequence_starts: Iterable[int] = (),
@@ -855,7 +855,7 @@ class Fitter:
         (a fly's hind leg through 6 cameras, frames 357-360) ends where they part. The next
         frame only, so a fit resumed from a checkpoint decides every frame as the whole fit
         did."""
-        apart = self._held_apart
+        apart = self._apart(self.params)
         pending = None
         for position, r in zip(idx, results, strict=False):  # a cancelled fit yields fewer
             r, spread = self._polished(obs, int(position), r)
@@ -866,11 +866,11 @@ class Fitter:
         if pending is not None:
             yield _held(*pending, apart)
 
-    @property
-    def _held_apart(self) -> float:
-        """How far apart (model units) a held limb's runs put one of its markers for the
-        frame to be ``ambiguous``: ``ambiguous_move`` segment lengths, as for candidates."""
-        return self.params.ambiguous_move * self._segment_scale
+    def _apart(self, p: AnnealParams) -> float:
+        """How far (model units) a model marker must lie from where another posture puts it
+        for the two to differ: ``ambiguous_move`` segment lengths. So it is for candidates
+        (ambiguous), confirming runs, a held limb's runs, and a re-track meeting the results."""
+        return p.ambiguous_move * self._segment_scale
 
     def _polished(self, obs: Observations, position: int, r: FrameResult
                   ) -> tuple[FrameResult, float | None]:
@@ -936,8 +936,8 @@ class Fitter:
         if held:
             spread = np.inf
             if len(r.candidates) > 1:
-                mk_c = self._markers(r.candidates)[:, np.concatenate(held)]
-                spread = float(np.linalg.norm(mk_c - mk_c[0], axis=-1).max())
+                spread = float(self._marker_moves(r.candidates[0], r.candidates[1:],
+                                                  np.concatenate(held)).max())
         if moved.size == 0:
             return r, spread
         new = self._frame_result(obs, position, r.frame, state, pos, rot, p, runs=r.runs,
@@ -1603,7 +1603,7 @@ class Fitter:
             if near.any() and p.ambiguous_move > 0:  # ... and visibly elsewhere
                 moves = np.zeros(len(near))  # (the window's rows are padded)
                 moves[:len(r.candidates)] = self._marker_moves(chosen, r.candidates)
-                near &= moves > p.ambiguous_move * self._segment_scale
+                near &= moves > self._apart(p)
             # ... and the movement does not rule it out: the smoothest path through it moves
             # about as little as the smoothest through the chosen one (a mirror branch as
             # smooth as the chosen one costs nothing more, a flip for one frame two jumps)
@@ -1804,10 +1804,10 @@ class Fitter:
             jump = TRACK_JUMP * recent + TRACK_JUMP_PX * max(images, 1)
             if r is None or not r.error <= p.reanalysis_threshold or r.error > jump:
                 tracked, r = r, self._fit_again(obs, idx, roots, rots, i, p, r)
-                if r is not tracked and limbs:  # a cut: mend the frames that led to it
-                    self._retrack_back(obs, p, out, r)
-                    kept_e = [q.error for q in out if np.isfinite(q.error)]
-            elif limbs and r.error < TRACK_DROP * recent:  # found a leg it had lost?
+                mend = r is not tracked  # a cut: mend the frames that led to it
+            else:
+                mend = r.error < TRACK_DROP * recent  # found a leg it had lost?
+            if mend and limbs:
                 self._retrack_back(obs, p, out, r)
                 kept_e = [q.error for q in out if np.isfinite(q.error)]
             out.append(r)
@@ -1869,7 +1869,7 @@ class Fitter:
           times its), the stretch before is taken where its summed E is below theirs at
           all, and the re-track stops. It also stops after :data:`TRACK_WINDOW` frames not
           taken."""
-        near = p.ambiguous_move * self._segment_scale
+        near = self._apart(p)
         taken = 0  # results[:taken] are decided
         pending: list[FrameResult] = []
         alt_e = res_e = 0.0
@@ -1906,10 +1906,11 @@ class Fitter:
                               zip(results[first:end], stretch, strict=True)]
         return end
 
-    def _marker_moves(self, chosen: Candidate, cands: Sequence[Candidate]) -> np.ndarray:
-        """Per candidate, the largest distance of a model marker from where the chosen
-        posture puts it (length units)."""
-        mk = self._markers([chosen, *cands])
+    def _marker_moves(self, chosen: Candidate, cands: Sequence[Candidate],
+                      markers: np.ndarray | slice = slice(None)) -> np.ndarray:
+        """Per candidate, the largest distance of a model marker (of ``markers``) from where
+        the chosen posture puts it (length units)."""
+        mk = self._markers([chosen, *cands])[:, markers]
         return np.linalg.norm(mk[1:] - mk[0], axis=-1).max(axis=-1)
 
     def _markers(self, cands: Sequence[Candidate]) -> np.ndarray:

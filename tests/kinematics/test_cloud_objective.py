@@ -326,7 +326,7 @@ def test_a_held_limb_is_ambiguous_where_its_runs_put_it_apart(monkeypatch):
     body = three_legs()
     cams = ring()
     fitter = Fitter(body, cams, AnnealParams(match="3d", candidates=2))
-    apart = fitter._held_apart
+    apart = fitter._apart(fitter.params)
     assert apart == pytest.approx(0.25 * fitter._segment_scale)
     frames = [0, 1, 2, 3, 4, 5, 7, 8, 9]
     spreads = [None, 0.1 * apart, 2 * apart, 0.1 * apart, 0.1 * apart, 0.5 * apart,
@@ -385,10 +385,10 @@ def test_a_held_limbs_runs_are_measured_on_its_own_markers():
         r = replace(held, status="ok", candidates=(own(held), moved(held, leg, by)))
         out, got = fitter._polished(obs, 0, r)
         if spread is None:
-            assert got > 0.0 and (got > fitter._held_apart) == (status == "ambiguous")
+            assert got > 0.0 and (got > fitter._apart(fitter.params)) == (status == "ambiguous")
         else:
             assert got == spread
-        assert anneal._held(out, got, fitter._held_apart).status == status
+        assert anneal._held(out, got, fitter._apart(fitter.params)).status == status
     r = replace(whole, candidates=(own(whole), moved(whole, "a", 20.0)))
     assert fitter._polished(obs, 1, r)[1] is None
 
