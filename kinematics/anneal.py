@@ -88,6 +88,13 @@ STATUSES = ("ok", "reanalysed", "ambiguous", "failed", "no-detections")
 #: The start search's draws per joint and kept posture (``start_samples`` None) for a body
 #: of several partitions (docs/benchmarks.md, the fly).
 DEFAULT_START_SAMPLES = 64
+#: ``match = "auto"`` matches a single chain in 3D where its views hold more than this many
+#: detections per marker image they show (median over the video's frames): other limbs' or
+#: animals' markers, which Eq. 5 lets the chain take in one view and another. One fly leg
+#: among six drawn (5.7 detections per marker image): 56 % of frames right per view, 100 %
+#: in 3D; the free mouse (1.0): per view keeps a marker absent from every view off its
+#: neighbours, 3D does not (docs/benchmarks.md, session 27).
+CLUTTER_RATIO = 2.0
 #: Levenberg-Marquardt steps of the final polish at most (it stops once converged).
 POLISH_STEPS = 50
 
@@ -414,17 +421,50 @@ class Fitter:
             return _ak.NO_HIDDEN
         return np.ascontiguousarray(self.unseen.T, dtype=float)
 
-    def _frame_ragged(self, detections_frame) -> _Ragged:
-        return _as_ragged([detections_frame], self.view_names)
+    def match_for(self, data) -> str:
+        """Where these data's markers are matched: 'views' (Eq. 5, each view on its own) or
+        '3d' (triangulated first). ``match`` says, or with 'auto' the data: '3d' with 3 or
+        more views (of each colour) for a body annealed in several partitions (many limbs),
+        or for a single chain whose views hold more than :data:`CLUTTER_RATIO` detections per
+        marker image (median over the frames given: other limbs' markers), else 'views'.
+        Labelled keypoints are matched by their labels in the views ('views'); 3D points are
+        '3d'. A fit of some frames decides on all the data it is given, so pass a video's
+        whole detections (and ``frames``) for its frames to be matched alike; a one-frame
+        call (:meth:`fit_frame`, :meth:`error`) decides on that frame, unless ``match`` is
+        set (the GUI sets it from the whole video)."""
+        if isinstance(data, Observations) and data.kind != "points":
+            return "3d" if data.kind in ("cloud", "points3d") else "views"
+        return self._match(data)
 
-    @property
-    def matches_in_3d(self) -> bool:
-        """Whether unlabelled points are triangulated and matched in 3D (``match``: '3d', or
-        'auto' with 3 or more views and a body annealed in several partitions)."""
+    def _match(self, data) -> str:
+        """:meth:`match_for` of unlabelled points (Observations, or any form :meth:`iter_fit`
+        takes: converted only where the clutter decides)."""
         p = self.params
         if p.match != "auto":
-            return p.match == "3d"
-        return self._views_3d >= 3 and self._limbs(p)
+            return p.match
+        if self._views_3d < 3:
+            return "views"
+        if not self.match_measured:
+            return "3d"  # many limbs
+        obs = data if isinstance(data, Observations) else self._unlabelled(data)
+        return "3d" if self._clutter(obs) > CLUTTER_RATIO else "views"
+
+    @property
+    def match_measured(self) -> bool:
+        """Whether :meth:`match_for` decides on the data's clutter: ``match`` 'auto' for a
+        single chain (one partition) in 3 or more views."""
+        p = self.params
+        return p.match == "auto" and self._views_3d >= 3 and not self._limbs(p)
+
+    def _clutter(self, obs: Observations) -> float:
+        """Median over frames of the detections per marker image the views show (0 without
+        any)."""
+        shown = obs.with_unseen(self.unseen) if self.unseen is not None else obs
+        frames = np.arange(obs.n_frames)
+        images = marker_images(shown, frames, len(self.body.marker_names))
+        found = obs.view_counts(frames).sum(axis=1)
+        keep = (images > 0) & (found > 0)
+        return float(np.median(found[keep] / images[keep])) if keep.any() else 0.0
 
     @property
     def _views_3d(self) -> int:
@@ -438,10 +478,11 @@ class Fitter:
         """Whether the body is annealed in several partitions (many limbs)."""
         return self._partitions(p, search=False).bounds.shape[0] > 1
 
-    def _partitions(self, p: AnnealParams, search: bool = True):
+    def _partitions(self, p: AnnealParams, search: bool = True, cloud: bool = False):
         """The fit's partitions; the start search as ``start_samples`` says (None: 64 for
-        several partitions, none for one) and runs confirmed as ``confirm_runs`` says, or
-        neither (``search`` False: a re-fit from a neighbour's posture)."""
+        several partitions, none for one) and runs confirmed as ``confirm_runs`` says
+        ('auto': for several partitions, or markers matched in 3D, ``cloud``), or neither
+        (``search`` False: a re-fit from a neighbour's posture)."""
         parts = self._once(  # the re-fits ask for them hundreds of times per block
             ("partitions", p.partitions, p.partition_rounds, p.claim_gate_px),
             lambda: partitions_of(self.problem, p.partitions, p.partition_rounds,
@@ -450,7 +491,7 @@ class Fitter:
         if samples is None:
             samples = DEFAULT_START_SAMPLES if parts.bounds.shape[0] > 1 else 0
         confirm = p.confirm_runs == "on" or (p.confirm_runs == "auto" and (
-            parts.bounds.shape[0] > 1 or p.match == "3d"))
+            parts.bounds.shape[0] > 1 or cloud))
         return parts._replace(samples=int(samples) if search else 0,
                               confirm=float(self._apart(p))
                               if confirm and search else 0.0)
@@ -469,9 +510,7 @@ class Fitter:
             raise KinematicsError("no cameras: 2D observations need one camera per view",
                                   field="cameras")
         if obs is None:
-            rag = _as_ragged(data, self.view_names)
-            obs = Observations.unlabelled(rag.points, rag.offsets, self.view_names,
-                                          rag.dropped)
+            obs = self._unlabelled(data)
         elif list(obs.view_names) != self.view_names:
             raise KinematicsError(f"observations are for views {list(obs.view_names)} but "
                                   f"the cameras are {self.view_names}", field="observations")
@@ -483,7 +522,7 @@ class Fitter:
         if obs.kind == "cloud" and obs.points3d.shape[2] not in (4, 4 + nm):
             raise KinematicsError(f"a cloud needs 4 columns, or 4 + {nm} (one per marker), "
                                   f"got {obs.points3d.shape[2]}", field="cloud")
-        if obs.kind == "points" and self.matches_in_3d:
+        if obs.kind == "points" and self._match(obs) == "3d":
             if self._views_3d < 3:
                 each = " of each colour (views that show the same markers)" if (
                     self.unseen is not None) else ""
@@ -494,6 +533,14 @@ class Fitter:
         if self.unseen is not None and obs.kind in ("points", "keypoints"):
             obs = obs.with_unseen(self.unseen)
         return obs
+
+    def _frame_ragged(self, detections_frame) -> _Ragged:
+        return _as_ragged([detections_frame], self.view_names)
+
+    def _unlabelled(self, data) -> Observations:
+        """Unlabelled detections in any form :meth:`iter_fit` takes, as Observations."""
+        rag = _as_ragged(data, self.view_names)
+        return Observations.unlabelled(rag.points, rag.offsets, self.view_names, rag.dropped)
 
     def _marks(self, obs: Observations, frames) -> np.ndarray | None:
         """(len(frames), n_views, n_markers) markers hidden in each view: the observations'
@@ -544,10 +591,11 @@ class Fitter:
         error : float
         error_per_view : ndarray, shape (n_views,) (zeros for 3D points)
         """
-        if isinstance(detections_frame, Observations) or self.matches_in_3d or (
+        frame = (detections_frame if isinstance(detections_frame, Observations)
+                 else self._unlabelled([detections_frame]))
+        if isinstance(detections_frame, Observations) or self._match(frame) == "3d" or (
                 hidden is not None or self.unseen is not None):
-            obs = self.observations(detections_frame if isinstance(
-                detections_frame, Observations) else [detections_frame])
+            obs = self.observations(frame)
             if hidden is not None:
                 marks = np.asarray(hidden, bool)
                 shape = (self.n_views, len(self.body.marker_names))
@@ -558,14 +606,13 @@ class Fitter:
             state, pos, rot = self.state(angles_deg, root_positions)
             return self._state_error(obs.arrays(np.array([0], np.int64)), state, pos, rot,
                                      self.params)
-        rag = self._frame_ragged(detections_frame)
         per_view = np.empty(self.n_views)
         opts = self.params.error
         state, pos, rot = self.state(angles_deg, root_positions)
         nm = self.problem.folded.marker_joint.size
         e = _ak.posture_error(state, pos, rot, *self.problem.folded, *self.problem.cams,
-                              _ak.OBJ_NEAREST, rag.points, np.ones(len(rag.points)),
-                              rag.offsets, np.zeros((nm, 4)), *error_args(opts), per_view)
+                              _ak.OBJ_NEAREST, frame.points, np.ones(len(frame.points)),
+                              frame.offsets, np.zeros((nm, 4)), *error_args(opts), per_view)
         return float(e), per_view
 
     # -- root placement -------------------------------------------------------------------
@@ -996,7 +1043,7 @@ class Fitter:
         cams, arrays = self._kernel_inputs(block)
         n, ns, nv = len(frame_ids), pr.n_state, len(cams.kind)
         out = FitOutputs.empty(n, ns, nv, max(p.max_runs, p.candidates))
-        parts = self._partitions(p)
+        parts = self._partitions(p, cloud=obs.kind == "cloud")
         backend = self._backend(p, arrays.objective, parts, n,
                                 hidden=obs.hidden is not None or obs.unseen is not None)
         if backend == "cuda":

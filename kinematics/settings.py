@@ -258,7 +258,8 @@ class AnnealParams:
         "marker within ambiguous_move segment lengths of each other, the best run one of "
         "them: a search that found its minimum once may have been lucky. 'auto': for a body "
         "annealed in several partitions (many limbs), where runs land on different limb "
-        "assignments, and for any body with match '3d'; 'on'; 'off' (the paper).",
+        "assignments, and for any body whose markers are matched in 3D (match); 'on'; 'off' "
+        "(the paper).",
         choices=CONFIRM_MODES)
     ambiguous_move: float = setting(
         0.25, "With candidates > 1: a candidate that fits about as well makes a frame "
@@ -283,10 +284,12 @@ class AnnealParams:
         "'3d' — the detections are first triangulated across the calibrated views into 3D "
         "points (a marker seen in at least 3 views; kinematics.cloud), and each model marker "
         "is matched to its nearest 3D point, its distance read in pixels at that point, so "
-        "every pixel setting keeps its meaning; 'auto' — '3d' for a body annealed in several "
-        "partitions (many limbs) seen by 3 or more views (with markers of several colours: "
-        "3 or more views of each colour), where blobs of different limbs fuse in the "
-        "images, else 'views' (docs/fitting.md, 'Matching in 3D').",
+        "every pixel setting keeps its meaning; 'auto' — with 3 or more views (with markers "
+        "of several colours: 3 or more views of each colour) '3d' for a body annealed in "
+        "several partitions (many limbs), where blobs of different limbs fuse in the images, "
+        "and for a single chain whose views hold more than twice as many detections as it "
+        "has marker images (median over the video: other limbs' markers), else 'views' "
+        "(docs/fitting.md, 'Matching in 3D').",
         choices=MATCH_MODES)
     backend: str = setting(
         "auto", "Which kernel anneals: 'scalar' one run at a time, 'lanes' many runs at once "

@@ -978,7 +978,14 @@ class Session(QObject):
         if not whole_video and params.threshold_mode == "auto":
             params = replace(params, threshold_mode="absolute",
                              reanalysis_threshold=self.threshold)
-        return replace(self._fit_model(), params=params).fitter(body or self.body)
+        fitter = replace(self._fit_model(), params=params).fitter(body or self.body)
+        if params.match != "auto" or self.fit_detections is None:
+            return fitter
+        # decided on the whole video, so that a re-fit or a correction of one frame is matched
+        # as the fit of every frame was ('auto' would decide on that one frame)
+        match = fitter.match_for(self.fit_detections)
+        return replace(self._fit_model(), params=replace(params, match=match)).fitter(
+            body or self.body)
 
     def _fitter_or_report(self, whole_video: bool = False):
         """The fitter for the next task, or None after reporting on :attr:`error` why there
@@ -1505,7 +1512,7 @@ class Session(QObject):
         fitter = self._fitter_or_report()
         if fitter is None:
             return False
-        if not self.keypoint_project and fitter.matches_in_3d:
+        if not self.keypoint_project and fitter.match_for(observed) == "3d":
             self.error.emit("markers are matched in 3D here (match): a marker cannot be hidden "
                             "in one view; set match = 'views' in the fitting settings first")
             return False

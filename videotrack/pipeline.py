@@ -430,6 +430,8 @@ def not_streamable(model: ProjectModel) -> str | None:
         return f"start {p.start!r}: a frame starts from the one before"
     if any(c.root.mode != "fixed" for c in model.body.chains):
         return "a root that is tracked or placed from the detections"
+    if model.fitter().match_measured:
+        return "match 'auto': decided on the detections of the whole video"
     return None
 
 

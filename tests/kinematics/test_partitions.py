@@ -295,7 +295,7 @@ def test_runs_confirm_each_other():
     """confirm_runs: a frame is re-run until two runs put every marker within ambiguous_move
     segment lengths of each other; it keeps the lowest E, never worse than without, its
     status stays 'ok' (confirming is no re-analysis), and 'auto' confirms bodies of several
-    partitions and bodies matched in 3D."""
+    partitions and bodies whose markers are matched in 3D (a cloud)."""
     body = three_legs()
     cams = top_and_side()
     _, frames = planted(body, cams, 10, seed=6)
@@ -313,7 +313,7 @@ def test_runs_confirm_each_other():
     single = load_body(CHAINS / "fly_six_legs.xml").chains[:1]
     one = Fitter(Body("leg", single, "mm"), locust_cameras(), base)
     assert one._partitions(replace(base, confirm_runs="auto")).confirm == 0
-    assert one._partitions(replace(base, confirm_runs="auto", match="3d")).confirm > 0
+    assert one._partitions(replace(base, confirm_runs="auto"), cloud=True).confirm > 0
     with pytest.raises(KinematicsError, match="confirm_runs"):
         AnnealParams(confirm_runs="maybe")
 

@@ -117,7 +117,7 @@ def test_view_markers_refuse_what_they_cannot_mean(locust):
     with pytest.raises(KinematicsError, match="3 or more views of each colour") as err:
         fitter.fit(frames)
     assert err.value.field == "match"
-    assert not Fitter(locust, cams, view_markers=shows).matches_in_3d
+    assert Fitter(locust, cams, view_markers=shows).match_for(frames) == "views"
 
 
 def test_legs_of_two_colours_fitted_in_3d_each_colour_triangulated_apart():
@@ -147,7 +147,7 @@ def test_legs_of_two_colours_fitted_in_3d_each_colour_triangulated_apart():
     params = AnnealParams(candidates=1, threshold_mode="absolute", reanalysis_threshold=8.0,
                           error=ErrorOptions("bounded", cap_px=10.0)).with_schedule(3000)
     fitter = Fitter(body, views, params, view_markers=shows)
-    assert fitter.matches_in_3d
+    assert fitter.match_for(split) == "3d"
     obs = fitter.observations(split)
     assert obs.kind == "cloud" and obs.points3d.shape[2] == 4 + len(names)
     used = obs.points3d[..., 3] > 0
@@ -197,4 +197,4 @@ def test_a_view_that_shows_no_marker_does_not_count_against_3d():
     cams = ring()
     views = {**cams, "c0_blank": cams["c0"]}
     fitter = Fitter(body, views, view_markers={"c0_blank": []})
-    assert fitter._views_3d == 5 and fitter.matches_in_3d
+    assert fitter._views_3d == 5 and fitter.match_for([[np.zeros((0, 2))] * 7]) == "3d"

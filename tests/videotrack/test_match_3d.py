@@ -7,7 +7,8 @@ from kinematics.cameras import PinholeCamera
 from kinematics.chain_xml import loads_body
 from videotrack.cli import main
 from videotrack.config import load_config
-from videotrack.pipeline import load_model
+from videotrack.detections import load_detections
+from videotrack.pipeline import load_model, not_streamable
 from videotrack.results import read_results, read_sidecar
 from videotrack.synth import SynthOptions, write_synthetic_project
 from videotrack.tables import read_table
@@ -24,12 +25,26 @@ CHAIN = ('<body name="two-legs" units="mm" format="1">' + "".join(
     for n, x in (("front", 3), ("hind", -3))) + "</body>")
 
 
-def test_run_matches_a_two_legged_body_in_3d(tmp_path, capsys):
-    body = loads_body(CHAIN)
+def four_cameras() -> dict:
     k = [[900.0, 0, 320], [0, 900.0, 240], [0, 0, 1]]
-    cams = {f"cam{i}": PinholeCamera(f"cam{i}", k, rvec=[0.5, yaw, 0], t=[0, 0, 120],
+    return {f"cam{i}": PinholeCamera(f"cam{i}", k, rvec=[0.5, yaw, 0], t=[0, 0, 120],
                                      size=(640, 480))
             for i, yaw in enumerate((-0.9, -0.3, 0.3, 0.9))}
+
+
+def cluttered_leg_project(folder) -> None:
+    """One leg (two markers) in four views, each with four static ghosts: three detections
+    per marker image."""
+    chain = ('<body name="one-leg" units="mm" format="1"><chain name="front"><root '
+             'mode="fixed" position="3 0 0"/>' + LEG.format(n="front") + "</chain></body>")
+    angles = np.array([[15 * np.sin(f / 4), 0, 20, 0, 0, -60] for f in range(8)])
+    write_synthetic_project(folder, loads_body(chain), chain, four_cameras(), angles,
+                            SynthOptions(layout="separate", seed=1, static_ghosts=4))
+
+
+def test_run_matches_a_two_legged_body_in_3d(tmp_path, capsys):
+    body = loads_body(CHAIN)
+    cams = four_cameras()
     angles = np.array([[15 * np.sin(f / 4), 0, 20, 0, 0, -60,
                         -15 * np.sin(f / 4), 0, 10, 0, 0, -80] for f in range(8)])
     write_synthetic_project(tmp_path, body, CHAIN, cams, angles,
@@ -38,12 +53,38 @@ def test_run_matches_a_two_legged_body_in_3d(tmp_path, capsys):
     res = read_results(tmp_path / "detections.results.csv")
     side = read_sidecar(tmp_path / "detections.results.csv")
     assert side["anneal"]["match"] == "auto" and side["anneal"]["start_samples"] is None
-    assert load_model(load_config(tmp_path / "project.toml")).fitter().matches_in_3d
+    assert load_model(load_config(tmp_path / "project.toml")).fitter().match_for(
+        load_detections(tmp_path / "detections.npz")) == "3d"
     cols, truth = read_table(tmp_path / "truth.csv")
     want = truth[:, [cols.index(lb) for lb in res.axis_labels]]
     err = np.abs((res.angles_deg - want + 180) % 360 - 180)
     assert np.median(err) < 1.0 and err.max() < 5.0, err
     assert set(res.status) <= {"ok", "reanalysed", "ambiguous"}
+
+
+def test_run_matches_a_leg_among_ghosts_in_3d(tmp_path):
+    """A single chain whose views hold three detections per marker image: 'auto' matches it
+    in 3D, decided on the whole video, and fits the planted movement."""
+    cluttered_leg_project(tmp_path)
+    assert main(["run", str(tmp_path / "project.toml"), "--n-end", "3000"]) == 0
+    fitter = load_model(load_config(tmp_path / "project.toml")).fitter()
+    det = load_detections(tmp_path / "detections.npz")
+    assert det.counts().sum() >= 3 * 8 * 4 * 2 - 8 and fitter.match_for(det) == "3d"
+    res = read_results(tmp_path / "detections.results.csv")
+    cols, truth = read_table(tmp_path / "truth.csv")
+    want = truth[:, [cols.index(lb) for lb in res.axis_labels]]
+    err = np.abs((res.angles_deg - want + 180) % 360 - 180)
+    assert np.median(err) < 1.0 and err.max() < 5.0, err
+
+
+def test_a_video_whose_match_is_decided_on_its_detections_is_detected_before_the_fit(
+        tmp_path):
+    cluttered_leg_project(tmp_path)
+    config = load_config(tmp_path / "project.toml")
+    model = load_model(config, candidates=1, threshold_mode="absolute")
+    assert "match 'auto'" in not_streamable(model)
+    assert not_streamable(load_model(config, candidates=1, threshold_mode="absolute",
+                                     match="views")) is None
 
 
 def test_frames_with_detections_but_no_3d_point_are_named():
