@@ -446,8 +446,7 @@ class Fitter:
             return "views"
         if not self.match_measured:
             return "3d"  # many limbs
-        obs = data if isinstance(data, Observations) else self._unlabelled(data)
-        return "3d" if self._clutter(obs) > CLUTTER_RATIO else "views"
+        return "3d" if self.clutter(data) > CLUTTER_RATIO else "views"
 
     @property
     def match_measured(self) -> bool:
@@ -456,9 +455,10 @@ class Fitter:
         p = self.params
         return p.match == "auto" and self._views_3d >= 3 and not self._limbs(p)
 
-    def _clutter(self, obs: Observations) -> float:
-        """Median over frames of the detections per marker image the views show (0 without
-        any)."""
+    def clutter(self, data) -> float:
+        """Unlabelled detections per marker image the views show: the median over the frames
+        with any (0 without any); what 'auto' :meth:`match_for` reads for a single chain."""
+        obs = data if isinstance(data, Observations) else self._unlabelled(data)
         shown = obs.with_unseen(self.unseen) if self.unseen is not None else obs
         frames = np.arange(obs.n_frames)
         images = marker_images(shown, frames, len(self.body.marker_names))

@@ -62,11 +62,12 @@ def test_run_matches_a_two_legged_body_in_3d(tmp_path, capsys):
     assert set(res.status) <= {"ok", "reanalysed", "ambiguous"}
 
 
-def test_run_matches_a_leg_among_ghosts_in_3d(tmp_path):
+def test_run_matches_a_leg_among_ghosts_in_3d(tmp_path, capsys):
     """A single chain whose views hold three detections per marker image: 'auto' matches it
     in 3D, decided on the whole video, and fits the planted movement."""
     cluttered_leg_project(tmp_path)
     assert main(["run", str(tmp_path / "project.toml"), "--n-end", "3000"]) == 0
+    assert "markers matched in 3D: 3.0 detections per marker image" in capsys.readouterr().err
     fitter = load_model(load_config(tmp_path / "project.toml")).fitter()
     det = load_detections(tmp_path / "detections.npz")
     assert det.counts().sum() >= 3 * 8 * 4 * 2 - 8 and fitter.match_for(det) == "3d"
