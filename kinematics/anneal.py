@@ -95,6 +95,14 @@ DEFAULT_START_SAMPLES = 64
 #: in 3D; the free mouse (1.0): per view keeps a marker absent from every view off its
 #: neighbours, 3D does not (docs/benchmarks.md, session 27).
 CLUTTER_RATIO = 2.0
+#: ... and also where the triangulated points cover its markers in at least this share of the
+#: frames (at least as many points as markers): one fly leg alone through 3 / 6 cameras
+#: (100 % of its frames covered) 89.4 / 93.9 % of frames right per view, 100 / 100 % in 3D;
+#: the free mouse (an ankle absent from the mocap, markers seen by 2 cameras: 83 %) folds its
+#: leg onto the points left in 3D.
+COVERED_SHARE = 0.95
+#: Frames triangulated at most to measure that share.
+MATCH_SAMPLE = 256
 #: Levenberg-Marquardt steps of the final polish at most (it stops once converged).
 POLISH_STEPS = 50
 
@@ -423,35 +431,48 @@ class Fitter:
 
     def match_for(self, data) -> str:
         """Where these data's markers are matched: 'views' (Eq. 5, each view on its own) or
-        '3d' (triangulated first). ``match`` says, or with 'auto' the data: '3d' with 3 or
-        more views (of each colour) for a body annealed in several partitions (many limbs),
-        or for a single chain whose views hold more than :data:`CLUTTER_RATIO` detections per
-        marker image (median over the frames given: other limbs' markers), else 'views'.
-        Labelled keypoints are matched by their labels in the views ('views'); 3D points are
-        '3d'. A fit of some frames decides on all the data it is given, so pass a video's
-        whole detections (and ``frames``) for its frames to be matched alike; a one-frame
-        call (:meth:`fit_frame`, :meth:`error`) decides on that frame, unless ``match`` is
-        set (the GUI sets it from the whole video)."""
-        if isinstance(data, Observations) and data.kind != "points":
-            return "3d" if data.kind in ("cloud", "points3d") else "views"
-        return self._match(data)
+        '3d' (triangulated first): :meth:`match_why`'s first answer."""
+        return self.match_why(data)[0]
 
-    def _match(self, data) -> str:
-        """:meth:`match_for` of unlabelled points (Observations, or any form :meth:`iter_fit`
-        takes: converted only where the clutter decides)."""
+    def match_why(self, data) -> tuple[str, str]:
+        """Where these data's markers are matched ('views' or '3d') and why, in a few words.
+
+        ``match`` says, or with 'auto' the data. With 3 or more views (of each colour): '3d'
+        for a body annealed in several partitions (many limbs); for a single chain, '3d'
+        where its views hold more than :data:`CLUTTER_RATIO` detections per marker image
+        (other limbs' markers: :meth:`clutter`) or where the triangulated points cover its
+        markers in at least :data:`COVERED_SHARE` of the frames (:meth:`covered`), else
+        'views'. Labelled keypoints are matched by their labels in the views ('views'); 3D
+        points are '3d'. A fit of some frames decides on all the data it is given, so pass
+        a video's whole detections (and ``frames``) for its frames to be matched alike; a
+        one-frame call (:meth:`fit_frame`, :meth:`error`) decides on that frame, unless
+        ``match`` is set (the GUI sets it from the whole video)."""
+        if isinstance(data, Observations) and data.kind != "points":
+            return ("3d", "3D points") if data.kind in ("cloud", "points3d") else (
+                "views", "labelled keypoints")
         p = self.params
         if p.match != "auto":
-            return p.match
+            return p.match, f"match = {p.match!r}"
         if self._views_3d < 3:
-            return "views"
+            return "views", "fewer than 3 views to triangulate from"
         if not self.match_measured:
-            return "3d"  # many limbs
-        return "3d" if self.clutter(data) > CLUTTER_RATIO else "views"
+            return "3d", "a body of several limbs"
+        obs = data if isinstance(data, Observations) else self._unlabelled(data)
+        if obs.hidden is not None:  # marked per view (the GUI's H): kept per view
+            return "views", "markers marked hidden in a view"
+        clutter = self.clutter(obs)
+        if clutter > CLUTTER_RATIO:
+            return "3d", (f"{clutter:.1f} detections per marker image, other limbs' markers "
+                          f"(above {CLUTTER_RATIO:g})")
+        covered = self.covered(obs)
+        return ("3d" if covered >= COVERED_SHARE else "views"), (
+            f"every marker triangulated in {100 * covered:.0f} % of the frames (3D from "
+            f"{100 * COVERED_SHARE:.0f} %)")
 
     @property
     def match_measured(self) -> bool:
-        """Whether :meth:`match_for` decides on the data's clutter: ``match`` 'auto' for a
-        single chain (one partition) in 3 or more views."""
+        """Whether :meth:`match_for` decides on the data: ``match`` 'auto' for a single
+        chain (one partition) in 3 or more views."""
         p = self.params
         return p.match == "auto" and self._views_3d >= 3 and not self._limbs(p)
 
@@ -465,6 +486,22 @@ class Fitter:
         found = obs.view_counts(frames).sum(axis=1)
         keep = (images > 0) & (found > 0)
         return float(np.median(found[keep] / images[keep])) if keep.any() else 0.0
+
+    def covered(self, data) -> float:
+        """The share of frames with detections whose triangulated points are at least as
+        many as the body's markers (:func:`~kinematics.cloud.cloud_observations`; on up to
+        :data:`MATCH_SAMPLE` frames spread over the video): where it is low, markers are
+        often absent or seen by fewer than 3 views, and matching in 3D lets a limb fold onto
+        the points that are there (docs/fitting.md, 'When the defaults match in 3D')."""
+        obs = data if isinstance(data, Observations) else self._unlabelled(data)
+        seen = np.flatnonzero(obs.view_counts(np.arange(obs.n_frames)).sum(axis=1) > 0)
+        if seen.size == 0 or self._views_3d < 3:
+            return 0.0
+        pick = seen[np.unique(np.linspace(0, seen.size - 1, min(MATCH_SAMPLE, seen.size)
+                                          ).astype(int))]
+        cloud = cloud_observations(self.cameras, obs.take(pick), self.unseen)
+        points = (cloud.points3d[:, :, 3] > 0).sum(axis=1)
+        return float(np.mean(points >= len(self.body.marker_names)))
 
     @property
     def _views_3d(self) -> int:
@@ -522,7 +559,7 @@ class Fitter:
         if obs.kind == "cloud" and obs.points3d.shape[2] not in (4, 4 + nm):
             raise KinematicsError(f"a cloud needs 4 columns, or 4 + {nm} (one per marker), "
                                   f"got {obs.points3d.shape[2]}", field="cloud")
-        if obs.kind == "points" and self._match(obs) == "3d":
+        if obs.kind == "points" and self.match_for(obs) == "3d":
             if self._views_3d < 3:
                 each = " of each colour (views that show the same markers)" if (
                     self.unseen is not None) else ""
@@ -593,15 +630,18 @@ class Fitter:
         """
         frame = (detections_frame if isinstance(detections_frame, Observations)
                  else self._unlabelled([detections_frame]))
-        if isinstance(detections_frame, Observations) or self._match(frame) == "3d" or (
+        if hidden is not None:
+            marks = np.asarray(hidden, bool)
+            shape = (self.n_views, len(self.body.marker_names))
+            if marks.shape != shape:
+                raise KinematicsError(f"hidden marks need shape {shape} (views, markers), "
+                                      f"got {marks.shape}", field="hidden")
+            if frame.kind == "points":  # before the match is decided: marks keep it per view
+                frame = frame.with_hidden(marks[None])
+        if isinstance(detections_frame, Observations) or self.match_for(frame) == "3d" or (
                 hidden is not None or self.unseen is not None):
             obs = self.observations(frame)
             if hidden is not None:
-                marks = np.asarray(hidden, bool)
-                shape = (self.n_views, len(self.body.marker_names))
-                if marks.shape != shape:
-                    raise KinematicsError(f"hidden marks need shape {shape} (views, markers), "
-                                          f"got {marks.shape}", field="hidden")
                 obs = obs.with_hidden(marks[None])
             state, pos, rot = self.state(angles_deg, root_positions)
             return self._state_error(obs.arrays(np.array([0], np.int64)), state, pos, rot,

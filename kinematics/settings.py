@@ -288,8 +288,10 @@ class AnnealParams:
         "of several colours: 3 or more views of each colour) '3d' for a body annealed in "
         "several partitions (many limbs), where blobs of different limbs fuse in the images, "
         "and for a single chain whose views hold more than twice as many detections as it "
-        "has marker images (median over the video: other limbs' markers), else 'views' "
-        "(docs/fitting.md, 'Matching in 3D').",
+        "has marker images (median over the video: other limbs' markers) or whose markers "
+        "are all triangulated in at least 95 % of the frames, else 'views' (markers often "
+        "absent: a limb would fold onto the points left; docs/fitting.md, 'When the "
+        "defaults match in 3D').",
         choices=MATCH_MODES)
     backend: str = setting(
         "auto", "Which kernel anneals: 'scalar' one run at a time, 'lanes' many runs at once "

@@ -213,6 +213,8 @@ class Session(QObject):
         self.detection_edits: dict = {}
         # (detections, edits, chain, edited detections, what the fit takes of them)
         self._edited = (None, None, None, None, None)
+        #: (detections, model, body, settings, match): 'auto' decided on the whole video
+        self._matched = (None, None, None, None, None)
         self._means: tuple = (None, None, None)  # (body, mean posture, locked mask)
         #: Frames whose results (error, status) were computed with an earlier chain.
         self.stale: set[int] = set()
@@ -979,13 +981,17 @@ class Session(QObject):
             params = replace(params, threshold_mode="absolute",
                              reanalysis_threshold=self.threshold)
         fitter = replace(self._fit_model(), params=params).fitter(body or self.body)
-        if params.match != "auto" or self.fit_detections is None:
+        observed = self.fit_detections
+        if observed is None or not fitter.match_measured:
             return fitter
         # decided on the whole video, so that a re-fit or a correction of one frame is matched
-        # as the fit of every frame was ('auto' would decide on that one frame)
-        match = fitter.match_for(self.fit_detections)
-        return replace(self._fit_model(), params=replace(params, match=match)).fitter(
-            body or self.body)
+        # as the fit of every frame was ('auto' would decide on that one frame); once per
+        # video, chain and settings (it triangulates a sample of frames)
+        key = (observed, self.model, body or self.body, self.params)
+        if any(a is not b for a, b in zip(self._matched[:4], key, strict=True)):
+            self._matched = (*key, fitter.match_for(observed))
+        return replace(self._fit_model(), params=replace(params, match=self._matched[4])
+                       ).fitter(body or self.body)
 
     def _fitter_or_report(self, whole_video: bool = False):
         """The fitter for the next task, or None after reporting on :attr:`error` why there

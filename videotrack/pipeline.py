@@ -62,7 +62,7 @@ from typing import NamedTuple
 import numpy as np
 
 from kinematics import anneal
-from kinematics.anneal import CLUTTER_RATIO, AnnealParams, Fitter, FrameResult
+from kinematics.anneal import AnnealParams, Fitter, FrameResult
 from kinematics.model import Body
 from videotrack.config import anneal_from_table
 from videotrack.errors import VideoTrackError, VideoTrackWarning
@@ -1050,12 +1050,11 @@ def _fit(run: ProjectRun, model: ProjectModel, frames: slice | None, force: bool
         log(f"fitting {total} records ({why}), {numba.get_num_threads()} thread(s)"
             + (", begun while detecting" if stream is not None else ""))
         fitter = model.fitter()
-        if fitter.match_measured:
-            how = fitter.match_for(detections)
-            log(f"markers matched {'in 3D' if how == '3d' else 'per view'}: "
-                f"{fitter.clutter(detections):.1f} detections per marker image (match "
-                f"'auto' matches a single chain in 3D above {CLUTTER_RATIO:g}: other limbs' "
-                "markers)")
+        if fitter.match_measured and not isinstance(detections, KeypointInput):
+            # decided on this video's detections: say how, and why
+            how, why_match = fitter.match_why(detections)
+            log(f"markers matched {'in 3D' if how == '3d' else 'per view'} (match 'auto'): "
+                f"{why_match}")
     out.parent.mkdir(parents=True, exist_ok=True)
     counts = {"done": 0, "bad": 0}
 

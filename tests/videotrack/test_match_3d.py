@@ -67,7 +67,8 @@ def test_run_matches_a_leg_among_ghosts_in_3d(tmp_path, capsys):
     in 3D, decided on the whole video, and fits the planted movement."""
     cluttered_leg_project(tmp_path)
     assert main(["run", str(tmp_path / "project.toml"), "--n-end", "3000"]) == 0
-    assert "markers matched in 3D: 3.0 detections per marker image" in capsys.readouterr().err
+    assert "markers matched in 3D (match 'auto'): 3.0 detections per marker image" in (
+        capsys.readouterr().err)
     fitter = load_model(load_config(tmp_path / "project.toml")).fitter()
     det = load_detections(tmp_path / "detections.npz")
     assert det.counts().sum() >= 3 * 8 * 4 * 2 - 8 and fitter.match_for(det) == "3d"
