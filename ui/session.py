@@ -213,8 +213,8 @@ class Session(QObject):
         self.detection_edits: dict = {}
         # (detections, edits, chain, edited detections, what the fit takes of them)
         self._edited = (None, None, None, None, None)
-        #: (detections, model, body, settings, match): 'auto' decided on the whole video
-        self._matched = (None, None, None, None, None)
+        #: (detections, model, body, settings, match, why): 'auto' decided on the whole video
+        self._matched = (None, None, None, None, None, "")
         self._means: tuple = (None, None, None)  # (body, mean posture, locked mask)
         #: Frames whose results (error, status) were computed with an earlier chain.
         self.stale: set[int] = set()
@@ -989,9 +989,17 @@ class Session(QObject):
         # video, chain and settings (it triangulates a sample of frames)
         key = (observed, self.model, body or self.body, self.params)
         if any(a is not b for a, b in zip(self._matched[:4], key, strict=True)):
-            self._matched = (*key, fitter.match_for(observed))
+            self._matched = (*key, *fitter.match_why(observed))
         return replace(self._fit_model(), params=replace(params, match=self._matched[4])
                        ).fitter(body or self.body)
+
+    def _match_note(self) -> str:
+        """Where 'auto' matched the markers of this video and why (for the status line of a
+        fit), or "" where the settings or the views decide."""
+        if self._matched[0] is not self.fit_detections or self._matched[3] is not self.params:
+            return ""
+        how = "in 3D" if self._matched[4] == "3d" else "per view"
+        return f"; markers matched {how}: {self._matched[5]}"
 
     def _fitter_or_report(self, whole_video: bool = False):
         """The fitter for the next task, or None after reporting on :attr:`error` why there
@@ -1046,7 +1054,7 @@ class Session(QObject):
         worker.progressed.connect(lambda *a: None if worker.released else self.progress.emit(*a))
         worker.failed.connect(lambda m: None if worker.released else self._failed(m))
         worker.finished.connect(lambda: None if worker.released else self._fit_done(worker))
-        self._start(worker, f"fitting {len(frames)} frames …")
+        self._start(worker, f"fitting {len(frames)} frames{self._match_note()} …")
         self._measuring = not some  # only a fit of the whole video measures the threshold
         return True
 

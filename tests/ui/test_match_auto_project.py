@@ -24,8 +24,11 @@ def test_a_cluttered_chain_is_matched_in_3d_for_every_task(tmp_path, window_on, 
     assert s.params.match == "auto"
     fitter = s._fitter()  # a task on one frame: decided on the whole video, not that frame
     assert fitter.params.match == "3d"
+    notes = []
+    s.status.connect(notes.append)
     s.fit([3])
     wait_idle(s)
+    assert "markers matched in 3D: 3.0 detections per marker image" in notes[0]
     r = s.results[3]
     assert r.status != "failed"
     view = [s.fit_detections.points_of(3, v) for v in range(len(s.view_names))]
