@@ -103,3 +103,20 @@ def test_a_leg_among_others_fitted_with_the_defaults_and_scored_alike():
     assert all(r.runs >= 2 for r in res)  # matched in 3D, its runs confirm each other
     e, per_view = fitter.error(res[0].angles_deg, frames[0])
     assert e == pytest.approx(res[0].error, rel=1e-9) and not per_view.any()
+
+
+def test_markers_hidden_by_hand_keep_a_chain_per_view():
+    """Marks of the GUI's H say a marker is hidden in one view, which only the per-view match
+    can honour: a chain 'auto' would match in 3D is then matched per view, and its E of one
+    frame with marks equals that of the per-view match."""
+    cams = ring()
+    one = Fitter(legs(("a",)), cams)
+    angles, alone = planted(legs(("a",)), cams, 3, seed=4)
+    assert one.match_for(alone) == "3d"
+    marks = np.zeros((len(cams), 2), bool)
+    marks[1, 1] = True  # the tip, in the second view
+    obs = one._unlabelled(alone).with_hidden(np.broadcast_to(marks, (3, *marks.shape)))
+    assert one.match_why(obs) == ("views", "markers marked hidden in a view")
+    views = Fitter(legs(("a",)), cams, AnnealParams(match="views"))
+    e = one.error(angles[0], alone[0], hidden=marks)
+    assert e[0] == views.error(angles[0], alone[0], hidden=marks)[0] and e[1].any()
