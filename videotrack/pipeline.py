@@ -347,6 +347,7 @@ def fit_project(
     notes: Sequence[str] = (),
     resumed: Callable[[int, int], object] | None = None,
     stream: FitAlongside | None = None,
+    match: str | None = None,
 ) -> Results:
     """Fit ``frames`` (default all records) and write the results file and its sidecar.
 
@@ -356,7 +357,10 @@ def fit_project(
     ``warnings`` are ``notes`` (e.g. the detections' warnings) followed by
     :func:`fit_warnings` of the results. ``stream``: a :class:`FitAlongside` that has been
     fitting every record while they were detected; its results are taken (when there is no
-    checkpoint to resume from) instead of fitting them again.
+    checkpoint to resume from) instead of fitting them again. ``match``: where the markers
+    of these detections are matched, when the caller has decided it already
+    (:meth:`Fitter.match_why`, for ``match = "auto"``), so it is not decided again; the
+    sidecar keeps the project's setting.
     """
     results_path = Path(results_path)
     idx = np.arange(detections.n_records) if frames is None else np.asarray(list(frames))
@@ -371,6 +375,8 @@ def fit_project(
         # the threshold the checkpoint's frames were judged by, not one measured again on
         # the frames left (another sample: another threshold)
         params = replace(params, threshold_mode="absolute", reanalysis_threshold=threshold)
+    if match is not None:
+        params = replace(params, match=match)
     fitter = model.fitter(params=params)
     if done and resumed is not None:
         resumed(len(done), len(idx))
@@ -1049,10 +1055,12 @@ def _fit(run: ProjectRun, model: ProjectModel, frames: slice | None, force: bool
     if log is not None:
         log(f"fitting {total} records ({why}), {numba.get_num_threads()} thread(s)"
             + (", begun while detecting" if stream is not None else ""))
-        fitter = model.fitter()
-        if fitter.match_measured and not isinstance(detections, KeypointInput):
-            # decided on this video's detections: say how, and why
-            how, why_match = fitter.match_why(detections)
+    how = None
+    fitter = model.fitter()
+    if fitter.match_measured and not isinstance(detections, KeypointInput):
+        # decided once, on this video's detections: said, and handed to the fit
+        how, why_match = fitter.match_why(detections)
+        if log is not None:
             log(f"markers matched {'in 3D' if how == '3d' else 'per view'} (match 'auto'): "
                 f"{why_match}")
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -1074,7 +1082,7 @@ def _fit(run: ProjectRun, model: ProjectModel, frames: slice | None, force: bool
     t0 = time.perf_counter() if stream is None else stream.started
     report(FIT, 0, total)
     table = fit_project(model, detections, run.detections_path, out, idx, fitted,
-                        notes=notes, resumed=resumed, stream=stream)
+                        notes=notes, resumed=resumed, stream=stream, match=how)
     return _with_results(replace(run, model=model, steps=(*run.steps, FIT), fit_reason=why,
                                  fit_seconds=time.perf_counter() - t0,
                                  resumed=sum(kept), overlapped=stream is not None), table)

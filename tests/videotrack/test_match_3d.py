@@ -89,6 +89,24 @@ def test_a_video_whose_match_is_decided_on_its_detections_is_detected_before_the
                                      match="views")) is None
 
 
+def test_a_match_decided_by_the_caller_is_not_decided_again(tmp_path):
+    """``fit_project(match=...)`` fits with the match its caller decided (and printed), and
+    the sidecar keeps the project's 'auto'."""
+    from videotrack import pipeline
+
+    cluttered_leg_project(tmp_path)
+    model = load_model(load_config(tmp_path / "project.toml"), n_end=2000)
+    det_path = tmp_path / "detections.npz"
+    assert main(["detect", str(tmp_path / "project.toml")]) == 0
+    det = load_detections(det_path)
+    fits = {m: pipeline.fit_project(model, det, det_path, tmp_path / f"{m}.results.csv",
+                                    match=None if m == "auto" else m)
+            for m in ("auto", "3d", "views")}
+    assert list(fits["auto"].error) == list(fits["3d"].error)  # 'auto' decided 3D itself
+    assert list(fits["views"].error) != list(fits["3d"].error)  # E per view: another sum
+    assert read_sidecar(tmp_path / "views.results.csv")["anneal"]["match"] == "auto"
+
+
 def test_frames_with_detections_but_no_3d_point_are_named():
     """A frame whose markers only two views see has no 3D point: the fit warns by name
     instead of reporting a frame without detections and nothing else."""
