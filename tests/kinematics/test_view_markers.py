@@ -197,4 +197,4 @@ def test_a_view_that_shows_no_marker_does_not_count_against_3d():
     cams = ring()
     views = {**cams, "c0_blank": cams["c0"]}
     fitter = Fitter(body, views, view_markers={"c0_blank": []})
-    assert fitter._views_3d == 5 and fitter.match_for([[np.zeros((0, 2))] * 7]) == "3d"
+    assert fitter._views_3d == 5 and fitter.match_for([[np.zeros((0, 2))] * len(views)]) == "3d"
