@@ -354,6 +354,13 @@ def _has_pinhole(kind):
     return out
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _drawn_views(kind, objective):
+    """The views a search projects its draws into (``kind``, sliced): none where the
+    objective is 3D (points or a cloud), which reads only the 3D markers."""
+    return kind[:0] if objective in (OBJ_POINTS3D, OBJ_CLOUD) else kind[:]
+
+
 @njit(cache=True, nogil=True)
 def project_posture(angles, root_pos, root_rot, parent, chain, pre_rot, pre_trans, post_trans,
                     elem_axis, elem_index, joint_flags, marker_joint, marker_local, slide_index,
@@ -774,6 +781,48 @@ def cloud_error(mk, cloud, m0, m1, claimed, penalty, cap, penalty_cap, one, near
     return total
 
 
+@njit(cache=True, nogil=True, inline="always")
+def cloud_error_once(mk, cloud, m0, m1, penalty, cap, penalty_cap, nearest, marker_d2,
+                     point_d2):
+    """:func:`cloud_error` of a cloud nothing is claimed from, without one-to-one: the same
+    E to the bit, each marker-point distance computed once for both terms (the nearest
+    point of each marker and the nearest marker of each point; :func:`cloud_error` computes
+    them twice). Points outer, markers inner, so each marker's search still meets the
+    points in order (ties to the lower row). ``marker_d2`` (n_markers,), ``point_d2``
+    (n_points or more,) float scratch."""
+    missing = cap if cap < np.inf else NAN_MARKER_COST
+    for i in range(m0, m1):
+        marker_d2[i] = np.inf
+        nearest[i] = -1
+    for c in range(cloud.shape[0]):
+        s = cloud[c, 3]
+        nearest_c = np.inf
+        if s > 0.0:
+            ss = s * s
+            for i in range(m0, m1):
+                if may_take(cloud, c, i):
+                    dx = mk[i, 0] - cloud[c, 0]
+                    dy = mk[i, 1] - cloud[c, 1]
+                    dz = mk[i, 2] - cloud[c, 2]
+                    d2 = dx * dx + dy * dy + dz * dz
+                    if ss * d2 < marker_d2[i]:
+                        marker_d2[i] = ss * d2
+                        nearest[i] = c
+                    nearest_c = min(nearest_c, d2)
+        point_d2[c] = nearest_c
+    total = 0.0
+    for i in range(m0, m1):
+        total += min(math.sqrt(marker_d2[i]) if nearest[i] >= 0 else missing, cap)
+    if penalty > 0.0:
+        for c in range(cloud.shape[0]):
+            taken = cloud[c, 3] <= 0.0
+            for i in range(m0, m1):
+                taken = taken or takes(nearest[i], c)
+            if not taken and point_d2[c] < np.inf:
+                total += penalty * min(cloud[c, 3] * math.sqrt(point_d2[c]), penalty_cap)
+    return total
+
+
 @njit(cache=True, nogil=True)
 def claim_cloud(mk, cloud, claimers, gate, claimed):
     """:func:`claim_detections` for a 3D cloud: each marker flagged in ``claimers`` claims
@@ -1067,7 +1116,7 @@ def anneal_chain(start, free_idx, step, hist, nbins, th, dof_kind, lo, hi, max_r
                  dist, R, t,
                  objective, points, conf, view_off, obs3, bidirectional, weight, cap,
                  penalty_cap, one, j0, j1, m0, m1, claimed,
-                 cur, cand, best, cs, sn, rot, pos, mk, proj, per_view, nearest):
+                 cur, cand, best, cs, sn, rot, pos, mk, proj, per_view, nearest, d2):
     """One annealing run from ``start``; the best posture seen is left in ``best``.
 
     Each iteration draws ``j' = j + l·v`` with ``v_i = s(H_i)·r_i``, ``r_i ~ U[-1, 1]``
@@ -1092,7 +1141,9 @@ def anneal_chain(start, free_idx, step, hist, nbins, th, dof_kind, lo, hi, max_r
         of its markers ``m0:m1`` (detections ``claimed`` by other partitions excluded), and
         ``rot``, ``pos``, ``mk``, ``proj`` must hold the current posture of the rest.
     cur, cand, best, cs, sn : (n_axes,) scratch; rot (nj, 3, 3), pos (nj, 3), mk (nm, 3),
-    proj (n_views, n_markers, 2), per_view (n_views,), nearest (n_markers,) int64 scratch.
+    proj (n_views, n_markers, 2), per_view (n_views,), nearest (n_markers,) int64 scratch;
+    d2 (n_markers + cloud rows,) float scratch of :func:`cloud_error_once` for a cloud
+    (shorter, e.g. empty: :func:`cloud_error` instead).
 
     Returns
     -------
@@ -1103,6 +1154,7 @@ def anneal_chain(start, free_idx, step, hist, nbins, th, dof_kind, lo, hi, max_r
     n_hist = 0  # free_idx holds the DOF_HISTOGRAM entries first
     while n_hist < n_free and dof_kind[free_idx[n_hist]] == DOF_HISTOGRAM:
         n_hist += 1
+    kind = _drawn_views(kind, objective)
     any_pinhole = _has_pinhole(kind)
     marks = obs3  # hidden marks not projected (3D objectives read no projection)
     rs = np.uint64(state)  # the stream state; int64 arithmetic with uint64 would be float
@@ -1114,6 +1166,12 @@ def anneal_chain(start, free_idx, step, hist, nbins, th, dof_kind, lo, hi, max_r
     whole = j0 == 0 and j1 == parent.shape[0] and m0 == 0 and m1 == marker_joint.shape[0]
     span = (j0, j1, m0, m1)
     unexplained = weight if bidirectional else 0.0  # the partition's unexplained-blob weight
+    # a cloud with nothing claimed (a partition's comes without the claimed points): each
+    # distance computed once (cloud_error_once), the same E
+    once = objective == OBJ_CLOUD and not one and (whole or claimed.shape[0] == 0) and \
+        d2.shape[0] >= mk.shape[0] + obs3.shape[0]
+    marker_d2 = d2[:mk.shape[0]]
+    point_d2 = d2[mk.shape[0]:]
     _project_cs(cand, cs, sn, root_pos, root_rot, parent, chain, pre_rot, pre_trans,
                 post_trans, elem_axis, elem_index, joint_flags, marker_joint, marker_local,
                 slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj, any_pinhole, span,
@@ -1171,7 +1229,10 @@ def anneal_chain(start, free_idx, step, hist, nbins, th, dof_kind, lo, hi, max_r
                     post_trans, elem_axis, elem_index, joint_flags, marker_joint, marker_local,
                     slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj, any_pinhole, span,
                     marks)
-        if not whole:
+        if once:
+            e = cloud_error_once(mk, obs3, m0, m1, unexplained, cap, penalty_cap, nearest,
+                                 marker_d2, point_d2)
+        elif not whole:
             e = partition_error(objective, proj, mk, points, conf, view_off, obs3, cap, m0,
                                 m1, claimed, unexplained, penalty_cap, one, nearest)
         elif objective == OBJ_NEAREST and not bidirectional and not one and \
@@ -1228,6 +1289,7 @@ def beam_start(work, s0, s1, stage_dof_off, stage_dofs, stage_mark, stage_joint,
     markers at the best posture before that polish."""
     ns = work.shape[0]
     e_first = np.inf
+    kind = _drawn_views(kind, objective)
     any_pinhole = _has_pinhole(kind)
     marks = obs3  # hidden marks not projected (3D objectives read no projection)
     cloud, free = obs3, claimed  # what the draws are scored against
@@ -1445,7 +1507,7 @@ def anneal_partitions(origin, state, rp, rr, body, cams, dofs, schedule, error, 
                                 K, dist, R, t, objective, points, conf, view_off, cloud,
                                 bidirectional, weight, cap, penalty_cap, one, j0, j1, m0,
                                 m1, free, cur, cand, best, cs, sn, rot, pos, mk, proj,
-                                per_view, nearest)
+                                per_view, nearest, np.empty(mk.shape[0] + cloud.shape[0]))
             its += n
             work[:] = best
     project_posture(work, rp, rr, parent, chain, pre_rot, pre_trans, post_trans, elem_axis,
@@ -1651,6 +1713,7 @@ def fit_frames(seg_off, frame_ids, root_pos, root_rot, start, body, cams, dofs, 
         per_view = np.empty(nv)
         nearest = np.empty(nm, np.int64)
         claimed = np.zeros(max(det_points.shape[0], obs3.shape[1]), np.bool_)
+        d2 = np.empty(nm + obs3.shape[1] if objective == OBJ_CLOUD else 0)
         work = np.empty(na)
         cur = np.empty(na)
         cand = np.empty(na)
@@ -1690,7 +1753,7 @@ def fit_frames(seg_off, frame_ids, root_pos, root_rot, start, body, cams, dofs, 
                                               det_conf, vo, obs3[f], bidirectional, weight,
                                               cap, penalty_cap, one, 0, nj, 0, nm, claimed, cur,
                                               cand, best, cs, sn, rot, pos, mk, proj,
-                                              per_view, nearest)
+                                              per_view, nearest, d2)
                     out_iterations[f] += its
                     e, pairs, u = finish_run(best, e, rp, rr, body, cams, dofs, schedule,
                                              error, objective, det_points, det_conf, vo,

@@ -89,7 +89,8 @@ def run_task(r, task_frame, task_run, frame_ids, root_pos, root_rot, start, free
         elem_index, joint_flags, marker_joint, marker_local, slide_index, kind, P, K, dist, R,
         t, objective, points, conf, det_off[f * nv: f * nv + nv + 1], obs3[f], bidirectional,
         weight, cap, penalty_cap, False, 0, parent.shape[0], 0, marker_joint.shape[0],
-        claimed, cur, cand, best, cs, sn, rot, pos, mk, proj, per_view, nearest)
+        claimed, cur, cand, best, cs, sn, rot, pos, mk, proj, per_view, nearest,
+        per_view[:0])  # no cloud on the GPU: no scratch for cloud_error_once
     for k in range(start.shape[0]):
         best_out[r, k] = best[k]
     e_out[r] = e

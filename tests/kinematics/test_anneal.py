@@ -447,7 +447,7 @@ def test_annealing_loop_allocates_nothing(locust):
     na, nj, nm = locust.n_axes, 3, 4
     scratch = [np.empty(na) for _ in range(5)] + [
         np.empty((nj, 3, 3)), np.empty((nj, 3)), np.empty((nm, 3)), np.empty((2, nm, 2)),
-        np.empty(2), np.empty(nm, np.int64)]
+        np.empty(2), np.empty(nm, np.int64), np.empty(0)]
     fresh = numba.njit(ak.anneal_chain.py_func)
     pr = fitter.problem
     _, its = fresh(pr.start, pr.free_idx, pr.step, pr.hist, pr.nbins, 1e-300, pr.dof_kind,

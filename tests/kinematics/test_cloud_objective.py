@@ -437,6 +437,32 @@ def test_the_unclaimed_points_score_as_the_claims_do(opts):
             assert got == want
 
 
+@pytest.mark.parametrize("opts", [o for o in OPTIONS if not o.one_to_one],
+                         ids=lambda o: f"{o.mode}-{o.cap_px}")
+def test_each_distance_computed_once_scores_as_cloud_error(opts):
+    """The annealing loop's cloud error (``cloud_error_once``: each marker-point distance
+    computed once for both terms) equals ``cloud_error`` to the bit, with the same nearest
+    points: padding rows, coloured clouds, a partition's markers, and ties (a point given
+    twice goes to the lower row)."""
+    rng = np.random.default_rng(21)
+    penalty = opts.penalty_weight if opts.bidirectional else 0.0
+    for trial in range(40):
+        mk, cloud = random_cloud(rng, n_points=int(rng.integers(0, 12)))
+        if trial % 4 == 1 and len(cloud) > 4:  # a tie: the same point in two rows
+            cloud[3] = cloud[1]
+        if trial % 3 == 0:  # one column per marker: which markers may take the point
+            cloud = np.concatenate([cloud, rng.integers(0, 2, (len(cloud), len(mk)))], 1)
+        for m0, m1 in ((0, len(mk)), (2, 5)):
+            want_near = np.full(len(mk), -7, np.int64)
+            got_near = want_near.copy()
+            want = ak.cloud_error(mk, cloud, m0, m1, ak.NO_CLAIMS, penalty, opts.cap,
+                                  opts.penalty_cap, False, want_near)
+            got = ak.cloud_error_once(mk, cloud, m0, m1, penalty, opts.cap, opts.penalty_cap,
+                                      got_near, np.empty(len(mk)), np.empty(len(cloud)))
+            assert got == want
+            assert np.array_equal(got_near, want_near)
+
+
 @pytest.mark.parametrize("match", ["3d", "views"])
 def test_the_start_search_scores_a_draw_from_its_beam(match):
     """The start search scores a draw by its beam's E of the markers earlier stages placed

@@ -47,7 +47,7 @@ def test_main_thread_runs_while_one_annealing_run_goes_on(locust):
     na, nj, nm = pr.n_state, 3, 4
     scratch = [np.empty(na) for _ in range(5)] + [
         np.empty((nj, 3, 3)), np.empty((nj, 3)), np.empty((nm, 3)), np.empty((2, nm, 2)),
-        np.empty(2), np.empty(nm, np.int64)]
+        np.empty(2), np.empty(nm, np.int64), np.empty(0)]
 
     def run(n_end):
         return ak.anneal_chain(pr.start, pr.free_idx, pr.step, pr.hist, pr.nbins, 1e-300,
