@@ -1600,8 +1600,8 @@ def finish_run(best, e, rp, rr, body, cams, dofs, schedule, error, objective, po
         _, pairs = _rk.refine_posture(
             best, free_idx, lo, hi, dof_kind, refine_steps, refine_gate, rp, rr, parent, chain,
             pre_rot, pre_trans, post_trans, elem_axis, elem_index, joint_flags, marker_joint,
-            marker_local, slide_index, kind, P, K, dist, R, t, objective, points, conf,
-            view_off, obs3)
+            marker_local, slide_index, _drawn_views(kind, objective), P, K, dist, R, t,
+            objective, points, conf, view_off, obs3)
         project_posture(best, rp, rr, parent, chain, pre_rot, pre_trans, post_trans,
                         elem_axis, elem_index, joint_flags, marker_joint, marker_local,
                         slide_index, kind, P, K, dist, R, t, cs, sn, rot, pos, mk, proj)
