@@ -26,6 +26,7 @@ from __future__ import annotations
 import weakref
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
+from functools import cached_property
 from typing import NamedTuple
 
 import numpy as np
@@ -574,11 +575,9 @@ class FitProblem:
             For a free root the seed is the posture itself (offsets zero).
         """
         a = np.asarray(angles_deg, dtype=float).copy()
-        locked = self.body.locked_mask()
+        locked, pinned, values = self._held
         a[locked] = self.mean_deg[locked]
-        labels = self.body.axis_labels
-        for k, v in self.pins.items():
-            a[labels.index(k)] = v
+        a[pinned] = values
         rad = np.deg2rad(a)
         state = np.r_[rad, np.zeros(self.n_state - self.n_axes)]
         rot = self.identity_rotations()
@@ -588,6 +587,15 @@ class FitProblem:
             state[ix] = 0.0
         pos = np.ascontiguousarray(np.asarray(root_positions, dtype=float))
         return np.ascontiguousarray(state), pos, rot
+
+    @cached_property
+    def _held(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """What :meth:`state` resets: the (n_axes,) locked mask, and the pinned axes' indices
+        and values (degrees). Computed once: each walks the body, and the path's re-fits ask
+        for a state thousands of times a video."""
+        labels = self.body.axis_labels
+        return (self.body.locked_mask(), np.array([labels.index(k) for k in self.pins], np.int64),
+                np.array(list(self.pins.values()), float))
 
     def posture(self, state, root_pos, root_rot) -> tuple[np.ndarray, np.ndarray]:
         """Public posture of a kernel state: angles (n_axes,) radians, absolute for free

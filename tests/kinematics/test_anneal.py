@@ -474,6 +474,12 @@ def test_pins_hold_axes_while_the_rest_is_fitted(locust):
     assert moved.size == fitter._partitions(fitter.params).dofs.size - 2
     assert fitter.problem.pins == {}
     assert pinned.problem.pins == {"J2.gamma": 90.0, "J0.phi": 220.0}
+    # a state resets the pinned axes of its own problem only (each caches what it holds)
+    zeros, roots = np.zeros(locust.n_axes), locust.root_positions()
+    assert fitter.problem.state(zeros, roots)[0][[0, 8]].tolist() == [0.0, 0.0]
+    held = pinned.problem.state(zeros, roots)[0]
+    np.testing.assert_allclose(held[[0, 8]], np.deg2rad([220.0, 90.0]))
+    assert fitter.problem.state(zeros, roots)[0][[0, 8]].tolist() == [0.0, 0.0]
     for k, frame in enumerate(dets):
         r = pinned.fit_frame(frame, k)
         assert r.angles_deg[8] == pytest.approx(90.0)
