@@ -1555,6 +1555,9 @@ class Fitter:
             return mk
 
         tried: set[tuple[int, int]] = set()
+        # the seeds tried, kept alive: a candidate the merges drop is freed, and a new one
+        # could take its id and be skipped as tried (which re-fits ran varied between runs)
+        alive: list[Candidate] = []
 
         def keep(k: int) -> float:
             """A re-fit joins frame k's candidates only when it fits about as well as the
@@ -1608,6 +1611,7 @@ class Fitter:
                         for cand in of_j:
                             if (i, id(cand)) not in tried:
                                 tried.add((i, id(cand)))
+                                alive.append(cand)  # its id stays its own
                                 seeds.append((i, j, cand))
                     # the seeds' re-fits are independent (each keyed by its frame, the window
                     # unchanged until they are merged): on every thread at once, merged in order
