@@ -1554,10 +1554,9 @@ class Fitter:
                 mk[have] = self._markers([c for c in chosen if c is not None])
             return mk
 
-        tried: set[tuple[int, int]] = set()
-        # the seeds tried, kept alive: a candidate the merges drop is freed, and a new one
-        # could take its id and be skipped as tried (which re-fits ran varied between runs)
-        alive: list[Candidate] = []
+        # the seeds tried, by frame and id, each kept alive here: a candidate the merges
+        # drop would be freed, and a new one could take its id and be skipped as tried
+        tried: dict[tuple[int, int], Candidate] = {}
 
         def keep(k: int) -> float:
             """A re-fit joins frame k's candidates only when it fits about as well as the
@@ -1610,8 +1609,7 @@ class Fitter:
                             of_j = window[j].candidates
                         for cand in of_j:
                             if (i, id(cand)) not in tried:
-                                tried.add((i, id(cand)))
-                                alive.append(cand)  # its id stays its own
+                                tried[i, id(cand)] = cand
                                 seeds.append((i, j, cand))
                     # the seeds' re-fits are independent (each keyed by its frame, the window
                     # unchanged until they are merged): on every thread at once, merged in order

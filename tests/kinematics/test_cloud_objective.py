@@ -191,17 +191,23 @@ def test_match_3d_refuses_two_views():
 
 def test_3d_points_fit_with_cameras_given():
     """Labelled 3D points need no cameras, but a fitter made with them fits them too (the
-    views simply have no observations)."""
+    views simply have no observations), to the bit as without them: the annealing, the
+    search and the refinement project a 3D objective into no view (_drawn_views)."""
     body = three_legs()
     cams = ring()
     angles, _ = planted(body, cams, 3, seed=2, shuffle=True)
     pts = forward_kinematics_reference(body, angles[0]).markers[None].repeat(2, axis=0)
+    pts[1] += 0.3  # a second frame the chain cannot fit exactly
     obs = Observations.points_3d(pts, body.marker_names, body.marker_names)
     params = AnnealParams(tau0=5.0, candidates=1, threshold_mode="absolute",
                           reanalysis_threshold=1.0).with_schedule(2000)
     res = Fitter(body, cams, params).fit(obs)
     assert len(res) == 2 and all(np.isfinite(r.error) for r in res)
     assert res[0].missing_views == ()
+    assert res[0].refined_pairs > 0  # the refinement ran
+    alone = Fitter(body, {}, params).fit(obs)
+    for a, b in zip(res, alone, strict=True):
+        assert a.error == b.error and np.array_equal(a.angles_deg, b.angles_deg)
 
 
 def test_final_polish_spreads_a_misfit_by_least_squares():
