@@ -366,15 +366,11 @@ class AnnealParams:
                     value, int | np.integer) or value < 0):
                 raise KinematicsError(f"must be None or an integer >= 0, got {value!r}",
                                       field=name)
-        for name, choices in (("threshold_mode", THRESHOLD_MODES),
-                              ("partitions", PARTITION_MODES), ("match", MATCH_MODES),
-                              ("backend", BACKENDS), ("precision", PRECISIONS),
-                              ("start", START_MODES),
-                              ("confirm_runs", CONFIRM_MODES)):
-            value = getattr(self, name)
+        for f in _CHOICE_FIELDS:  # the allowed values are the fields' ``choices``
+            value, choices = getattr(self, f.name), f.metadata["choices"]
             if value not in choices:
                 raise KinematicsError(f"must be one of {', '.join(choices)}, got {value!r}",
-                                      field=name)
+                                      field=f.name)
         if not isinstance(self.refine, bool | np.bool_):
             raise KinematicsError(f"must be true or false, got {self.refine!r}",
                                   field="refine")
@@ -428,6 +424,10 @@ class AnnealParams:
             kw["error"] = ErrorOptions(**kw["error"])
         return cls(**kw)
 
+
+#: The fields of :class:`AnnealParams` with allowed values (metadata ``choices``: START_MODES,
+#: THRESHOLD_MODES, ...), which :meth:`AnnealParams.validate` checks.
+_CHOICE_FIELDS = tuple(f for f in fields(AnnealParams) if "choices" in f.metadata)
 
 #: The error function of the defaults (bench/bench_temporal.py, docs/benchmarks.md).
 BEST_ERROR = {"mode": "bounded", "cap_px": 10.0}

@@ -6,6 +6,9 @@ import argparse
 import re
 from pathlib import Path
 
+from videotrack.calibration.formats import FORMATS as CAMERA_FORMATS
+from videotrack.io.camera_formats import ORIGINS as DLT_ORIGINS
+
 EXAMPLES = """\
 examples:
   # four synchronised videos of a ChArUco board -> the project's camera file (mm)
@@ -119,11 +122,11 @@ def add_parser(subparsers) -> None:
     conv.add_argument("--import", dest="import_file", type=Path, metavar="FILE",
                       help="read cameras from FILE instead of calibrating: VideoTrack or "
                            "Anipose TOML, OpenCV YAML, DLT CSV, Qualisys .qca")
-    conv.add_argument("--format", choices=("videotrack", "anipose", "opencv", "dlt", "qca"),
+    conv.add_argument("--format", choices=CAMERA_FORMATS,
                       help="format of --import (default: from the name and content)")
     conv.add_argument("--dlt-size", metavar="WxH",
                       help="image size of DLT cameras (needed: DLTdv counts v from the bottom)")
-    conv.add_argument("--dlt-origin", choices=("bottom-left", "top-left"),
+    conv.add_argument("--dlt-origin", choices=DLT_ORIGINS,
                       default="bottom-left",
                       help="pixel convention of DLT coefficients: bottom-left (DLTdv, "
                            "easyWand, Argus; default) or top-left (OpenCV)")

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from kinematics.settings import START_MODES
+
 EXAMPLES = """\
 examples:
   # fit every frame of the detections named in the project file
@@ -59,8 +61,10 @@ def _add_common(p) -> None:
                            "refinement, one answer per frame) under the [anneal] keys set")
     tune.add_argument("--refine", action="store_true", default=None,
                       help="polish each fit by Levenberg-Marquardt")
-    tune.add_argument("--start", choices=("mean", "previous"),
-                      help="start posture: histogram means or the previous frame")
+    tune.add_argument("--start", choices=START_MODES,
+                      help="start posture: the histogram means, the previous frame's result, "
+                           "or 'track' (a short anneal from the previous frame's result; "
+                           "[anneal] start)")
     p.add_argument("--force", action="store_true",
                    help="recompute even if the outputs are up to date; replace an existing "
                         "file of another kind at an output path (never an input)")

@@ -6,6 +6,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from videotrack.io.keypoints import FORMATS
+
 EXAMPLES = """\
 examples:
   # what is in a SLEAP file and a DeepLabCut file (one camera each)
@@ -38,8 +40,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("files", type=Path, nargs="+", help="keypoint file or folder per camera")
     p.add_argument("--names", metavar="A,B,...",
                    help="camera names, in the files' order (default: the file names)")
-    p.add_argument("--format", choices=("dlc", "sleap", "openpose", "lightning-pose",
-                                        "anipose"), help="the files' format (default: detect)")
+    p.add_argument("--format", choices=FORMATS, help="the files' format (default: detect)")
     p.add_argument("--individual", action="append", metavar="ID",
                    help="animal/track/person to follow: name or index (default: the first; "
                         "OpenPose: 'largest' bounding box, or 'confident')")

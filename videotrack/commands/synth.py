@@ -8,6 +8,7 @@ from pathlib import Path
 from tqdm import tqdm
 
 from videotrack.errors import VideoTrackError
+from videotrack.synth import LAYOUTS
 
 EXAMPLES = """\
 examples:
@@ -88,7 +89,7 @@ def add_parser(subparsers) -> None:
                       help="two fields per frame at consecutive postures (PAL-style)")
     look.add_argument("--bottom-field-first", action="store_true",
                       help="with --interlaced: odd rows were exposed first")
-    look.add_argument("--layout", choices=("side-by-side", "stacked", "separate"),
+    look.add_argument("--layout", choices=LAYOUTS,
                       default="side-by-side", help="views in one video, or one per camera")
     look.add_argument("--codec", choices=("ffv1", "png"), default="ffv1",
                       help="lossless FFV1 AVI or a PNG folder")

@@ -6,6 +6,10 @@ import argparse
 import sys
 from pathlib import Path
 
+from kinematics.triangulation import LOSSES
+from videotrack.config import TRIANGULATION_INITS, TRIANGULATION_METHODS
+from videotrack.io.keypoints import FORMATS
+
 EXAMPLES = """\
 examples:
   # SLEAP tracks of four cameras, named as in an Anipose calibration
@@ -56,11 +60,10 @@ def add_parser(subparsers) -> None:
                         "camera")
     p.add_argument("--output", "-o", type=Path, required=True, metavar="CSV",
                    help="the pose-3d CSV to write")
-    p.add_argument("--method", choices=("linear", "ransac", "optim"), default="linear",
+    p.add_argument("--method", choices=TRIANGULATION_METHODS, default="linear",
                    help="triangulation backend (default linear)")
     p.add_argument("--format", metavar="FORMAT",
-                   help="keypoint file format (default: detected): dlc, sleap, openpose, "
-                        "lightning-pose, anipose")
+                   help=f"keypoint file format (default: detected): {', '.join(FORMATS)}")
     p.add_argument("--model", metavar="NAME",
                    help="OpenPose keypoint model naming the points: BODY_25, BODY_25B, COCO")
     p.add_argument("--individual", metavar="NAME",
@@ -82,7 +85,7 @@ def add_parser(subparsers) -> None:
                      help="re-solve with every camera within PX of the best subset's point "
                           "(default 0: off)")
     opt = p.add_argument_group("optimisation (--method optim)")
-    opt.add_argument("--init", choices=("linear", "ransac"), default="linear",
+    opt.add_argument("--init", choices=TRIANGULATION_INITS, default="linear",
                      help="starting points (default linear)")
     opt.add_argument("--limbs", nargs="+", default=(), metavar="A,B",
                      help="pairs of body parts whose distance stays constant")
@@ -96,7 +99,7 @@ def add_parser(subparsers) -> None:
                      help="order of the smoothed derivative (default 1)")
     opt.add_argument("--limb-weight", type=float, default=2.0, metavar="ALPHA",
                      help="weight of the limb-length term (default 2)")
-    opt.add_argument("--loss", choices=("soft_l1", "huber", "linear"), default="soft_l1",
+    opt.add_argument("--loss", choices=tuple(LOSSES), default="soft_l1",
                      help="robust loss of the reprojection term (default soft_l1)")
     opt.add_argument("--loss-px", type=float, default=15.0, metavar="PX",
                      help="scale of the robust loss (default 15)")

@@ -9,6 +9,7 @@ and :func:`map_to_markers` renames keypoints to the chain's markers.
 
 from __future__ import annotations
 
+import importlib
 import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -18,8 +19,63 @@ import numpy as np
 
 from videotrack.errors import VideoTrackError
 
-#: Format names :func:`read_keypoints` accepts (``anipose`` pose-2d files are DeepLabCut h5).
-FORMATS = ("dlc", "sleap", "openpose", "lightning-pose", "anipose")
+
+@dataclass(frozen=True)
+class KeypointFormat:
+    """One keypoint file format of :data:`KEYPOINT_FORMATS`.
+
+    ``module`` is the reader module under :mod:`videotrack.io` (imported when a file is
+    read), whose ``read(path, individual=..., **options)`` returns a :class:`KeypointTracks`;
+    ``options`` are the keywords of :func:`read_keypoints` it takes besides ``individual``.
+    ``suffixes`` are the file suffixes it reads and ``folder`` whether it reads a folder.
+    ``detect`` says whether :func:`detect_format` chooses it. A suffix one detected format
+    alone reads is that format's; where several share one, the formats with ``sniff`` (a
+    function of ``module`` telling from the file's content whether it is one) are asked in
+    registry order, and the one without is the fallback. ``files`` names its files in
+    messages.
+    """
+
+    name: str
+    module: str
+    suffixes: tuple[str, ...]
+    files: str
+    folder: bool = False
+    sniff: str | None = None
+    options: tuple[str, ...] = ()
+    detect: bool = True
+
+    def reader(self):
+        """The reader module (``read``, and ``sniff`` where set)."""
+        return importlib.import_module(f"videotrack.io.{self.module}")
+
+    def claims(self, path: Path) -> bool:
+        """Whether a folder or a file of this format's suffixes may be of this format."""
+        return self.detect and (self.folder if path.is_dir()
+                                else path.suffix.lower() in self.suffixes)
+
+    def sniffs(self, path: Path) -> bool:
+        """Whether this format's content test (``sniff``) takes ``path``."""
+        return self.sniff is not None and bool(getattr(self.reader(), self.sniff)(path))
+
+
+_H5 = (".h5", ".hdf5", ".hdf")
+
+#: The keypoint formats, by the name ``--format`` and ``[keypoints] format`` give: the one
+#: registry the CLI's choices, the config's validation, :func:`detect_format` and
+#: :func:`read_keypoints` read. An ``anipose`` pose-2d file is a DeepLabCut h5 (read by the
+#: DeepLabCut reader, detected as ``dlc``).
+KEYPOINT_FORMATS: dict[str, KeypointFormat] = {f.name: f for f in (
+    KeypointFormat("dlc", "dlc", (*_H5, ".csv"), "DeepLabCut .h5/.csv"),
+    KeypointFormat("sleap", "sleap", (".slp", *_H5), "SLEAP .slp/.h5", sniff="is_analysis_h5"),
+    KeypointFormat("openpose", "openpose", (".json",), "an OpenPose JSON folder",
+                   folder=True, options=("model",)),
+    KeypointFormat("lightning-pose", "lightning_pose", (".csv",), "a Lightning Pose .csv",
+                   sniff="is_lightning_pose_csv"),
+    KeypointFormat("anipose", "dlc", _H5, "an Anipose pose-2d .h5", detect=False),
+)}
+
+#: Format names :func:`read_keypoints` accepts (the keys of :data:`KEYPOINT_FORMATS`).
+FORMATS = tuple(KEYPOINT_FORMATS)
 
 
 @dataclass(frozen=True, eq=False)
@@ -90,24 +146,23 @@ def make_tracks(names, xy, score, frames, source, **extra) -> KeypointTracks:
 
 
 def detect_format(path: str | os.PathLike) -> str:
-    """The format of a keypoint file or folder (one of :data:`FORMATS`)."""
+    """The format of a keypoint file or folder (one of :data:`FORMATS`), from its suffix and,
+    where formats share one, its content (:attr:`KeypointFormat.sniff`)."""
     path = Path(path)
-    if path.is_dir() or path.suffix.lower() == ".json":
-        return "openpose"
-    if not path.is_file():
+    if not path.is_dir() and not path.is_file():
         raise VideoTrackError("no such keypoint file or folder", file=path)
-    suffix = path.suffix.lower()
-    if suffix == ".slp":
-        return "sleap"
-    if suffix in (".h5", ".hdf5", ".hdf"):
-        from videotrack.io import sleap
-        return "sleap" if sleap.is_analysis_h5(path) else "dlc"
-    if suffix == ".csv":
-        from videotrack.io import lightning_pose
-        return "lightning-pose" if lightning_pose.is_lightning_pose_csv(path) else "dlc"
-    raise VideoTrackError("unknown keypoint file type (expected DeepLabCut .h5/.csv, SLEAP "
-                          ".slp/.h5, an OpenPose JSON folder or a Lightning Pose .csv)",
-                          file=path)
+    claims = [f for f in KEYPOINT_FORMATS.values() if f.claims(path)]
+    if len(claims) == 1:
+        return claims[0].name
+    for fmt in claims:  # a suffix several formats share: content tests, then the fallback
+        if fmt.sniffs(path):
+            return fmt.name
+    fallback = [f for f in claims if f.sniff is None]
+    if fallback:
+        return fallback[0].name
+    files = [f.files for f in KEYPOINT_FORMATS.values() if f.detect]
+    raise VideoTrackError("unknown keypoint file type (expected "
+                          f"{', '.join(files[:-1])} or {files[-1]})", file=path)
 
 
 def read_keypoints(path: str | os.PathLike, format: str | None = None, *,
@@ -131,20 +186,13 @@ def read_keypoints(path: str | os.PathLike, format: str | None = None, *,
     VideoTrackError
         A one-line error naming the file (and line or field) for an unreadable file.
     """
-    fmt = detect_format(path) if format is None else str(format).lower().replace("_", "-")
-    if fmt not in FORMATS:
+    name = detect_format(path) if format is None else str(format).lower().replace("_", "-")
+    if name not in KEYPOINT_FORMATS:
         raise VideoTrackError(f"unknown keypoint format {format!r} (one of "
                               f"{', '.join(FORMATS)})", file=path, field="format")
-    if fmt in ("dlc", "anipose"):
-        from videotrack.io import dlc as reader
-    elif fmt == "sleap":
-        from videotrack.io import sleap as reader
-    elif fmt == "openpose":
-        from videotrack.io import openpose as reader
-    else:
-        from videotrack.io import lightning_pose as reader
-    options = {"model": model} if fmt == "openpose" else {}
-    tracks = reader.read(Path(path), individual=individual, **options)
+    fmt = KEYPOINT_FORMATS[name]
+    options = {k: v for k, v in {"model": model}.items() if k in fmt.options}
+    tracks = fmt.reader().read(Path(path), individual=individual, **options)
     return shift(tracks, crop_offset, frame_offset)
 
 
