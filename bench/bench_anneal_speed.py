@@ -13,7 +13,7 @@ Measured: (a) ns per SA iteration on one thread (one frame, Table 1 schedule run
 ε = 0, one run); (b) frames/s with the Table 1 defaults (re-analysis included) on one thread and
 on all of numba's threads; (c) the same with refinement and the shortened schedule
 ``--short`` (N_l, N_τ scaled; re-analysis threshold 1 px) that keeps the accuracy in
-``bench_table2.py``; (d) the NumPy reference loop (:func:`kinematics.anneal.anneal_reference`,
+``bench_table2.py``; (d) the NumPy reference loop (:func:`kinematics.fit.anneal_reference`,
 4x4 forward kinematics and the NumPy Eq. 5) per iteration; (e) the refinement kernel per frame
 against ``scipy.optimize.least_squares`` on the same problem. Timings are the best of
 ``--repeats`` runs; the first call of each kernel (compilation or cache load) is excluded.
@@ -35,8 +35,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from _report import machine, print_table
 
 from kinematics import _refine_kernels as rk
-from kinematics.anneal import AnnealParams, Fitter, _as_ragged, anneal_reference
 from kinematics.chain_xml import load_body
+from kinematics.fit import AnnealParams, Fitter, anneal_reference
+from kinematics.fit.inputs import as_ragged
 from kinematics.fk import forward_kinematics
 from kinematics.observations import ObservationArrays
 from kinematics.refine import refine_reference
@@ -135,7 +136,7 @@ def main() -> int:
     # (e) the refinement kernel against scipy's least_squares, per frame, one thread.
     res = table1.fit(dets)
     starts = np.deg2rad([r.angles_deg for r in res])
-    rag = _as_ragged(dets, one.view_names)
+    rag = as_ragged(dets, one.view_names)
     roots = np.zeros((len(dets), 1, 3))
     rots = one.problem.identity_rotations(len(dets))
     sse, pairs = np.empty(len(dets)), np.empty(len(dets), np.int64)

@@ -31,7 +31,7 @@ from _report import machine, print_table  # noqa: E402
 SNIPPET = r"""
 import json, sys, time
 import numba, numpy as np
-from kinematics.anneal import AnnealParams, Fitter
+from kinematics.fit import AnnealParams, Fitter
 from kinematics.cameras import PinholeCamera
 from kinematics.chain_xml import load_body
 from kinematics.fk import forward_kinematics

@@ -44,7 +44,7 @@ missing in a view (occluded in the truth) that is not marked yet, they select th
 occlusion's rows (click, Shift+click: two actions), click the model marker, press H and F7
 (five actions per marker and stretch), then go on as above.
 
-Everything goes through the window: its actions (``ui/shortcuts.py``), the video view's
+Everything goes through the window: its actions (``ui/views/shortcuts.py``), the video view's
 marker drag signal and the correction panel's number boxes; the session only reports.
 """
 
@@ -306,7 +306,7 @@ class User:
 def measure(project: Path, log: bool, hide: bool = False) -> list[tuple]:
     from PySide6.QtWidgets import QApplication, QMessageBox
 
-    from ui.main_window import MainWindow
+    from ui.views.main_window import MainWindow
 
     app = QApplication.instance() or QApplication([])
     window = MainWindow(use_opengl=False)

@@ -42,8 +42,8 @@ from _report import machine, print_table  # noqa: E402
 from bench_lanes import detections  # noqa: E402
 
 from kinematics import _cuda_kernels  # noqa: E402
-from kinematics.anneal import AnnealParams, Fitter  # noqa: E402
 from kinematics.chain_xml import load_body  # noqa: E402
+from kinematics.fit import AnnealParams, Fitter  # noqa: E402
 from videotrack.motion import smooth_random_motion  # noqa: E402
 from videotrack.paper_setup import bundled_chain, locust_cameras  # noqa: E402
 

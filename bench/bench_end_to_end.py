@@ -51,8 +51,8 @@ from bench_detection import write as write_avi
 from videotrack.cli import main as cli
 from videotrack.config import load_config
 from videotrack.detect import detect_video, settings_from_config, video_paths
-from videotrack.pipeline import load_model, not_streamable, run_project
 from videotrack.video import open_videos
+from videotrack.workflow import load_model, not_streamable, run_project
 
 CAMERAS = """\
 units = "px"

@@ -404,8 +404,8 @@ def parse_param(text: str):
 
 def build_params(args, threshold_px: float):
     """AnnealParams of the command line, with the re-analysis threshold of one fit."""
-    from kinematics.anneal import AnnealParams, ErrorOptions
     from kinematics.errors import KinematicsError
+    from kinematics.fit import AnnealParams, ErrorOptions
 
     error = {"mode": args.error, "cap_px": args.cap if args.cap > 0 else None}
     kw = {"refine": True, "reanalysis_threshold": threshold_px, "seed": args.seed}
@@ -452,7 +452,7 @@ def build_params(args, threshold_px: float):
 
 
 def fit(body, cams, det, params, colours=()):
-    from kinematics.anneal import Fitter
+    from kinematics.fit import Fitter
 
     views, shows = fit_views(cams, colours, body.marker_names)
     fitter = Fitter(body, views, params, view_markers=shows)

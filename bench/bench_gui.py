@@ -75,7 +75,7 @@ def measure(project: Path) -> list[tuple]:
     from PySide6.QtCore import QTimer
     from PySide6.QtWidgets import QApplication, QMessageBox
 
-    from ui.main_window import MainWindow
+    from ui.views.main_window import MainWindow
 
     app = QApplication.instance() or QApplication([])
     window = MainWindow()  # the 3D view in OpenGL on a real display, its 2D fallback offscreen

@@ -48,9 +48,9 @@ sys.path.insert(0, str(REPO))
 
 from _report import machine, print_table  # noqa: E402
 
-from kinematics.anneal import AnnealParams, Fitter  # noqa: E402
 from kinematics.cameras import PinholeCamera  # noqa: E402
 from kinematics.chain_xml import load_body  # noqa: E402
+from kinematics.fit import AnnealParams, Fitter  # noqa: E402
 from kinematics.fk import forward_kinematics  # noqa: E402
 from kinematics.observations import Observations  # noqa: E402
 from kinematics.rotations import euler_yxz  # noqa: E402

@@ -49,8 +49,8 @@ def _mean_error(a: np.ndarray, b: np.ndarray) -> float:
 def run(folder: Path, frames: int, seed: int, distance: float) -> list[tuple]:
     from videotrack.config import load_config
     from videotrack.markerless import load_keypoints
-    from videotrack.pipeline import load_model, run_project
     from videotrack.synth_keypoints import write_session
+    from videotrack.workflow import load_model, run_project
 
     rows = []
     for k, (name, text) in enumerate(ROUTES.items()):

@@ -239,7 +239,7 @@ def place_cameras(points, side: str):
 
 # -- fits ----------------------------------------------------------------------------------------
 def fit_true_root(body, cams, det, params, true_root, frames):
-    from kinematics.anneal import Fitter
+    from kinematics.fit import Fitter
 
     fitter = Fitter(body, cams, params)
     out = {}
@@ -251,7 +251,7 @@ def fit_true_root(body, cams, det, params, true_root, frames):
 
 
 def fit_free_root(body, cams, det, params, frames):
-    from kinematics.anneal import Fitter
+    from kinematics.fit import Fitter
 
     fitter = Fitter(body, cams, params)
     t0 = time.perf_counter()
@@ -260,7 +260,7 @@ def fit_free_root(body, cams, det, params, frames):
 
 
 def fit_observations(body, cams, obs, params):
-    from kinematics.anneal import Fitter
+    from kinematics.fit import Fitter
 
     fitter = Fitter(body, cams, params)
     t0 = time.perf_counter()
@@ -405,10 +405,10 @@ def main() -> int:
 
 def run(args, out: Path, keep: bool) -> int:
     import kinematics.model as km
-    from kinematics.anneal import AnnealParams
     from kinematics.camera_io import save_cameras
     from kinematics.chain_xml import loads_body
     from kinematics.error_function import ErrorOptions
+    from kinematics.fit import AnnealParams
     from videotrack.detect import detect_project
     from videotrack.project import command_config
     from videotrack.synth import SynthOptions, read_points, write_points_project

@@ -32,9 +32,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _report import machine, print_table
 from bench_table2 import render_and_detect
 
-from kinematics.anneal import AnnealParams, Fitter
 from kinematics.cameras import OrthographicCamera
 from kinematics.chain_xml import load_body
+from kinematics.fit import AnnealParams, Fitter
 from videotrack.paper_setup import bundled_chain
 from videotrack.synth import SynthOptions
 

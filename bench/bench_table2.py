@@ -36,9 +36,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from kinematics.anneal import AnnealParams, Fitter
 from kinematics.chain_xml import load_body
 from kinematics.error_function import ErrorOptions
+from kinematics.fit import AnnealParams, Fitter
 from kinematics.refine import cramer_rao_bound
 from videotrack.detect import detect_video
 from videotrack.detections import DetectSettings

@@ -1,14 +1,14 @@
 """numba kernels of the posture fitter: Eq. 5, the annealing loop of Eq. 6, re-analysis and
-root-marker tracking (private; the public wrapper is :mod:`kinematics.anneal`).
+root-marker tracking (private; the public wrapper is :mod:`kinematics.fit`).
 
 The readable twins are :mod:`kinematics.error_function` (Eq. 5 and its variants) and
-:func:`kinematics.anneal.anneal_reference` (the annealing loop on the same random stream);
+:func:`kinematics.fit.anneal_reference` (the annealing loop on the same random stream);
 they are the specification and the test oracles.
 
 Layout and conventions
 ----------------------
 * Angles are radians. A posture is a flat vector of ``n_axes`` angles (y, x, z per joint).
-* The body is passed in the *folded* layout of :func:`kinematics.anneal.fold_body`: the
+* The body is passed in the *folded* layout of :func:`kinematics.problem.fold_body`: the
   constant parts of Eq. 1 (R^s, R^d, T and the rotations of locked axes before the first
   and after the last free axis of a joint) are multiplied out once, so a joint costs one
   3×3 product plus one 12-flop column rotation per moving axis, and locked hinge axes cost
@@ -18,10 +18,11 @@ Layout and conventions
 * Arrays are passed one by one, never as a tuple (unpacking a tuple of arrays in a
   non-inlined call costs atomic reference counts on every call).
 * Detections of one frame are ragged: ``points`` (n, 2) pixels, view ``v`` owning rows
-  ``view_off[v]:view_off[v + 1]``, sorted by x within each view (``anneal._as_ragged``), so
-  a view with many detections is searched by a sweep along x (:func:`nearest_sorted`). For
-  many frames ``det_off`` (n_frames * n_views + 1,) is frame-major; frame ``f``'s view
-  offsets are ``det_off[f * n_views: (f + 1) * n_views + 1]``.
+  ``view_off[v]:view_off[v + 1]``, sorted by x within each view
+  (:func:`kinematics.fit.inputs.as_ragged`), so a view with many detections is searched by a
+  sweep along x (:func:`nearest_sorted`). For many frames ``det_off`` (n_frames * n_views +
+  1,) is frame-major; frame ``f``'s view offsets are
+  ``det_off[f * n_views: (f + 1) * n_views + 1]``.
 * Everything one annealing chain touches per iteration lives in caller-supplied scratch
   arrays (``cur``, ``cand``, ``best``, ``cs``, ``sn``, ``rot``, ``pos``, ``proj``), so the
   loop allocates nothing, and a later kernel can interleave many chains in SIMD lanes by

@@ -1,5 +1,5 @@
 """CUDA backend: one annealing run per GPU thread (private; the public entry is
-:class:`kinematics.anneal.Fitter` with ``backend = "cuda"``).
+:class:`kinematics.fit.Fitter` with ``backend = "cuda"``).
 
 The GPU runs the scalar kernel itself: every thread calls
 :func:`kinematics._anneal_kernels.anneal_chain` (numba compiles it as a device function),

@@ -1,5 +1,5 @@
 """numba lane kernels: many annealing runs at once, one per SIMD lane (private; the public
-entry is :class:`kinematics.anneal.Fitter` with ``backend = "lanes"``).
+entry is :class:`kinematics.fit.Fitter` with ``backend = "lanes"``).
 
 One annealing run is latency-bound: each iteration waits for the previous acceptance. Runs
 of different frames (and the candidate runs of one frame) are independent, so this module

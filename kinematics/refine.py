@@ -24,8 +24,9 @@ from scipy.optimize import least_squares
 
 from kinematics import _anneal_kernels as _ak
 from kinematics import _refine_kernels as _rk
-from kinematics.anneal import Fitter, _as_ragged
 from kinematics.errors import KinematicsError
+from kinematics.fit import Fitter
+from kinematics.fit.inputs import as_ragged
 from kinematics.observations import ObservationArrays
 
 
@@ -123,7 +124,7 @@ def refine_many(fitter: Fitter, angles_deg, detections, root_positions=None, *,
         Default the configured positions.
     """
     steps, gate = _gate_steps(fitter, steps, gate_px)
-    rag = _as_ragged(detections, fitter.view_names)
+    rag = as_ragged(detections, fitter.view_names)
     start = np.asarray(angles_deg, dtype=float)
     n = rag.n_frames
     if start.shape != (n, fitter.body.n_axes):

@@ -1,14 +1,14 @@
 """Promises about the repository itself: package rooms, lint, the README's commands."""
 
+import ast
 import os
 import re
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 
-REPO = Path(__file__).resolve().parents[1]
+from tests.fixtures.paths import BIND_TESTS_PACKAGE, REPO, TESTS
 
 
 def test_core_packages_never_import_qt():
@@ -45,8 +45,8 @@ def test_numba_cache_stays_out_of_the_package(tmp_path):
     """Compiled kernels are cached under the user's cache folder, never in site-packages
     (files pip does not know would survive an uninstall and shadow the next install)."""
     code = ("import numpy as np\nfrom kinematics.fk import forward_kinematics\n"
-            "from kinematics.model import *\nimport sys\nsys.path.insert(0, 'tests')\n"
-            "from conftest import locust_body\nb = locust_body()\n"
+            "from kinematics.model import *\n" + BIND_TESTS_PACKAGE +
+            "from tests.fixtures.bodies import locust_body\nb = locust_body()\n"
             "forward_kinematics(b, b.mean_posture_deg())\n")
     env = {**os.environ, "XDG_CACHE_HOME": str(tmp_path)}
     env.pop("NUMBA_CACHE_DIR", None)
@@ -56,3 +56,89 @@ def test_numba_cache_stays_out_of_the_package(tmp_path):
     cached = list((tmp_path / "videotrack" / "numba").rglob("*.nbi"))
     assert cached, "no kernel was cached in the user's cache folder"
     assert not list((REPO / "kinematics").rglob("*.nbi"))
+
+
+#: Calls that import the module or file a string names.
+IMPORTING_CALLS = {"import_module", "__import__", "spec_from_file_location", "SourceFileLoader",
+                   "run_path", "import_path"}
+#: A line of a code string that imports (a child process's ``python -c`` script).
+IMPORT_LINE = re.compile(r"^[ \t]*(?:from|import)[ \t]+\S.*$", re.M)
+
+
+def _names_a_test_module(name: str) -> bool:
+    """``name`` (dotted, or a file path) names a test module or a conftest."""
+    return any(p == "conftest" or p.startswith("test_") for p in re.split(r"[./\\]", name))
+
+
+def imports_of_test_modules(source: str, where: str = "<string>") -> list[str]:
+    """Where ``source`` imports a test module or a conftest: import statements (absolute or
+    relative), importing calls (importlib) given such a name or file, and the import lines
+    of strings with line breaks (code for a child process)."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        at = f"{where}:{getattr(node, 'lineno', '?')}"
+        if isinstance(node, ast.Import):
+            found += [f"{at}: import {a.name}" for a in node.names if _names_a_test_module(a.name)]
+        elif isinstance(node, ast.ImportFrom):
+            module = node.module or ""
+            names = [a.name for a in node.names]
+            from_tests = node.level or module.split(".")[0] == "tests"
+            if _names_a_test_module(module) or (from_tests and any(map(_names_a_test_module,
+                                                                         names))):
+                found.append(f"{at}: from {'.' * node.level}{module} import {', '.join(names)}")
+        elif isinstance(node, ast.Call):
+            func = node.func
+            name = func.attr if isinstance(func, ast.Attribute) else getattr(func, "id", "")
+            if name in IMPORTING_CALLS:
+                found += [f"{at}: {name}(... {s.value!r} ...)" for s in ast.walk(node)
+                          if isinstance(s, ast.Constant) and isinstance(s.value, str)
+                          and _names_a_test_module(s.value)]
+        elif isinstance(node, ast.Constant) and isinstance(node.value, str) and "\n" in node.value:
+            for line in IMPORT_LINE.findall(node.value):
+                try:
+                    inner = imports_of_test_modules(line.strip())
+                except SyntaxError:  # prose that starts with 'import'
+                    continue
+                found += [f"{at}: in a code string: {line.strip()}" for _ in inner[:1]]
+    return found
+
+
+def test_no_test_module_imports_another_or_a_conftest():
+    """Shared builders live in tests/fixtures (registered as plugins by the root conftest);
+    a test module that imports another one runs that module's code twice under two names,
+    and a conftest is pytest's to import."""
+    found = []
+    for path in sorted(TESTS.rglob("*.py")):
+        found += imports_of_test_modules(path.read_text(), str(path.relative_to(REPO)))
+    assert not found, "import these from tests/fixtures instead:\n" + "\n".join(found)
+
+
+@pytest.mark.parametrize("source", [
+    "from tests.kinematics.test_partitions import planted",
+    "from .test_anneal import planted",
+    "from test_free_root import mouse_like",
+    "from tests.conftest import CHAINS",
+    "from tests.ui.conftest import SHORT_ANNEAL",
+    "import conftest",
+    "import tests.kinematics.test_lanes as lanes",
+    "from . import test_lanes",
+    "from tests.kinematics import test_lanes",
+    'spec = importlib.util.spec_from_file_location("kp", here.with_name("test_io_keypoints.py"))',
+    'mod = importlib.import_module("tests.kinematics.test_anneal")',
+    'SCRIPT = "import sys\\nsys.path.insert(0, \'tests\')\\nfrom conftest import locust_body\\n"',
+])
+def test_the_import_check_finds_test_modules_and_conftests(source):
+    assert len(imports_of_test_modules(source)) == 1
+
+
+@pytest.mark.parametrize("source", [
+    "from tests.fixtures.bodies import leg",
+    "from .bodies import LEG_XML",
+    "import pytest",
+    "from kinematics.anneal import Fitter",
+    'WINDOWLESS = {"test_adapters.py", "test_session.py"}',
+    'CODE = "import numpy\\nfrom tests.fixtures.bodies import locust_body\\n"',
+    'DOC = """Import the tracks.\\nimport them all, then fit."""',
+])
+def test_the_import_check_lets_fixtures_and_others_pass(source):
+    assert imports_of_test_modules(source) == []

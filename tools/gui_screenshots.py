@@ -62,7 +62,7 @@ def main() -> int:
 
     from PySide6.QtWidgets import QApplication, QMessageBox
 
-    from ui.main_window import MainWindow
+    from ui.views.main_window import MainWindow
     from videotrack.tables import read_table
 
     app = QApplication.instance() or QApplication([])

@@ -66,7 +66,7 @@ def save(widget, path: Path) -> None:
 def window_on(project: Path):
     from PySide6.QtWidgets import QApplication, QMessageBox
 
-    from ui.main_window import MainWindow
+    from ui.views.main_window import MainWindow
 
     window = MainWindow()
     window.ask_unsaved = lambda: QMessageBox.StandardButton.Discard  # a demo: no saving

@@ -13,7 +13,7 @@ def run(project=None, trial: str | None = None, argv: list[str] | None = None) -
     """
     from PySide6.QtWidgets import QApplication
 
-    from ui.main_window import MainWindow
+    from ui.views.main_window import MainWindow
 
     app = QApplication.instance() or QApplication(argv if argv is not None else sys.argv[:1])
     app.setApplicationName("VideoTrack")

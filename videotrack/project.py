@@ -90,8 +90,8 @@ class TrialOutputs:
 
     def files(self) -> tuple[Path, ...]:
         """Every file a finished trial has, checkpoints of an interrupted fit included."""
-        from videotrack.pipeline import checkpoint_paths
         from videotrack.results import sidecar_path
+        from videotrack.workflow import checkpoint_paths
 
         return (self.detections, self.results, sidecar_path(self.results), self.plot,
                 *checkpoint_paths(self.results))
@@ -100,7 +100,7 @@ class TrialOutputs:
 def trial_outputs(config: Config) -> TrialOutputs:
     """The detections, results and plot paths of a (trial) config."""
     from videotrack.detect import default_output
-    from videotrack.pipeline import default_plot_path, default_results_path
+    from videotrack.workflow import default_plot_path, default_results_path
 
     detections = default_output(config)
     results = default_results_path(config, detections)

@@ -16,7 +16,7 @@ detection. They show which marker of a frame is off (a swapped or missing marker
 
 ``status`` is ``ok``, ``reanalysed``, ``ambiguous`` (another candidate posture far from this
 one fits about as well, or the frame needs a look for another reason:
-:class:`kinematics.anneal.FrameResult`), ``failed``, ``no-detections`` or ``corrected``
+:class:`kinematics.fit.FrameResult`), ``failed``, ``no-detections`` or ``corrected``
 (set by hand in the GUI). Empty cells are NaN. The sidecar ``<results>.json`` records the
 seed, every fitting parameter, the chain, cameras and detections used (paths relative to
 the results file's folder, and content hashes) so any run can be replayed and stale
@@ -44,13 +44,15 @@ from pathlib import Path
 import numpy as np
 
 from kinematics.fileio import atomic_write_text
+from kinematics.fit.result import TRUSTED, Status
 from kinematics.fk import forward_kinematics
 from kinematics.model import Body
 from kinematics.packing import pack_body
 from videotrack.errors import VideoTrackError
 from videotrack.tables import format_cell
 
-STATUSES = ("ok", "reanalysed", "ambiguous", "failed", "no-detections", "corrected")
+#: Every status a results file may hold (a fit's, and ``corrected`` by hand).
+STATUSES = tuple(Status)
 #: Per-frame match counts (FrameResult.matched, .unexplained, .worst_px), between iterations
 #: and status; files written before they existed lack them.
 QUALITY_COLUMNS = ("matched", "unexplained", "worst_px")
@@ -91,8 +93,8 @@ class Results:
     def ok_mask(self, ambiguous: bool = True) -> np.ndarray:
         """Rows whose fit met the error threshold (ok, re-analysed, corrected by hand and,
         unless ``ambiguous`` is False, ambiguous)."""
-        good = ("ok", "reanalysed", "corrected") + (("ambiguous",) if ambiguous else ())
-        return np.isin(np.array(self.status), good)
+        good = TRUSTED | {Status.AMBIGUOUS} if ambiguous else TRUSTED
+        return np.array([s in good for s in self.status], bool)
 
     @property
     def columns(self) -> list[str]:
@@ -269,7 +271,7 @@ def attach_candidates(results: Mapping[int, object], path: str | os.PathLike) ->
     by rank, as the fitter gives them."""
     from dataclasses import replace
 
-    from kinematics.anneal import Candidate
+    from kinematics.fit import Candidate
 
     out = dict(results)
     found_path = candidates_path(path)
@@ -338,7 +340,7 @@ def read_results(path: str | os.PathLike) -> Results:
                 if cell not in STATUSES:
                     raise VideoTrackError(f"unknown status '{cell}'", file=path, line=r + 2,
                                           field="status")
-                status.append(cell)
+                status.append(Status(cell))
             elif cell:
                 try:
                     data[r, c] = float(cell)
@@ -374,7 +376,7 @@ def read_results(path: str | os.PathLike) -> Results:
 def frame_results(table: Results, seed: int) -> dict:
     """The rows of a results table as the fitter's ``FrameResult`` records, keyed by frame
     (to resume a fit, or to edit results in the GUI)."""
-    from kinematics.anneal import FrameResult
+    from kinematics.fit import FrameResult
 
     return {
         int(table.frames[i]): FrameResult(

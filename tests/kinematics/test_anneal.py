@@ -10,47 +10,16 @@ import numpy as np
 import pytest
 
 from kinematics import _anneal_kernels as ak
-from kinematics.anneal import (
-    AnnealParams,
-    Fitter,
-    SplitMix64,
-    anneal_reference,
-    histogram_tables,
-)
-from kinematics.cameras import OrthographicCamera
 from kinematics.error_function import ErrorOptions
 from kinematics.errors import KinematicsError
-from kinematics.fk import forward_kinematics
+from kinematics.fit import AnnealParams, Fitter, SplitMix64, anneal_reference
 from kinematics.histograms import Histogram
 from kinematics.model import Body, Chain
+from kinematics.problem import histogram_tables
+from tests.fixtures.cameras import stick_cameras
+from tests.fixtures.planted import moving_roots, planted_detections
 from videotrack.motion import smooth_random_motion
 from videotrack.paper_setup import locust_cameras
-
-NOISE_PX = 0.2  # centroid noise of the planted detections, about a 4-px marker's
-
-
-def stick_cameras() -> dict:
-    """Top and side orthographic views of the stick insect, 10 px per mm."""
-    return {
-        "top": OrthographicCamera.from_axes("top", 10.0, ("x", "z"), (400.0, 300.0),
-                                            size=(800, 600)),
-        "side": OrthographicCamera.from_axes("side", 10.0, ("x", "-y"), (400.0, 300.0),
-                                             size=(800, 600)),
-    }
-
-
-def planted(body, cams, angles, seed=0, noise=NOISE_PX, roots=None, ghosts=0):
-    """Detections per frame and view: exact marker projections + Gaussian noise (+ ghosts)."""
-    rng = np.random.default_rng(seed)
-    frames = []
-    for k, a in enumerate(angles):
-        markers = forward_kinematics(body, a, None if roots is None else roots[k]).markers
-        views = []
-        for cam in cams.values():
-            p = cam.project(markers) + rng.normal(0, noise, (len(markers), 2))
-            views.append(np.concatenate([p, rng.uniform(20, 280, (ghosts, 2))]))
-        frames.append(views)
-    return frames
 
 
 def angle_errors(body, results, truth):
@@ -141,7 +110,7 @@ def test_kernel_equals_reference_twin(locust):
     """Same random stream, same schedule: the kernel follows the plain Python loop."""
     cams = locust_cameras()
     truth = np.array([160.0, 12.0, 4.0, 0, 0, 25.0, 0, 0, 95.0])
-    frame = planted(locust, cams, [truth], seed=4, ghosts=1)[0]
+    frame = planted_detections(locust, cams, [truth], seed=4, ghosts=1)[0]
     params = AnnealParams.paper(seed=11, max_runs=1, epsilon=0.0).with_schedule(300)
     got = Fitter(locust, cams, params).fit_frame(frame, frame=7)
     best, e, its = anneal_reference(locust, cams, frame, params, frame=7)
@@ -155,7 +124,8 @@ def test_locust_planted_postures_table_1(locust):
     alpha and beta, whose errors cancel in alpha + beta)."""
     cams = locust_cameras()
     truth = smooth_random_motion(locust, 10, 10, seed=1)
-    results = Fitter(locust, cams, AnnealParams.paper()).fit(planted(locust, cams, truth, seed=1))
+    results = Fitter(locust, cams, AnnealParams.paper()).fit(
+        planted_detections(locust, cams, truth, seed=1))
     err = angle_errors(locust, results, truth)  # phi, psi, alpha, beta, gamma
     assert err[:, [0, 1, 4]].max() < 2.0
     assert err[:, [2, 3]].max() < 8.0
@@ -169,7 +139,8 @@ def test_locust_short_schedule(locust):
     cams = locust_cameras()
     truth = smooth_random_motion(locust, 30, 30, seed=2)
     params = AnnealParams.paper().with_schedule(8000)
-    results = Fitter(locust, cams, params).fit(planted(locust, cams, truth, seed=2, ghosts=2))
+    results = Fitter(locust, cams, params).fit(
+        planted_detections(locust, cams, truth, seed=2, ghosts=2))
     err = angle_errors(locust, results, truth)
     assert np.median(err[:, [0, 1, 4]]) < 1.0
     assert err[:, [0, 1, 4]].max() < 5.0
@@ -181,7 +152,8 @@ def test_stick_insect_planted_postures(stick_insect):
     cams = stick_cameras()
     truth = smooth_random_motion(stick_insect, 30, 30, seed=3)
     params = AnnealParams.paper(reanalysis_threshold=5.0)
-    results = Fitter(stick_insect, cams, params).fit(planted(stick_insect, cams, truth, seed=3))
+    results = Fitter(stick_insect, cams, params).fit(
+        planted_detections(stick_insect, cams, truth, seed=3))
     err = angle_errors(stick_insect, results, truth)  # pi, rho, alpha, psi, beta, gamma
     assert np.sqrt((err**2).mean(axis=0)).max() < 2.0
     assert err.max() < 6.0
@@ -193,7 +165,7 @@ def test_same_seed_same_result_on_1_and_2_threads(locust):
         pytest.skip("needs two numba threads")
     cams = locust_cameras()
     truth = smooth_random_motion(locust, 12, 3, seed=4)
-    dets = planted(locust, cams, truth, seed=4, ghosts=2)
+    dets = planted_detections(locust, cams, truth, seed=4, ghosts=2)
     params = AnnealParams.paper(seed=5, reanalysis_threshold=3.0).with_schedule(3000)
     fitter = Fitter(locust, cams, params)
     before = numba.get_num_threads()
@@ -223,13 +195,13 @@ def test_locked_axes_never_move(locust, stick_insect):
     for body, cams in [(locust, locust_cameras()), (stick_insect, stick_cameras())]:
         truth = smooth_random_motion(body, 4, 4, seed=5)
         params = AnnealParams.paper().with_schedule(2000)
-        results = Fitter(body, cams, params).fit(planted(body, cams, truth, seed=5))
+        results = Fitter(body, cams, params).fit(planted_detections(body, cams, truth, seed=5))
         locked = body.locked_mask()
         for r in results:
             np.testing.assert_array_equal(r.angles_deg[locked], body.mean_posture_deg()[locked])
         # Even from a start posture with other values on locked axes.
         start = body.mean_posture_deg() + 7.0
-        r = Fitter(body, cams, params).fit_frame(planted(body, cams, truth[:1])[0],
+        r = Fitter(body, cams, params).fit_frame(planted_detections(body, cams, truth[:1])[0],
                                                  start_deg=start)
         np.testing.assert_array_equal(r.angles_deg[locked], body.mean_posture_deg()[locked])
 
@@ -237,7 +209,7 @@ def test_locked_axes_never_move(locust, stick_insect):
 def test_start_from_previous_tracks_with_a_cold_short_schedule(locust):
     cams = locust_cameras()
     truth = smooth_random_motion(locust, 40, 2, seed=6)
-    dets = planted(locust, cams, truth, seed=6)
+    dets = planted_detections(locust, cams, truth, seed=6)
     # Refined E is about 1.5 px here; a frame stuck in a wrong basin is re-run (from the
     # means) above 3 px.
     params = AnnealParams.paper(start="previous", tau0=10.0, l0=0.5, segment_length=10,
@@ -256,7 +228,7 @@ def test_reanalysis_keeps_the_best_of_at_most_max_runs(locust):
     best is kept; the twin replays each run's stream."""
     cams = locust_cameras()
     truth = np.array([175.0, -8.0, 2.0, 0, 0, 10.0, 0, 0, 70.0])
-    frame = planted(locust, cams, [truth], seed=8, ghosts=2)[0]
+    frame = planted_detections(locust, cams, [truth], seed=8, ghosts=2)[0]
     params = AnnealParams.paper(reanalysis_threshold=0.5, epsilon=0.0).with_schedule(40)
     r = Fitter(locust, cams, params).fit_frame(frame, frame=3)
     assert (r.status, r.runs, r.iterations) == ("failed", 5, 200)
@@ -270,7 +242,7 @@ def test_reanalysis_keeps_the_best_of_at_most_max_runs(locust):
 def test_reanalysis_statuses(locust):
     cams = locust_cameras()
     truth = smooth_random_motion(locust, 30, 30, seed=3)
-    dets = planted(locust, cams, truth, seed=5)
+    dets = planted_detections(locust, cams, truth, seed=5)
     params = AnnealParams.paper(reanalysis_threshold=4.0).with_schedule(1000)
     results = Fitter(locust, cams, params).fit(dets)
     counts = Counter(r.status for r in results)
@@ -286,18 +258,12 @@ def test_reanalysis_statuses(locust):
 
 
 # -- root tracking --------------------------------------------------------------------------------
-def moving_roots(n):
-    t = np.arange(n)[:, None]
-    return (np.array([0.8, 0.1, -0.3]) * t + np.array([0.0, 0.5, 0.0]) * np.sin(t / 3.0)
-            )[:, None, :]
-
-
 def test_root_follows_the_root_marker(stick_insect):
     cams = stick_cameras()
     n = 15
     truth = smooth_random_motion(stick_insect, n, 1, seed=9)
     roots = moving_roots(n)
-    dets = planted(stick_insect, cams, truth, seed=9, roots=roots, noise=0.1)
+    dets = planted_detections(stick_insect, cams, truth, seed=9, roots=roots, noise=0.1)
     fitter = Fitter(stick_insect, cams, AnnealParams.paper().with_schedule(8000))
     tracked = fitter.track_roots(dets)
     np.testing.assert_allclose(tracked, roots, atol=0.05)  # 0.5 px at 10 px/mm
@@ -313,7 +279,7 @@ def test_root_tracking_with_a_gate_skips_a_view_that_lost_the_marker(stick_insec
     n = 6
     truth = smooth_random_motion(stick_insect, n, 1, seed=10)
     roots = moving_roots(n)
-    dets = planted(stick_insect, cams, truth, seed=10, roots=roots, noise=0.0)
+    dets = planted_detections(stick_insect, cams, truth, seed=10, roots=roots, noise=0.0)
     dets[3][1] = dets[3][1][1:]  # M0 (the root marker) occluded in the side view
     params = AnnealParams.paper(root_gate_px=30.0)  # moves 8 px per frame; M1 is 90 px away
     tracked = Fitter(stick_insect, cams, params).track_roots(dets)
@@ -329,7 +295,7 @@ def test_root_marker_is_reacquired_after_a_gap(stick_insect):
     n = 9
     truth = smooth_random_motion(stick_insect, n, 1, seed=12)
     roots = moving_roots(n) * 4.0  # 3 mm (30 px) per frame
-    dets = planted(stick_insect, cams, truth, seed=12, roots=roots, noise=0.0)
+    dets = planted_detections(stick_insect, cams, truth, seed=12, roots=roots, noise=0.0)
     for f in (3, 4, 5):  # the root marker M0 is hidden in both views
         dets[f] = [d[1:] for d in dets[f]]
     tracked = Fitter(stick_insect, cams, AnnealParams.paper(root_gate_px=40.0)).track_roots(dets)
@@ -347,14 +313,14 @@ def test_root_tracking_with_pinhole_cameras(stick_insect):
     n = 8
     truth = smooth_random_motion(stick_insect, n, 1, seed=11)
     roots = moving_roots(n)
-    dets = planted(stick_insect, cams, truth, seed=11, roots=roots, noise=0.0)
+    dets = planted_detections(stick_insect, cams, truth, seed=11, roots=roots, noise=0.0)
     tracked = Fitter(stick_insect, cams).track_roots(dets)
     np.testing.assert_allclose(tracked, roots, atol=1e-6)
 
 
 def test_fixed_root_stays(locust):
     cams = locust_cameras()
-    dets = planted(locust, cams, smooth_random_motion(locust, 3, 1, seed=1))
+    dets = planted_detections(locust, cams, smooth_random_motion(locust, 3, 1, seed=1))
     tracked = Fitter(locust, cams).track_roots(dets)
     np.testing.assert_array_equal(tracked, np.zeros((3, 1, 3)))
 
@@ -363,7 +329,7 @@ def test_fixed_root_stays(locust):
 def test_views_without_detections(locust):
     cams = locust_cameras()
     truth = smooth_random_motion(locust, 2, 2, seed=12)
-    dets = planted(locust, cams, truth, seed=12)
+    dets = planted_detections(locust, cams, truth, seed=12)
     dets[0] = [dets[0][0], np.empty((0, 2))]
     dets[1] = [np.empty((0, 2)), np.empty((0, 2))]
     r0, r1 = Fitter(locust, cams, AnnealParams.paper().with_schedule(5000)).fit(dets)
@@ -377,7 +343,7 @@ def test_views_without_detections(locust):
 def test_nan_detections_are_dropped_and_counted(locust):
     cams = locust_cameras()
     truth = smooth_random_motion(locust, 1, 1, seed=13)
-    clean = planted(locust, cams, truth, seed=13, ghosts=1)[0]
+    clean = planted_detections(locust, cams, truth, seed=13, ghosts=1)[0]
     dirty = [np.insert(clean[0], 2, [[np.nan, 5.0], [np.inf, np.nan]], axis=0),
              np.insert(clean[1], 0, [[1.0, np.nan]], axis=0)]
     fitter = Fitter(locust, cams, AnnealParams.paper().with_schedule(2000))
@@ -391,7 +357,7 @@ def test_accepts_a_detections_record(locust):
 
     cams = locust_cameras()
     truth = smooth_random_motion(locust, 3, 1, seed=14)
-    frames = planted(locust, cams, truth, seed=14)
+    frames = planted_detections(locust, cams, truth, seed=14)
     per_record = [[(p, np.full(len(p), 12)) for p in views] for views in frames]
     det = build_detections(per_record, range(3), [-1] * 3, {"view_names": list(cams)})
     fitter = Fitter(locust, cams, AnnealParams.paper().with_schedule(2000))
@@ -422,12 +388,12 @@ def test_bodies_that_cannot_be_fitted(locust):
         Fitter(no_markers, cams)
     assert err.value.field == "markers"
     with pytest.raises(KinematicsError, match="no cameras"):
-        Fitter(locust, {}).fit(planted(locust, cams, smooth_random_motion(locust, 1, 1)))
+        Fitter(locust, {}).fit(planted_detections(locust, cams, smooth_random_motion(locust, 1, 1)))
 
 
 def test_iter_fit_order_and_cancel(locust):
     cams = locust_cameras()
-    dets = planted(locust, cams, smooth_random_motion(locust, 6, 2, seed=15))
+    dets = planted_detections(locust, cams, smooth_random_motion(locust, 6, 2, seed=15))
     fitter = Fitter(locust, cams, AnnealParams.paper().with_schedule(500))
     assert [r.frame for r in fitter.iter_fit(dets, frames=[4, 0, 2])] == [4, 0, 2]
     gen = fitter.iter_fit(dets, chunk_size=2)
@@ -441,7 +407,8 @@ def test_annealing_loop_allocates_nothing(locust):
     """The loop's LLVM IR (a fresh compile, callees inlined into it) holds no allocation."""
     cams = locust_cameras()
     fitter = Fitter(locust, cams)
-    frame = planted(locust, cams, smooth_random_motion(locust, 1, 1, seed=16), ghosts=1)[0]
+    frame = planted_detections(locust, cams, smooth_random_motion(locust, 1, 1, seed=16),
+                               ghosts=1)[0]
     pts = np.ascontiguousarray(np.concatenate(frame))
     off = np.array([0, len(frame[0]), len(pts)], np.int64)
     na, nj, nm = locust.n_axes, 3, 4
@@ -465,7 +432,7 @@ def test_pins_hold_axes_while_the_rest_is_fitted(locust):
     """Pinning is a method of the problem: no rebuilt body, the pinned axes never move."""
     cams = locust_cameras()
     truth = smooth_random_motion(locust, 3, 1, seed=21)
-    dets = planted(locust, cams, truth, seed=21)
+    dets = planted_detections(locust, cams, truth, seed=21)
     fitter = Fitter(locust, cams, AnnealParams.paper().with_schedule(4000))
     fitter.fit_frame(dets[0], 0)  # what it keeps per problem must not reach the pinned copy
     pinned = fitter.with_pins({"J2.gamma": 90.0, 0: 500.0})  # label or index; clipped
@@ -493,7 +460,7 @@ def test_pins_hold_axes_while_the_rest_is_fitted(locust):
 
 def test_cancel_stops_before_the_next_batch_and_keeps_what_was_fitted(locust):
     truth = smooth_random_motion(locust, 40, 1, seed=3)
-    dets = planted(locust, locust_cameras(), truth)
+    dets = planted_detections(locust, locust_cameras(), truth)
     fitter = Fitter(locust, locust_cameras(), AnnealParams().with_schedule(300))
     asked = []
 
@@ -509,7 +476,7 @@ def test_cancel_stops_before_the_next_batch_and_keeps_what_was_fitted(locust):
 
 def test_results_carry_the_threshold_that_decided_their_status(locust):
     truth = smooth_random_motion(locust, 12, 1, seed=4)
-    dets = planted(locust, locust_cameras(), truth, ghosts=2)
+    dets = planted_detections(locust, locust_cameras(), truth, ghosts=2)
     fixed = Fitter(locust, locust_cameras(), AnnealParams(threshold_mode="absolute",
                                                           reanalysis_threshold=7.0
                                                           ).with_schedule(300)).fit(dets)

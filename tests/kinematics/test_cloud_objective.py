@@ -11,31 +11,22 @@ import pytest
 
 from kinematics import _anneal_kernels as ak
 from kinematics import _refine_kernels as rk
-from kinematics import anneal
-from kinematics.anneal import AnnealParams, Candidate, Fitter
-from kinematics.cameras import PinholeCamera
 from kinematics.error_function import cloud_error
 from kinematics.errors import KinematicsError
+from kinematics.fit import AnnealParams, Candidate, Fitter, FrameResult
+from kinematics.fit.polish import held_limb
 from kinematics.fk import forward_kinematics_reference
 from kinematics.observations import Observations
-from kinematics.rotations import euler_yxz
 from kinematics.settings import ErrorOptions
-from tests.kinematics.test_partitions import marker_errors, planted, three_legs
+from tests.fixtures.bodies import three_legs
+from tests.fixtures.cameras import ring
+from tests.fixtures.planted import marker_errors, planted_postures, random_cloud
 
 OPTIONS = [ErrorOptions(), ErrorOptions(cap_px=4.0), ErrorOptions(mode="bidirectional"),
            ErrorOptions(mode="bounded", cap_px=6.0), ErrorOptions(mode="bidirectional",
                                                                   penalty_weight=0.5),
            ErrorOptions(one_to_one=True), ErrorOptions(mode="bounded", cap_px=6.0,
                                                        one_to_one=True)]
-
-
-def random_cloud(rng, n_markers=7, n_points=9, pad=3):
-    mk = rng.uniform(-5, 5, (n_markers, 3))
-    cloud = np.zeros((n_points + pad, 4))
-    cloud[:n_points, :3] = rng.uniform(-5, 5, (n_points, 3))
-    cloud[:n_points, 3] = rng.uniform(5, 20, n_points)  # px per unit
-    cloud[n_points:, :3] = rng.uniform(-5, 5, (pad, 3))  # padding: s = 0, never used
-    return mk, cloud
 
 
 @pytest.mark.parametrize("opts", OPTIONS, ids=lambda o: f"{o.mode}-{o.cap_px}-{o.one_to_one}")
@@ -139,22 +130,11 @@ def test_polish_pairs_each_point_with_one_marker():
     assert pair.tolist() == [0, 1, -1]
 
 
-def ring(n=5, distance=80.0, focal=800.0):
-    """Pinhole cameras on a ring around the origin at alternating elevations."""
-    cams = {}
-    for i in range(n):
-        r = euler_yxz(2 * np.pi * i / n, 0.3 + 0.3 * (i % 2), 0.0).T
-        centre = r.T @ np.array([0.0, 0.0, -distance])
-        cams[f"c{i}"] = PinholeCamera(f"c{i}", [[focal, 0, 320], [0, focal, 240], [0, 0, 1]],
-                                      R=r, t=-r @ centre, size=(640, 480))
-    return cams
-
-
 @pytest.mark.parametrize("one_to_one", [False, True], ids=["nearest", "one-to-one"])
 def test_three_legs_fitted_to_their_triangulated_markers(one_to_one):
     body = three_legs()
     cams = ring()
-    angles, frames = planted(body, cams, 8, seed=11, shuffle=True)
+    angles, frames = planted_postures(body, cams, 8, seed=11, shuffle=True)
     # the defaults (bounded error, 10-px cap, start search); without the search the cap
     # leaves far limbs no slope to follow and 4 of 8 frames end off
     params = AnnealParams(match="3d", candidates=1, threshold_mode="absolute",
@@ -195,7 +175,7 @@ def test_3d_points_fit_with_cameras_given():
     search and the refinement project a 3D objective into no view (_drawn_views)."""
     body = three_legs()
     cams = ring()
-    angles, _ = planted(body, cams, 3, seed=2, shuffle=True)
+    angles, _ = planted_postures(body, cams, 3, seed=2, shuffle=True)
     pts = forward_kinematics_reference(body, angles[0]).markers[None].repeat(2, axis=0)
     pts[1] += 0.3  # a second frame the chain cannot fit exactly
     obs = Observations.points_3d(pts, body.marker_names, body.marker_names)
@@ -222,7 +202,7 @@ def test_final_polish_spreads_a_misfit_by_least_squares():
 
     body = three_legs()
     cams = ring()
-    angles, _ = planted(body, cams, 5, seed=5)
+    angles, _ = planted_postures(body, cams, 5, seed=5)
     rng = np.random.default_rng(2)
     frames, targets = [], []
     for a in angles:
@@ -283,7 +263,7 @@ def test_final_polish_places_a_marker_without_a_point_by_its_views():
     the polish the two views do not both explain it."""
     body = three_legs()
     cams = ring()
-    angles, _ = planted(body, cams, 2, seed=7)
+    angles, _ = planted_postures(body, cams, 2, seed=7)
     names = body.marker_names
     tip = names.index("a_tip")
     a_leg = [i for i, lab in enumerate(body.axis_labels) if lab.startswith("a_")]
@@ -344,7 +324,7 @@ def test_a_held_limb_is_ambiguous_where_its_runs_put_it_apart(monkeypatch):
         spread, status = planted[r.frame]
         return replace(r, status=status), spread
     monkeypatch.setattr(Fitter, "_polished", polished)
-    results = [anneal.FrameResult(f, np.zeros(body.n_axes), 1.0, np.zeros(len(cams)), 2, 1,
+    results = [FrameResult(f, np.zeros(body.n_axes), 1.0, np.zeros(len(cams)), 2, 1,
                                   0, "ok", np.zeros((1, 3))) for f in frames]
     out = list(fitter._final_polish(None, np.array(frames), iter(results)))
     assert [r.frame for r in out] == frames
@@ -362,7 +342,7 @@ def test_a_held_limbs_runs_are_measured_on_its_own_markers():
     camera only, so nothing places it and its leg is held."""
     body = three_legs()
     cams = ring()
-    angles, _ = planted(body, cams, 2, seed=7)
+    angles, _ = planted_postures(body, cams, 2, seed=7)
     tip = body.marker_names.index("a_tip")
     frames = [[c.project(forward_kinematics_reference(body, a).markers) for c in cams.values()]
               for a in angles]
@@ -394,7 +374,7 @@ def test_a_held_limbs_runs_are_measured_on_its_own_markers():
             assert got > 0.0 and (got > fitter._apart(fitter.params)) == (status == "ambiguous")
         else:
             assert got == spread
-        assert anneal._held(out, got, fitter._apart(fitter.params)).status == status
+        assert held_limb(out, got, fitter._apart(fitter.params)).status == status
     r = replace(whole, candidates=(own(whole), moved(whole, "a", 20.0)))
     assert fitter._polished(obs, 1, r)[1] is None
 
@@ -414,7 +394,7 @@ def test_a_marker_without_a_point_is_placed_by_two_views_one_its_own(case, dets,
     """The polish's rule for a marker without a cloud point: a detection within the gate
     (50 px) where no point has it, within cap_px (10 px) where one has it (a fused blob),
     in two views, one of them the marker's own."""
-    from kinematics.anneal import _placed
+    from kinematics.fit.polish import _placed
 
     proj = np.full((3, 1, 2), 100.0)
     points = np.array(dets, float)
@@ -476,7 +456,7 @@ def test_the_start_search_scores_a_draw_from_its_beam(match):
     them: the E it returns is that of the posture it keeps, recomputed whole."""
     body = three_legs()
     cams = ring()
-    _, frames = planted(body, cams, 1, seed=4, shuffle=True)
+    _, frames = planted_postures(body, cams, 1, seed=4, shuffle=True)
     fitter = Fitter(body, cams, AnnealParams(match=match, error=ErrorOptions(cap_px=10.0)))
     pr = fitter.problem
     obs = fitter.observations(frames)

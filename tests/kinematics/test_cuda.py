@@ -13,16 +13,16 @@ import pytest
 from kinematics import _anneal_kernels as _ak
 from kinematics import _cuda_kernels as _ck
 from kinematics import _lane_kernels as _lk
-from kinematics.anneal import AnnealParams, Fitter
 from kinematics.errors import KinematicsError
+from kinematics.fit import AnnealParams, Fitter
 from kinematics.problem import FitOutputs, schedule_of
 from kinematics.settings import ErrorOptions
+from tests.fixtures.assertions import assert_same
+from tests.fixtures.bodies import mouse_like
+from tests.fixtures.cameras import three_pinholes
+from tests.fixtures.planted import labelled_keypoints, planted_detections, planted_frames
 from videotrack.motion import smooth_random_motion
 from videotrack.paper_setup import locust_cameras
-
-from .test_anneal import planted
-from .test_free_root import mouse_like, planted_frames, three_pinholes
-from .test_lanes import _keypoints, assert_same
 
 GPU = _ck.available()
 
@@ -58,7 +58,7 @@ def assert_rounds_are_fit_frames(body, cams, detections, params) -> FitOutputs:
 
 def locust_frames(locust, n, seed, ghosts=1):
     truth = smooth_random_motion(locust, n, 1, seed=seed)
-    return truth, planted(locust, locust_cameras(), truth, ghosts=ghosts)
+    return truth, planted_detections(locust, locust_cameras(), truth, ghosts=ghosts)
 
 
 def test_rounds_reanalyse_as_fit_frames(locust):
@@ -84,7 +84,7 @@ def test_rounds_keypoints_and_unexplained_detections():
     _, _, frames = planted_frames(body, cams, n=8, seed=7)
     assert_rounds_are_fit_frames(body, cams, frames,
                                  AnnealParams(max_unexplained=0).with_schedule(800))
-    kp = _keypoints(body, {c.name: c for c in cams}, frames, seed=12)
+    kp = labelled_keypoints(body, {c.name: c for c in cams}, frames, seed=12)
     assert_rounds_are_fit_frames(body, cams, kp, AnnealParams.paper(
         error=ErrorOptions(cap_px=20.0)).with_schedule(800))
 

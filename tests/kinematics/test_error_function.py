@@ -4,7 +4,6 @@ import numpy as np
 import pytest
 
 from kinematics import _anneal_kernels as ak
-from kinematics.anneal import AnnealParams, Fitter, fold_body
 from kinematics.cameras import OrthographicCamera, PinholeCamera
 from kinematics.error_function import (
     NAN_MARKER_COST,
@@ -14,21 +13,12 @@ from kinematics.error_function import (
     projection_error,
 )
 from kinematics.errors import KinematicsError
+from kinematics.fit import AnnealParams, Fitter
 from kinematics.fk import forward_kinematics_reference
 from kinematics.model import Axis, Body, Chain, Joint, Marker, Segment
+from kinematics.problem import fold_body
+from tests.fixtures.settings import ERROR_VARIANT_IDS, ERROR_VARIANTS
 from videotrack.paper_setup import locust_cameras
-
-VARIANTS = [
-    ErrorOptions(),
-    ErrorOptions(cap_px=3.0),
-    ErrorOptions("bidirectional"),
-    ErrorOptions("bidirectional", penalty_weight=0.5, cap_px=4.0),
-    ErrorOptions("bounded"),
-    ErrorOptions("bounded", penalty_weight=2.0, cap_px=6.0, penalty_cap_px=1.5),
-    ErrorOptions(one_to_one=True),
-    ErrorOptions("bounded", cap_px=6.0, one_to_one=True),
-]
-VARIANT_IDS = ["paper", "cap", "bidir", "bidir-cap", "bounded", "bounded-cap", "one", "bounded-one"]
 
 
 def kernel_error(proj, detections, opts: ErrorOptions):
@@ -70,7 +60,7 @@ def test_two_views_sum_and_empty_view_contributes_nothing():
     np.testing.assert_allclose(per_view, [2.0, 0.0])
 
 
-@pytest.mark.parametrize("opts", VARIANTS, ids=VARIANT_IDS)
+@pytest.mark.parametrize("opts", ERROR_VARIANTS, ids=ERROR_VARIANT_IDS)
 def test_kernel_equals_twin_random(opts):
     rng = np.random.default_rng(7)
     for _ in range(300):
@@ -160,7 +150,7 @@ def test_fold_keeps_locked_rotations_out_of_the_loop(locust):
     assert folded.joint_flags[2] & ak.G_IDENTITY
 
 
-@pytest.mark.parametrize("opts", VARIANTS, ids=VARIANT_IDS)
+@pytest.mark.parametrize("opts", ERROR_VARIANTS, ids=ERROR_VARIANT_IDS)
 @pytest.mark.parametrize("which", ["stick", "odd"])
 def test_posture_error_kernel_equals_twin(which, opts, stick_insect):
     body = stick_insect if which == "stick" else odd_body()

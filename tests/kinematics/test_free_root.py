@@ -6,11 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from kinematics.anneal import AnnealParams, Fitter
-from kinematics.cameras import OrthographicCamera, PinholeCamera
+from kinematics.cameras import OrthographicCamera
 from kinematics.chain_xml import body_to_string as body_to_xml
 from kinematics.chain_xml import loads_body as parse_body
 from kinematics.errors import KinematicsError
+from kinematics.fit import AnnealParams, Fitter
 from kinematics.fk import forward_kinematics_reference
 from kinematics.model import Axis, Body, Chain, Joint, Marker, Root, Segment
 from kinematics.placement import (
@@ -23,48 +23,9 @@ from kinematics.placement import (
 from kinematics.problem import FitProblem, euler_yxz_from_matrix
 from kinematics.refine import refine
 from kinematics.rotations import euler_yxz
-
-
-def mouse_like(mode: str = "free", **root) -> Body:
-    """A pelvis (free root, 4 markers) with a hip (3 axes) -> femur -> knee hinge -> tibia."""
-    tibia = Segment("tibia", 12.0, markers=(Marker("ankle"),))
-    knee = Joint("knee", (Axis.fixed("ry", "y"), Axis.fixed("rx", "x"),
-                          Axis.free("flex", "z", -150, -10)), segments=(tibia,))
-    femur = Segment("femur", 20.0, markers=(Marker("kneeM"),), joints=(knee,))
-    hip = Joint("hip", (Axis.free("yaw", "y", -60, 60), Axis.free("roll", "x", -60, 60),
-                        Axis.free("pitch", "z", -120, 0)), segments=(femur,))
-    pelvis = Segment("pelvis", 0.0, markers=(
-        Marker("hipL", (0.0, 0.0, -8.0)), Marker("hipR", (0.0, 0.0, 8.0)),
-        Marker("back", (-10.0, 6.0, 0.0)), Marker("tail", (-22.0, 2.0, 0.0))), joints=(hip,))
-    root_joint = Joint("body", (Axis.free("yaw", "y", -180, 180), Axis.free("pitch", "x", -90, 90),
-                                Axis.free("roll", "z", -180, 180)), segments=(pelvis,))
-    return Body("mouse", (Chain("hindlimb", root_joint, Root(mode, **root)),), units="mm")
-
-
-def three_pinholes() -> list:
-    k = [[1400.0, 0, 640.0], [0, 1400.0, 512.0], [0, 0, 1]]
-    cams = []
-    for name, yaw in (("left", -0.6), ("front", 0.0), ("right", 0.7)):
-        r = euler_yxz(yaw, 0.25, 0.0).T  # looking at the origin from 350 mm
-        centre = euler_yxz(yaw, 0.25, 0.0) @ np.array([0.0, 0.0, -350.0])
-        cams.append(PinholeCamera(name, k, [0.02, -0.01, 0, 0, 0], R=r, t=-r @ centre))
-    return cams
-
-
-def planted_frames(body, cams, n=12, seed=3, noise=0.1):
-    rng = np.random.default_rng(seed)
-    lo, hi = body.ranges_deg().T
-    angles, roots, frames = [], [], []
-    for f in range(n):
-        a = rng.uniform(lo, hi)
-        a[:3] = (30.0 * np.sin(0.3 * f), 10.0 * np.cos(0.2 * f), 15.0 + 5 * np.sin(0.5 * f))
-        root = np.array([[5.0 * f - 20.0, 3.0 * np.sin(f), 2.0]])
-        markers = forward_kinematics_reference(body, a, root).markers
-        frames.append([c.project(markers) + rng.normal(0, noise, (len(markers), 2))
-                       for c in cams])
-        angles.append(a)
-        roots.append(root)
-    return np.array(angles), np.array(roots), frames
+from tests.fixtures.bodies import mouse_like
+from tests.fixtures.cameras import three_pinholes
+from tests.fixtures.planted import joint_errors, planted_frames
 
 
 def test_free_root_in_chain_xml_round_trips():
@@ -190,17 +151,6 @@ def test_default_windows():
     assert w.shape == (1, 2)
     assert w[0, 1] == 20.0 and 0 < w[0, 0] < 8.0
     assert root_windows(mouse_like(translation_window=2.5))[0, 0] == 2.5
-
-
-def joint_errors(body, results, angles, roots, points: str = "markers"):
-    """Per frame, the largest distance of fitted to true ``points`` ("markers" or
-    "joints")."""
-    errs = []
-    for r, a, rt in zip(results, angles, roots, strict=True):
-        fit = forward_kinematics_reference(body, r.angles_deg, r.root_positions)
-        true = forward_kinematics_reference(body, a, rt)
-        errs.append(np.linalg.norm(getattr(fit, points) - getattr(true, points), axis=1).max())
-    return np.array(errs)
 
 
 def test_free_body_is_placed_and_fitted():

@@ -10,12 +10,14 @@ import pytest
 
 from kinematics import _anneal_kernels as ak
 from kinematics import _refine_kernels as rk
-from kinematics.anneal import AnnealParams, Fitter, _emptied
 from kinematics.error_function import posture_error, projection_error
 from kinematics.errors import KinematicsError
+from kinematics.fit import AnnealParams, Fitter
+from kinematics.fit.roots import _emptied
 from kinematics.observations import Observations
-from tests.kinematics.test_anneal import moving_roots, planted, stick_cameras
-from tests.kinematics.test_error_function import VARIANT_IDS, VARIANTS
+from tests.fixtures.cameras import stick_cameras
+from tests.fixtures.planted import moving_roots, planted_detections
+from tests.fixtures.settings import ERROR_VARIANT_IDS, ERROR_VARIANTS
 from videotrack.motion import smooth_random_motion
 from videotrack.paper_setup import locust_cameras
 
@@ -26,7 +28,7 @@ def packed(dets):
     return np.concatenate([np.reshape(d, (-1, 2)) for d in dets]).astype(float), off
 
 
-@pytest.mark.parametrize("opts", VARIANTS, ids=VARIANT_IDS)
+@pytest.mark.parametrize("opts", ERROR_VARIANTS, ids=ERROR_VARIANT_IDS)
 def test_kernels_equal_the_twin_with_hidden_markers(opts):
     """projection_error and partition_error (whole body, and a partition with claims) leave
     hidden markers out exactly as the twin does, views where every marker is hidden too."""
@@ -89,7 +91,7 @@ def occluded_tip(locust, seed=3, n=6):
     lies 15 px from where it would be (a neighbour's leg, dirt)."""
     cams = locust_cameras()
     truth = smooth_random_motion(locust, n, n, seed=seed)
-    frames = planted(locust, cams, truth, seed=seed)
+    frames = planted_detections(locust, cams, truth, seed=seed)
     tip = locust.marker_names.index("M3")
     for k in range(n):
         side = frames[k][0]
@@ -213,7 +215,7 @@ def test_a_root_marker_hidden_in_a_view_is_not_tracked_there(stick_insect):
     n = 6
     truth = smooth_random_motion(stick_insect, n, 1, seed=10)
     roots = moving_roots(n)
-    dets = planted(stick_insect, cams, truth, seed=10, roots=roots, noise=0.0)
+    dets = planted_detections(stick_insect, cams, truth, seed=10, roots=roots, noise=0.0)
     dets[3][1][0] += 4.0  # M0's detection in the side view is a ghost's, 4 px off
     fitter = Fitter(stick_insect, cams, AnnealParams.paper(root_gate_px=30.0))
     marks = np.zeros((n, 2, len(stick_insect.marker_names)), bool)

@@ -8,19 +8,18 @@ import json
 import os
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parents[2]
+from tests.fixtures.paths import BIND_TESTS_PACKAGE, REPO
 
-SCRIPT = r"""
+SCRIPT = BIND_TESTS_PACKAGE + r"""
 import json, numpy as np
-from kinematics.anneal import AnnealParams, Fitter
+from kinematics.fit import AnnealParams, Fitter
 from kinematics.observations import Observations
-import sys
-sys.path.insert(0, "tests/kinematics")  # by path: a package may install its own 'tests'
-from test_free_root import mouse_like, planted_frames, three_pinholes
+from tests.fixtures.bodies import mouse_like
+from tests.fixtures.cameras import three_pinholes
+from tests.fixtures.planted import planted_frames
 body, cams = mouse_like(), three_pinholes()
 angles, roots, frames = planted_frames(body, cams, n=2)
 params = AnnealParams.paper(refine=True, max_runs=1, seed=3).with_schedule(300)

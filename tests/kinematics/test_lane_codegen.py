@@ -12,14 +12,14 @@ from kinematics import _anneal_kernels as _ak
 from kinematics import _lane_codegen as cg
 from kinematics import _lane_kernels as _lk
 from kinematics._lane_kernels import PAD
-from kinematics.anneal import AnnealParams, Fitter
 from kinematics.chain_xml import load_body
+from kinematics.fit import AnnealParams, Fitter
 from kinematics.rotations import euler_yxz
+from tests.fixtures.bodies import mouse_like
+from tests.fixtures.cameras import three_pinholes
+from tests.fixtures.planted import planted_detections
 from videotrack.motion import smooth_random_motion
 from videotrack.paper_setup import bundled_chain, locust_cameras
-
-from .test_anneal import planted
-from .test_free_root import mouse_like, three_pinholes
 
 
 def _problem(kind):
@@ -259,7 +259,7 @@ def test_an_unwritable_cache_falls_back_to_the_general_loops(monkeypatch, tmp_pa
     monkeypatch.setattr(cg, "generated_dir", lambda: blocked / "lanes")
     monkeypatch.setattr(cg, "_loaded", {})
     fitter = Fitter(body, locust_cameras(), AnnealParams(backend="lanes").with_schedule(300))
-    views = planted(body, locust_cameras(), smooth_random_motion(body, 4, 1, seed=1))
+    views = planted_detections(body, locust_cameras(), smooth_random_motion(body, 4, 1, seed=1))
     with pytest.warns(UserWarning, match="general loops"):
         assert fitter._fused_kernel(fitter.observations(views).arrays(np.arange(4)),
                                     fitter._error_args(fitter.params, 0)) == (_lk.no_fused, 0)

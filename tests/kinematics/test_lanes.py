@@ -12,17 +12,18 @@ import pytest
 
 from kinematics import _anneal_kernels as _ak
 from kinematics import _lane_kernels as _lk
-from kinematics.anneal import AnnealParams, Fitter
 from kinematics.errors import KinematicsError
+from kinematics.fit import AnnealParams, Fitter
 from kinematics.fk import forward_kinematics, forward_kinematics_reference
 from kinematics.observations import Observations
 from kinematics.problem import FitOutputs, error_args, partitions_of, schedule_of
 from kinematics.settings import ErrorOptions
+from tests.fixtures.assertions import assert_same
+from tests.fixtures.bodies import mouse_like
+from tests.fixtures.cameras import three_pinholes
+from tests.fixtures.planted import labelled_keypoints, planted_detections, planted_frames
 from videotrack.motion import smooth_random_motion
 from videotrack.paper_setup import locust_cameras
-
-from .test_anneal import planted
-from .test_free_root import mouse_like, planted_frames, three_pinholes
 
 
 def fit_both(body, cams, detections, params):
@@ -31,21 +32,6 @@ def fit_both(body, cams, detections, params):
     for backend in ("scalar", "lanes"):
         out.append(Fitter(body, cams, replace(params, backend=backend)).fit(detections))
     return out
-
-
-def assert_same(scalar, lanes):
-    assert len(scalar) == len(lanes)
-    for a, b in zip(scalar, lanes, strict=True):
-        np.testing.assert_array_equal(a.angles_deg, b.angles_deg)
-        np.testing.assert_array_equal(a.root_positions, b.root_positions)
-        assert (a.error, a.runs, a.iterations, a.status) == (b.error, b.runs, b.iterations,
-                                                              b.status) or (
-            np.isnan(a.error) and np.isnan(b.error))
-        np.testing.assert_array_equal(a.error_per_view, b.error_per_view)
-        assert len(a.candidates) == len(b.candidates)
-        for ca, cb in zip(a.candidates, b.candidates, strict=True):
-            np.testing.assert_array_equal(ca.angles_deg, cb.angles_deg)
-            assert ca.error == cb.error
 
 
 def _sincos_twin(x: float) -> tuple[float, float]:
@@ -81,7 +67,7 @@ def test_float32_sincos_is_within_two_float32_ulp():
 
 def test_paper_profile_identical(locust):
     truth = smooth_random_motion(locust, 20, 1, seed=4)
-    dets = planted(locust, locust_cameras(), truth, ghosts=1)
+    dets = planted_detections(locust, locust_cameras(), truth, ghosts=1)
     scalar, lanes = fit_both(locust, locust_cameras(), dets,
                              AnnealParams.paper().with_schedule(3000))
     assert_same(scalar, lanes)
@@ -90,7 +76,7 @@ def test_paper_profile_identical(locust):
 
 def test_defaults_identical_with_ghosts_and_an_empty_frame(locust):
     truth = smooth_random_motion(locust, 24, 1, seed=5)
-    dets = planted(locust, locust_cameras(), truth, ghosts=2)
+    dets = planted_detections(locust, locust_cameras(), truth, ghosts=2)
     dets[7] = [np.zeros((0, 2)), np.zeros((0, 2))]  # nothing detected
     dets[9][1] = np.zeros((0, 2))  # one view empty
     params = AnnealParams().with_schedule(2000)
@@ -117,21 +103,6 @@ def _projected(body, cams, angles, noise):
              for c in cams.values()] for k, a in enumerate(angles)]
 
 
-def _keypoints(body, cams, frames, seed):
-    """The planted frames as labelled keypoints (marker i of each view is keypoint i), with
-    confidences below 1, missing keypoints (NaN, weight 0), a view without any and a frame
-    without any."""
-    rng = np.random.default_rng(seed)
-    kp = np.array([[np.c_[view, rng.uniform(0.3, 1.0, len(view))] for view in f]
-                   for f in frames])
-    kp[1, 0, 2, :2] = np.nan  # a keypoint not found
-    kp[2, 1, 0, 2] = 0.0  # a keypoint of weight 0
-    kp[3, 1, :, :2] = np.nan  # a view with no keypoint: it holds no rows
-    kp[4, :, :, :2] = np.nan  # nothing in the frame
-    names = list(body.marker_names)
-    return Observations.keypoints(kp, list(cams), names, names)
-
-
 @pytest.mark.parametrize("params", [
     AnnealParams().with_schedule(1500),  # the defaults: candidates and the path
     AnnealParams.paper(error=ErrorOptions(cap_px=20.0)).with_schedule(1500),  # re-analysis
@@ -139,7 +110,7 @@ def _keypoints(body, cams, frames, seed):
 def test_labelled_keypoints_identical(locust, params):
     cams = locust_cameras()
     truth = smooth_random_motion(locust, 16, 1, seed=8)
-    obs = _keypoints(locust, cams, _projected(locust, cams, truth, 0.5), seed=9)
+    obs = labelled_keypoints(locust, cams, _projected(locust, cams, truth, 0.5), seed=9)
     scalar, lanes = fit_both(locust, cams, obs, params)
     assert_same(scalar, lanes)
     assert lanes[4].status == "no-detections"
@@ -156,7 +127,7 @@ def test_labelled_keypoints_free_root_pinholes_identical(loops, monkeypatch):
     body = mouse_like(translation_window=4.0, rotation_window_deg=30.0)
     cams = three_pinholes()
     _, _, frames = planted_frames(body, cams, n=10, seed=11)
-    obs = _keypoints(body, {c.name: c for c in cams}, frames, seed=12)
+    obs = labelled_keypoints(body, {c.name: c for c in cams}, frames, seed=12)
     params = AnnealParams(precision="float32" if loops == "float32 asked" else "float64")
     fitter = Fitter(body, cams, params)
     fused, _ = fitter._fused_kernel(fitter.observations(obs).arrays(np.arange(10)),
@@ -219,7 +190,7 @@ def _kernel_outputs(fitter, dets, n_lanes, groups, generated=True, single=False)
 
 def test_general_loops_equal_the_generated_kernel(locust):
     truth = smooth_random_motion(locust, 12, 1, seed=6)
-    dets = planted(locust, locust_cameras(), truth, ghosts=1)
+    dets = planted_detections(locust, locust_cameras(), truth, ghosts=1)
     fitter = Fitter(locust, locust_cameras(), AnnealParams().with_schedule(800))
     fused, n_fused = fitter._fused_kernel(fitter.observations(dets).arrays(np.arange(12)),
                                           error_args(fitter.params.error))
@@ -233,7 +204,7 @@ def test_general_loops_equal_the_generated_kernel(locust):
 @pytest.mark.parametrize(("generated", "single"), [(True, False), (False, False), (True, True)])
 def test_same_results_for_any_lane_and_thread_count(locust, generated, single):
     truth = smooth_random_motion(locust, 12, 1, seed=6)
-    dets = planted(locust, locust_cameras(), truth, ghosts=1)
+    dets = planted_detections(locust, locust_cameras(), truth, ghosts=1)
     _same_for_any_lane_and_thread_count(locust, dets, generated, single)
 
 
@@ -242,7 +213,7 @@ def test_labelled_same_results_for_any_lane_and_thread_count(locust, generated):
     # lanes that shrink and reorder (3 and 8 lanes) carry their keypoints' weights along
     cams = locust_cameras()
     truth = smooth_random_motion(locust, 12, 1, seed=10)
-    kp = _keypoints(locust, cams, _projected(locust, cams, truth, 2.0), seed=13)
+    kp = labelled_keypoints(locust, cams, _projected(locust, cams, truth, 2.0), seed=13)
     _same_for_any_lane_and_thread_count(locust, kp, generated, False)
 
 
@@ -270,7 +241,7 @@ def test_float32_fits_as_well_as_float64(locust):
     """precision 'float32': E within float32 rounding, so the fits end where float64's do
     (or as near the truth), though not always to the bit."""
     truth = smooth_random_motion(locust, 24, 1, seed=9)
-    dets = planted(locust, locust_cameras(), truth, ghosts=2)
+    dets = planted_detections(locust, locust_cameras(), truth, ghosts=2)
     params = AnnealParams(backend="lanes").with_schedule(2000)
     res = {prec: Fitter(locust, locust_cameras(), replace(params, precision=prec)).fit(dets)
            for prec in ("float64", "float32")}
@@ -287,7 +258,7 @@ def test_float32_fits_as_well_as_float64(locust):
 
 
 def test_locked_axes_untouched(locust):
-    dets = planted(locust, locust_cameras(), smooth_random_motion(locust, 4, 1, seed=1))
+    dets = planted_detections(locust, locust_cameras(), smooth_random_motion(locust, 4, 1, seed=1))
     res = Fitter(locust, locust_cameras(), AnnealParams(backend="lanes").with_schedule(500)
                  ).fit(dets)
     locked = locust.locked_mask()
@@ -328,7 +299,7 @@ def test_bad_backend_is_named():
 def test_choice_over_time_does_not_depend_on_chunk_size(locust):
     # the lane backend fits bigger chunks than the scalar one; the path must not notice
     truth = smooth_random_motion(locust, 90, 1, seed=8)
-    dets = planted(locust, locust_cameras(), truth, ghosts=1)
+    dets = planted_detections(locust, locust_cameras(), truth, ghosts=1)
     fitter = Fitter(locust, locust_cameras(), AnnealParams(backend="scalar").with_schedule(400))
     small = list(fitter.iter_fit(dets, chunk_size=8))
     large = list(fitter.iter_fit(dets, chunk_size=90))

@@ -8,13 +8,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from kinematics.anneal import CLUTTER_RATIO, COVERED_SHARE, AnnealParams, Fitter
+from kinematics.fit import AnnealParams, Fitter
+from kinematics.fit.tuning import TUNING
 from kinematics.fk import forward_kinematics_reference
 from kinematics.model import Body, Chain, Root
 from kinematics.observations import Observations
 from kinematics.settings import ErrorOptions
-from tests.kinematics.test_cloud_objective import ring
-from tests.kinematics.test_partitions import leg, planted
+from tests.fixtures.bodies import leg
+from tests.fixtures.cameras import ring
+from tests.fixtures.planted import planted_postures
 
 LEGS = (("a", (4.0, 0.0, 6.0), 45.0), ("b", (0.0, 0.0, 8.0), 90.0),
         ("c", (-4.0, 0.0, 6.0), 135.0))
@@ -42,17 +44,17 @@ def without_tip(frames, which):
 def test_auto_matches_a_chain_in_3d_where_its_views_hold_other_limbs_markers():
     cams = ring()
     one = Fitter(legs(("a",)), cams)
-    _, among = planted(legs(), cams, 4, seed=1, shuffle=True)  # 6 markers drawn, 2 fitted
+    _, among = planted_postures(legs(), cams, 4, seed=1, shuffle=True)  # 6 markers drawn, 2 fitted
     assert one.match_for(among) == "3d" and one.observations(among).kind == "cloud"
     assert "3.0 detections per marker image" in one.match_why(among)[1]
     # the bound, on a chain whose tip is never seen (so its markers are never all
     # triangulated): detections per marker image, median over the frames
-    _, alone = planted(legs(("a",)), cams, 4, seed=1)
+    _, alone = planted_postures(legs(("a",)), cams, 4, seed=1)
     absent = without_tip(alone, range(4))
     assert one.covered(absent) == 0.0 and one.match_for(absent) == "views"
-    below = with_extra(absent, int(2 * CLUTTER_RATIO) - 1)  # (1 + 3) / 2 = the bound
-    assert one.clutter(below) == CLUTTER_RATIO and one.match_for(below) == "views"
-    assert one.match_for(with_extra(absent, int(2 * CLUTTER_RATIO))) == "3d"
+    below = with_extra(absent, int(2 * TUNING.clutter_ratio) - 1)  # (1 + 3) / 2 = the bound
+    assert one.clutter(below) == TUNING.clutter_ratio and one.match_for(below) == "views"
+    assert one.match_for(with_extra(absent, int(2 * TUNING.clutter_ratio))) == "3d"
     # 3D needs 3 views; a setting overrides; labelled data are not matched
     two = Fitter(legs(("a",)), dict(list(cams.items())[:2]))
     assert two.match_for([f[:2] for f in among]) == "views"
@@ -67,15 +69,15 @@ def test_auto_matches_a_chain_in_3d_where_its_views_hold_other_limbs_markers():
 
 def test_auto_matches_a_chain_seen_alone_in_3d_where_its_markers_are_triangulated():
     """A chain alone in its views: in 3D where the triangulated points cover its markers in
-    COVERED_SHARE of the frames, per view where markers are often absent (a limb folds onto
+    TUNING.covered_share of the frames, per view where markers are often absent (a limb folds onto
     the points left in 3D: the free mouse of docs/benchmarks.md)."""
     cams = ring()
     one = Fitter(legs(("a",)), cams)
-    _, alone = planted(legs(("a",)), cams, 40, seed=2)
+    _, alone = planted_postures(legs(("a",)), cams, 40, seed=2)
     assert one.covered(alone) == 1.0 and one.match_for(alone) == "3d"
-    few = int(len(alone) * (1 - COVERED_SHARE) / 2)  # absent in half the share allowed
+    few = int(len(alone) * (1 - TUNING.covered_share) / 2)  # absent in half the share allowed
     assert one.match_for(without_tip(alone, range(few))) == "3d"
-    many = 2 * int(len(alone) * (1 - COVERED_SHARE))  # ... in twice that share
+    many = 2 * int(len(alone) * (1 - TUNING.covered_share))  # ... in twice that share
     assert one.covered(without_tip(alone, range(many))) == 1 - many / len(alone)
     how, why = one.match_why(without_tip(alone, range(many)))
     assert how == "views" and "every marker triangulated in 90 % of the frames" in why
@@ -88,7 +90,7 @@ def test_a_leg_among_others_fitted_with_the_defaults_and_scored_alike():
     fits as well: what 3D gains on a real fly leg is measured (docs/benchmarks.md)."""
     cams = ring()
     body = legs()
-    angles, frames = planted(body, cams, 6, seed=5, shuffle=True)
+    angles, frames = planted_postures(body, cams, 6, seed=5, shuffle=True)
     one = legs(("a",))
     params = AnnealParams(candidates=1, threshold_mode="absolute", reanalysis_threshold=8.0,
                           error=ErrorOptions("bounded", cap_px=10.0)).with_schedule(3000)
@@ -111,7 +113,7 @@ def test_markers_hidden_by_hand_keep_a_chain_per_view():
     frame with marks equals that of the per-view match."""
     cams = ring()
     one = Fitter(legs(("a",)), cams)
-    angles, alone = planted(legs(("a",)), cams, 3, seed=4)
+    angles, alone = planted_postures(legs(("a",)), cams, 3, seed=4)
     assert one.match_for(alone) == "3d"
     marks = np.zeros((len(cams), 2), bool)
     marks[1, 1] = True  # the tip, in the second view

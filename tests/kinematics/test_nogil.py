@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from kinematics import _anneal_kernels as ak
-from kinematics.anneal import AnnealParams, Fitter
-from tests.kinematics.test_anneal import planted
+from kinematics.fit import AnnealParams, Fitter
+from tests.fixtures.planted import planted_detections
 from videotrack.motion import smooth_random_motion
 from videotrack.paper_setup import locust_cameras
 
@@ -40,7 +40,7 @@ def test_main_thread_runs_while_one_annealing_run_goes_on(locust):
     """One long call of the serial annealing kernel (numba's parallel launch releases the
     GIL anyway; this kernel only does so because it is compiled nogil)."""
     cams = locust_cameras()
-    frame = planted(locust, cams, smooth_random_motion(locust, 1, 1, seed=3))[0]
+    frame = planted_detections(locust, cams, smooth_random_motion(locust, 1, 1, seed=3))[0]
     pts = np.ascontiguousarray(np.concatenate(frame))
     off = np.array([0, len(frame[0]), len(pts)], np.int64)
     pr = Fitter(locust, cams).problem
@@ -68,7 +68,7 @@ def test_main_thread_runs_while_one_annealing_run_goes_on(locust):
 @pytest.mark.parametrize(("backend", "frames"), [("scalar", 120), ("lanes", 1200)])
 def test_main_thread_runs_while_a_video_is_fitted(locust, backend, frames):
     cams = locust_cameras()
-    dets = planted(locust, cams, smooth_random_motion(locust, frames, 4, seed=3))
+    dets = planted_detections(locust, cams, smooth_random_motion(locust, frames, 4, seed=3))
     fitter = Fitter(locust, cams, AnnealParams.paper(epsilon=0.0, max_runs=1,
                                                      backend=backend))
     fitter.fit(dets[:1])

@@ -7,18 +7,15 @@ import numpy as np
 import pytest
 
 from kinematics import _anneal_kernels as ak
-from kinematics.anneal import AnnealParams, Fitter
 from kinematics.error_function import labelled_error, points3d_error
 from kinematics.errors import KinematicsError
+from kinematics.fit import AnnealParams, Fitter
 from kinematics.fk import forward_kinematics_reference
 from kinematics.observations import Observations
 from kinematics.settings import ErrorOptions
-from tests.kinematics.test_free_root import (
-    joint_errors,
-    mouse_like,
-    planted_frames,
-    three_pinholes,
-)
+from tests.fixtures.bodies import mouse_like
+from tests.fixtures.cameras import three_pinholes
+from tests.fixtures.planted import joint_errors, planted_frames
 
 CAPS = [ErrorOptions(), ErrorOptions(cap_px=2.0)]
 

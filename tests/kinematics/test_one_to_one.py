@@ -10,13 +10,14 @@ import numpy as np
 import pytest
 
 from kinematics import _anneal_kernels as ak
-from kinematics.anneal import AnnealParams, Fitter
 from kinematics.error_function import cloud_error, one_to_one, projection_error
 from kinematics.errors import KinematicsError
+from kinematics.fit import AnnealParams, Fitter
 from kinematics.fk import forward_kinematics_reference
 from kinematics.settings import ErrorOptions
-from tests.kinematics.test_cloud_objective import random_cloud, ring
-from tests.kinematics.test_partitions import planted, three_legs
+from tests.fixtures.bodies import three_legs
+from tests.fixtures.cameras import ring
+from tests.fixtures.planted import planted_postures, random_cloud
 
 ONE = ErrorOptions(one_to_one=True)
 
@@ -110,7 +111,7 @@ def test_the_fitter_scores_one_to_one():
     one-to-one E, per view and in 3D (the planted fit with it: test_cloud_objective.py)."""
     body = three_legs()
     cams = ring()
-    _, frames = planted(body, cams, 1, seed=5, shuffle=True)
+    _, frames = planted_postures(body, cams, 1, seed=5, shuffle=True)
     start = body.mean_posture_deg()
     markers = forward_kinematics_reference(body, start).markers
     nv = len(cams)

@@ -9,45 +9,16 @@ import numpy as np
 import pytest
 
 from kinematics import _anneal_kernels as ak
-from kinematics.anneal import AnnealParams, Fitter
-from kinematics.cameras import OrthographicCamera
 from kinematics.chain_xml import load_body
 from kinematics.errors import KinematicsError
-from kinematics.fk import forward_kinematics_reference
-from kinematics.model import Axis, Body, Chain, Joint, Marker, Root, Segment
+from kinematics.fit import AnnealParams, Fitter
+from kinematics.model import Body
 from kinematics.problem import FitProblem, partitions_of
-from tests.conftest import CHAINS
+from tests.fixtures.bodies import three_legs
+from tests.fixtures.cameras import top_and_side
+from tests.fixtures.paths import CHAINS
+from tests.fixtures.planted import marker_errors, planted_postures
 from videotrack.paper_setup import locust_cameras
-
-
-def leg(name: str, at, yaw: float) -> Joint:
-    """A two-segment leg: hip (yaw about y, lift about z), knee hinge; markers at the knee
-    and the tip."""
-    tip = Segment(f"{name}_tibia", 10.0, markers=(Marker(f"{name}_tip"),))
-    knee = Joint(f"{name}_knee", (Axis.fixed("ry", "y"), Axis.fixed("rx", "x"),
-                                  Axis.free("flex", "z", -120, -20)), segments=(tip,))
-    femur = Segment(f"{name}_femur", 12.0, markers=(Marker(f"{name}_knee_mk"),),
-                    joints=(knee,))
-    return Joint(f"{name}_hip", (Axis.free("yaw", "y", yaw - 40, yaw + 40), Axis.fixed("rx", "x"),
-                                 Axis.free("lift", "z", -30, 50)), translation=at,
-                 segments=(femur,))
-
-
-def three_legs(mode="fixed") -> Body:
-    """A body (free yaw about y) with three legs hanging off one segment: a branching joint,
-    so 'auto' makes a trunk partition and one per leg."""
-    legs = (leg("a", (4.0, 0, 6.0), 45.0), leg("b", (0.0, 0, 8.0), 90.0),
-            leg("c", (-4.0, 0, 6.0), 135.0))
-    thorax = Segment("thorax", 0.0, markers=(Marker("head", (8.0, 1.0, 0.0)),
-                                             Marker("tail", (-8.0, 1.0, 0.0))), joints=legs)
-    body = Joint("body", (Axis.free("turn", "y", -20, 20), Axis.fixed("rx", "x"),
-                          Axis.fixed("rz", "z")), segments=(thorax,))
-    return Body("tripod", (Chain("c", body, Root(mode)),), "px")
-
-
-def top_and_side():
-    return {"top": OrthographicCamera.from_axes("top", 4.0, ("x", "z"), (150.0, 150.0)),
-            "side": OrthographicCamera.from_axes("side", 4.0, ("x", "-y"), (150.0, 150.0))}
 
 
 def test_partitions_trunk_first_then_each_limb():
@@ -120,35 +91,10 @@ def test_claimed_detections_are_not_shared():
     assert claimed.tolist() == [False, False]
 
 
-def planted(body, cams, n, seed, shuffle=False):
-    """n planted postures within the ranges and their detections (0.05 px noise), in marker
-    order or (``shuffle``) in a random order per view."""
-    rng = np.random.default_rng(seed)
-    lo, hi = body.ranges_deg().T
-    margin = np.minimum(5.0, (hi - lo) / 4)
-    angles = np.where(body.locked_mask(), 0.0, rng.uniform(lo + margin, hi - margin,
-                                                           (n, len(lo))))
-    frames = []
-    for a in angles:
-        m = forward_kinematics_reference(body, a).markers
-        views = [c.project(m) + rng.normal(0, 0.05, (len(m), 2)) for c in cams.values()]
-        frames.append([v[rng.permutation(len(v))] for v in views] if shuffle else views)
-    return angles, frames
-
-
-def marker_errors(body, results, angles):
-    out = []
-    for r, a in zip(results, angles, strict=True):
-        fit = forward_kinematics_reference(body, r.angles_deg).markers
-        true = forward_kinematics_reference(body, a).markers
-        out.append(np.linalg.norm(fit - true, axis=1).max())
-    return np.array(out)
-
-
 def test_three_legs_fitted_limb_by_limb():
     body = three_legs()
     cams = top_and_side()
-    angles, frames = planted(body, cams, 12, seed=4)
+    angles, frames = planted_postures(body, cams, 12, seed=4)
     params = AnnealParams.paper(refine=True, reanalysis_threshold=2.0, partitions="auto"
                           ).with_schedule(4000)
     res = Fitter(body, cams, params).fit(frames)
@@ -162,7 +108,7 @@ def test_auto_threshold_is_measured_on_the_video():
     so good frames are 'ok' and a frame whose markers were swapped is flagged."""
     body = three_legs()
     cams = top_and_side()
-    _, frames = planted(body, cams, 30, seed=6)
+    _, frames = planted_postures(body, cams, 30, seed=6)
     # frame 7: one leg's tip drawn 15 px away in the top view (a wrong detection)
     frames[7][0] = frames[7][0].copy()
     frames[7][0][4] += (15.0, 0.0)
@@ -195,7 +141,7 @@ def test_unexplained_detections_trigger_reanalysis_and_the_flag():
     flagged if it still does; a detection every fit must leave (a ghost) flags the frame."""
     body = three_legs()
     cams = top_and_side()
-    _, frames = planted(body, cams, 6, seed=8)
+    _, frames = planted_postures(body, cams, 6, seed=8)
     frames[2][0] = np.vstack([frames[2][0], [[5.0, 5.0]]])  # a ghost far from the body
     params = AnnealParams.paper(refine=True, max_unexplained=0, reanalysis_threshold=2.0
                           ).with_schedule(3000)
@@ -213,7 +159,7 @@ def test_block_residuals_equal_the_per_frame_ones(monkeypatch):
     the per-frame ones: with a ghost, an empty view and a frame without detections."""
     body = three_legs()
     cams = top_and_side()
-    _, frames = planted(body, cams, 6, seed=8)
+    _, frames = planted_postures(body, cams, 6, seed=8)
     frames[2][0] = np.vstack([frames[2][0], [[5.0, 5.0]]])  # a ghost far from the body
     frames[3][1] = np.empty((0, 2))
     frames[4] = [np.empty((0, 2)), np.empty((0, 2))]
@@ -263,7 +209,7 @@ def test_start_search_finds_limbs_the_start_posture_misses():
     that leaves limbs where the mean posture put them still finds every planted posture."""
     body = three_legs()
     cams = top_and_side()
-    angles, frames = planted(body, cams, 12, seed=4)
+    angles, frames = planted_postures(body, cams, 12, seed=4)
     base = AnnealParams.paper(refine=True, reanalysis_threshold=2.0, max_runs=1
                               ).with_schedule(300)
     plain = marker_errors(body, Fitter(body, cams, base).fit(frames), angles)
@@ -276,7 +222,7 @@ def test_start_search_finds_limbs_the_start_posture_misses():
 def test_auto_threshold_survives_e_in_steps():
     """E per marker image in steps (a flickering ghost adds a fixed cost): the MAD of a
     sample mostly on one step is ~0, which would fail every frame on the next step."""
-    from kinematics.anneal import auto_threshold
+    from kinematics.fit import auto_threshold
 
     rng = np.random.default_rng(1)
     normal = 2.0 + 0.1 * rng.standard_normal(400)
@@ -298,7 +244,7 @@ def test_runs_confirm_each_other():
     partitions and bodies whose markers are matched in 3D (a cloud)."""
     body = three_legs()
     cams = top_and_side()
-    _, frames = planted(body, cams, 10, seed=6)
+    _, frames = planted_postures(body, cams, 10, seed=6)
     base = AnnealParams(candidates=1, threshold_mode="absolute", reanalysis_threshold=1e6,
                         max_runs=6, start_samples=0, ambiguous_move=0.02, confirm_runs="off"
                         ).with_schedule(60)
@@ -325,7 +271,7 @@ def test_partitions_share_the_schedule_by_axes():
     paper's."""
     body = three_legs()
     cams = top_and_side()
-    _, frames = planted(body, cams, 1, seed=3)
+    _, frames = planted_postures(body, cams, 1, seed=3)
     params = AnnealParams(candidates=1, threshold_mode="absolute", reanalysis_threshold=1e9,
                           confirm_runs="off", refine=False, epsilon=0.0, partition_rounds=2,
                           start_samples=0).with_schedule(10)

@@ -6,8 +6,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from kinematics.anneal import AnnealParams, Fitter
 from kinematics.errors import KinematicsError
+from kinematics.fit import AnnealParams, Fitter
 from kinematics.fk import forward_kinematics
 from kinematics.refine import (
     cramer_rao_bound,
@@ -16,6 +16,9 @@ from kinematics.refine import (
     refine_many,
     refine_reference,
 )
+from tests.fixtures.bodies import three_legs
+from tests.fixtures.cameras import top_and_side
+from tests.fixtures.planted import planted_postures
 from videotrack.motion import smooth_random_motion
 from videotrack.paper_setup import locust_cameras
 
@@ -183,11 +186,9 @@ def test_fit_with_refinement_never_has_a_worse_error_than_without(locust):
 def test_kernel_equals_scipy_on_a_branched_body():
     """Each entry's Jacobian column is computed from its own subtree only (entry_spans):
     on a body whose legs hang off a trunk the kernel still solves the twin's problem."""
-    from tests.kinematics.test_partitions import planted, three_legs, top_and_side
-
     body, cams = three_legs(), top_and_side()
     fitter = Fitter(body, cams)
-    angles, frames = planted(body, cams, 6, seed=4)
+    angles, frames = planted_postures(body, cams, 6, seed=4)
     free = ~body.locked_mask()
     rng = np.random.default_rng(1)
     for truth, det in zip(angles, frames, strict=True):
@@ -204,7 +205,6 @@ def test_entry_spans_are_subtrees_or_the_whole_body():
     order); where the order breaks that, the whole body (never too little)."""
     from kinematics._refine_kernels import entry_spans
     from kinematics.problem import FitProblem
-    from tests.kinematics.test_partitions import three_legs, top_and_side
 
     body = three_legs()
     pr = FitProblem.build(body, top_and_side())

@@ -8,12 +8,14 @@ import numpy as np
 import pytest
 
 from kinematics import _anneal_kernels as ak
-from kinematics.anneal import AnnealParams, Fitter, _as_ragged
 from kinematics.error_function import projection_error
+from kinematics.fit import AnnealParams, Fitter
+from kinematics.fit.inputs import as_ragged
 from kinematics.observations import Observations
 from kinematics.settings import ErrorOptions
-from tests.kinematics.test_cloud_objective import ring
-from tests.kinematics.test_partitions import planted, three_legs
+from tests.fixtures.bodies import three_legs
+from tests.fixtures.cameras import ring
+from tests.fixtures.planted import planted_postures
 
 VARIANTS = [ErrorOptions(), ErrorOptions("bounded", cap_px=10.0),
             ErrorOptions("bounded", cap_px=10.0, one_to_one=True)]
@@ -84,7 +86,7 @@ def test_kernels_equal_the_twin_on_many_detections(opts, hide):
 def test_ragged_detections_are_sorted_by_x_in_each_view():
     frames = [[np.array([[5.0, 1.0], [1.0, 2.0], [3.0, 0.0]]), np.array([[2.0, 2.0]])],
               [np.array([[9.0, 9.0], [np.nan, 1.0], [0.0, 1.0]]), np.empty((0, 2))]]
-    rag = _as_ragged(frames, ["a", "b"])
+    rag = as_ragged(frames, ["a", "b"])
     assert rag.offsets.tolist() == [0, 3, 4, 6, 6]
     assert rag.points[:, 0].tolist() == [1.0, 3.0, 5.0, 2.0, 0.0, 9.0]
     assert rag.dropped.tolist() == [0, 1]
@@ -93,7 +95,7 @@ def test_ragged_detections_are_sorted_by_x_in_each_view():
 def test_fit_does_not_depend_on_the_order_of_detections():
     body = three_legs()
     cams = ring(3)
-    _, frames = planted(body, cams, 3, seed=2, shuffle=False)
+    _, frames = planted_postures(body, cams, 3, seed=2, shuffle=False)
     rng = np.random.default_rng(0)
     ghosts = [[np.r_[d, rng.uniform(0, 640, (70, 2))] for d in f] for f in frames]  # swept
     shuffled = [[d[rng.permutation(len(d))] for d in f] for f in ghosts]

@@ -12,8 +12,9 @@ import numpy as np
 import pytest
 
 from kinematics._temporal_kernels import path_dp
-from kinematics.anneal import JUMP_SEEN_RATIO, AnnealParams, Candidate, Fitter
 from kinematics.cameras import OrthographicCamera
+from kinematics.fit import AnnealParams, Candidate, Fitter
+from kinematics.fit.tuning import TUNING
 from kinematics.fk import forward_kinematics
 from kinematics.model import Body, Chain, Marker, Root, Segment
 from kinematics.temporal import (
@@ -29,7 +30,8 @@ from kinematics.temporal import (
     transition_costs,
     transitions,
 )
-from tests.conftest import hinge
+from tests.fixtures.bodies import hinge, leg, three_legs
+from tests.fixtures.cameras import top_and_side
 
 
 # -- merging -----------------------------------------------------------------------------------
@@ -374,11 +376,9 @@ def test_a_frame_off_its_neighbours_line_is_flagged_though_it_fits():
 
 
 def legs_walking(n: int, step_deg: float, seed=0):
-    """The three-legged body of test_partitions moving every free axis by ``step_deg`` per
-    frame, seen from the top and the side (markers in order): body, cameras, the true
-    angles (n, n_axes) and each frame's detections."""
-    from tests.kinematics.test_partitions import three_legs, top_and_side
-
+    """The three-legged body (tests/fixtures/bodies.py) moving every free axis by
+    ``step_deg`` per frame, seen from the top and the side (markers in order): body, cameras,
+    the true angles (n, n_axes) and each frame's detections."""
     body, cams = three_legs(), top_and_side()
     lo, hi = body.ranges_deg().T
     t = np.arange(n)[:, None]
@@ -409,7 +409,7 @@ def count_refits(monkeypatch, threads: set | None = None) -> list:
 
 
 def test_limbs_moving_at_once_are_no_jump(monkeypatch):
-    """Each of a body's partitions may change by up to REDO_JUMP squared spreads per frame
+    """Each of a body's partitions may change by up to TUNING.redo_jump squared spreads per frame
     before the frame is re-fitted from its neighbours: three legs each moving about 0.4
     squared spreads per frame (1.5 together) are no jump. Measured on a fly: its six legs at
     330 Hz change by ~10 per frame, so the whole clip was re-fitted, at 0.08 frames/s."""
@@ -439,7 +439,7 @@ def redundant_arm() -> tuple[Body, dict]:
     return body, {"top": cam}
 
 
-@pytest.mark.parametrize("seen_ratio", [0.0, JUMP_SEEN_RATIO])
+@pytest.mark.parametrize("seen_ratio", [0.0, TUNING.jump_seen_ratio])
 def test_a_jump_the_markers_do_not_show_is_not_flagged(monkeypatch, seen_ratio):
     """In frames 10-13 the arm's turn is split 30° differently between its two hinges and
     no re-fit finds a posture that continues the angles: the chosen path jumps into that
@@ -447,9 +447,9 @@ def test_a_jump_the_markers_do_not_show_is_not_flagged(monkeypatch, seen_ratio):
     (on the fly such jumps of the coxa roll made 142 of 660 frames ambiguous, 7 of them off).
     Counting every jump and kink (``seen_ratio`` 0, as before) flags the stretch, and not the
     frames beside it, whose kinks the stretch between the two jumps explains."""
-    from kinematics import anneal
+    from kinematics.fit import tuning
 
-    monkeypatch.setattr(anneal, "JUMP_SEEN_RATIO", seen_ratio)
+    monkeypatch.setattr(tuning, "TUNING", replace(tuning.TUNING, jump_seen_ratio=seen_ratio))
     body, cams = redundant_arm()
     turn = np.linspace(0.0, 23.0, 24)  # 1° per frame
     rng = np.random.default_rng(0)
@@ -570,7 +570,7 @@ def test_re_fits_keep_a_bounded_number_of_candidates(monkeypatch):
     re-fit is a new candidate, and each seeds the next frame's re-fits: a fly's 20-frame
     window grew from 40 to 3 627 candidates. Here every re-fit returns a new posture that
     fits as well as the frame's best; the candidates and the re-fits must stay bounded."""
-    from kinematics.anneal import REFIT_CANDIDATES
+    from kinematics.fit.tuning import TUNING
 
     body, cams, angles, frames = legs_walking(12, 40.0, seed=3)  # jumps every frame
     p = AnnealParams(candidates=2, **FAST)
@@ -591,8 +591,8 @@ def test_re_fits_keep_a_bounded_number_of_candidates(monkeypatch):
     monkeypatch.setattr(Fitter, "_refit_from", distinct_refit)
     res = fitter.fit(obs)
     assert len(calls) > 0
-    assert max(len(r.candidates) for r in res) == p.candidates + REFIT_CANDIDATES
-    assert len(calls) <= 2 * len(frames) * 2 * (p.candidates + REFIT_CANDIDATES) * (
+    assert max(len(r.candidates) for r in res) == p.candidates + TUNING.refit_candidates
+    assert len(calls) <= 2 * len(frames) * 2 * (p.candidates + TUNING.refit_candidates) * (
         1 + WRONG_STRETCH)
 
 
@@ -601,7 +601,7 @@ def test_re_fits_on_several_threads_give_the_same_results(monkeypatch):
     each is keyed by its frame, so the results equal those made one after the other."""
     import numba
 
-    from kinematics import anneal
+    from kinematics.fit import candidates
 
     if numba.config.NUMBA_NUM_THREADS < 2:
         pytest.skip("one numba thread: nothing runs at once")
@@ -617,7 +617,7 @@ def test_re_fits_on_several_threads_give_the_same_results(monkeypatch):
         numba.set_num_threads(threads)
     assert len(calls) > 10
     assert len(workers) >= 2  # the re-fits really ran on several threads
-    monkeypatch.setattr(anneal, "concurrent_fits", lambda: False)
+    monkeypatch.setattr(candidates, "concurrent_fits", lambda: False)
     alone = Fitter(body, cams, p).fit(frames)
     for a, b in zip(together, alone, strict=True):
         np.testing.assert_array_equal(a.angles_deg, b.angles_deg)
@@ -642,9 +642,9 @@ def plane_arm() -> tuple[Body, dict]:
 
 def test_track_follows_the_movement_with_one_short_cold_run_per_frame():
     """start="track": each segment's first frame is fitted in full, every other frame by one
-    cold anneal of TRACK_SHARE of the schedule from the previous result; the same results
+    cold anneal of TUNING.track_share of the schedule from the previous result; the same results
     whatever the number of threads (segments are independent)."""
-    from kinematics.anneal import TRACK_SHARE
+    from kinematics.fit.tuning import TUNING
 
     body, cams = plane_arm()
     truth = np.linspace(-40.0, 40.0, 40)
@@ -653,7 +653,7 @@ def test_track_follows_the_movement_with_one_short_cold_run_per_frame():
     res = Fitter(body, cams, p).fit(frames)
     theta = np.array([r.angles_deg[2] for r in res])
     np.testing.assert_allclose(theta, truth, atol=1.0)
-    short = max(1, int(p.n_end * TRACK_SHARE))
+    short = max(1, int(p.n_end * TUNING.track_share))
     for k, r in enumerate(res):
         if k % 16 == 0:  # a segment's first frame: the full fit (runs until two agree)
             assert r.runs >= 2
@@ -673,9 +673,9 @@ def test_track_lost_by_a_jump_is_found_by_a_full_fit(monkeypatch):
     very short one, so that it surely cannot follow) leaves E jumping, and that frame is
     fitted in full (reanalysed); tracking goes on from it. With threshold_mode auto the
     threshold is measured on the tracked frames."""
-    from kinematics import anneal
+    from kinematics.fit import tuning
 
-    monkeypatch.setattr(anneal, "TRACK_SHARE", 0.002)
+    monkeypatch.setattr(tuning, "TUNING", replace(tuning.TUNING, track_share=0.002))
     body, cams = plane_arm()
     truth = np.r_[np.linspace(-40.0, -30.0, 12), np.linspace(30.0, 40.0, 12)]
     frames = frames_of(body, cams, truth)
@@ -718,9 +718,10 @@ def test_a_merge_takes_each_limb_from_the_fit_that_explains_its_markers():
 def test_track_mends_a_segment_start_from_the_segment_before(monkeypatch):
     """A segment's first frame is fitted alone; where that fit lost a leg, the previous
     segment's track, one step on, explains it better and takes it over."""
-    from kinematics import anneal
+    from kinematics.fit import tuning
 
-    monkeypatch.setattr(anneal, "TRACK_DROP", 0.0)  # frame 13 would track it back too
+    # frame 13 would track it back too
+    monkeypatch.setattr(tuning, "TUNING", replace(tuning.TUNING, track_drop=0.0))
     body, cams, angles, frames = legs_walking(24, 1.0)
     p = AnnealParams(start="track", segment_length=12, **FAST)
     full = Fitter._fit_full
@@ -764,9 +765,10 @@ def _creep(monkeypatch, first: int, last: int, deg) -> None:
 def test_track_cut_by_a_full_fit_mends_the_frames_that_led_to_it(monkeypatch):
     """A track that crept off a leg over frames 5-8 (below the threshold) until frame 9
     was fitted in full: the frames before it are tracked back from the full fit."""
-    from kinematics import anneal
+    from kinematics.fit import tuning
 
-    monkeypatch.setattr(anneal, "TRACK_JUMP", 1e9)  # only the threshold cuts here
+    # only the threshold cuts here
+    monkeypatch.setattr(tuning, "TUNING", replace(tuning.TUNING, track_jump=1e9))
     body, cams, angles, frames = legs_walking(16, 1.0)
     # E: ~1 px right, 8-9 px with the leg 8° off, 46 px 60° off
     p = AnnealParams(start="track", segment_length=32,
@@ -788,7 +790,6 @@ def _planted_retrack(monkeypatch, wrong_e, alt_e, n_wrong, merged_e=None):
     to frame k returns the right posture with E ``alt_e(k)``; its merge with the result
     there is the wrong posture with E ``merged_e(k)`` (None: no merges). Returns the results after
     it, the right results and the frames the steps were asked for."""
-    from kinematics import anneal
 
     body, cams, angles, frames = legs_walking(12, 1.0)
     fitter = Fitter(body, cams, AnnealParams(**FAST))
@@ -808,7 +809,7 @@ def _planted_retrack(monkeypatch, wrong_e, alt_e, n_wrong, merged_e=None):
     monkeypatch.setattr(Fitter, "_merged", merged)
     out = list(results)
     fitter._retrack(obs, fitter.params, out, right[0])
-    assert anneal.TRACK_WINDOW == 8 and anneal.TRACK_PREFER == 0.9  # the cases below
+    assert TUNING.track_window == 8 and TUNING.track_prefer == 0.9  # the cases below
     return out, right, asked
 
 
@@ -827,7 +828,7 @@ def test_a_retrack_takes_a_stretch_that_fits_better_over_several_frames(monkeypa
     assert all(_is_right(r, right) and r.status == "reanalysed" for r in out[:8])
     assert asked == list(range(1, 10))  # frame 9 met the right result: stop
     assert all(r is q for r, q in zip(out[8:], right[9:], strict=True))
-    # every step 3 % better: never taken, given up after TRACK_WINDOW frames
+    # every step 3 % better: never taken, given up after TUNING.track_window frames
     out, right, asked = _planted_retrack(monkeypatch, 10.0, lambda k: 9.7, 8)
     assert not any(_is_right(r, right) for r in out[:8]) and asked == list(range(1, 9))
 
@@ -835,7 +836,7 @@ def test_a_retrack_takes_a_stretch_that_fits_better_over_several_frames(monkeypa
 def test_a_retrack_that_meets_the_results_need_only_fit_better(monkeypatch):
     """Frames 1-4 wrong, 5 on right: a re-track from frame 0 that joins them at frame 5
     takes 1-4 where its summed E is lower at all (5 % here), not 10 %; where it is higher,
-    nothing. A re-track that never meets the results gives up after TRACK_WINDOW frames."""
+    nothing. A re-track that never meets the results gives up after TUNING.track_window frames."""
     out, right, asked = _planted_retrack(monkeypatch, 10.0, lambda k: 9.5, 4)
     assert all(_is_right(r, right) for r in out[:4]) and asked == [1, 2, 3, 4, 5]
     out, right, asked = _planted_retrack(monkeypatch, 10.0, lambda k: 10.5, 4)
@@ -846,7 +847,7 @@ def test_a_retrack_that_meets_the_results_need_only_fit_better(monkeypatch):
 
 def test_a_retrack_takes_a_merge_only_where_it_fits_clearly_better(monkeypatch):
     """The step continues the movement; its merge with a wrong result (the wrong leg kept)
-    replaces it only below TRACK_PREFER times its E, as a full fit replaces the track (fly,
+    replaces it only below TUNING.track_prefer times its E, as a full fit replaces the track (fly,
     3 cameras, frame 224: a merge 0.5 % below the step kept a leg 2 mm off)."""
     out, right, _ = _planted_retrack(monkeypatch, 10.0, lambda k: 8.0, 4,
                                      merged_e=lambda k: 7.9)
@@ -859,17 +860,17 @@ def test_a_retrack_takes_a_merge_only_where_it_fits_clearly_better(monkeypatch):
 def test_a_track_that_finds_a_lost_leg_again_mends_the_frames_before(monkeypatch):
     """A track that crept off a leg over frames 3-8 without E jumping (nor reaching the
     threshold) finds it again at frame 9, where E falls below the median of the frames
-    before (TRACK_DROP): frames 3-8 are tracked back from it."""
-    from kinematics import anneal
+    before (TUNING.track_drop): frames 3-8 are tracked back from it."""
+    from kinematics.fit import tuning
 
-    monkeypatch.setattr(anneal, "TRACK_JUMP", 1e9)
+    monkeypatch.setattr(tuning, "TUNING", replace(tuning.TUNING, track_jump=1e9))
     body, cams, angles, frames = legs_walking(16, 1.0)
     p = AnnealParams(start="track", segment_length=32,
                      **{**FAST, "reanalysis_threshold": 1e9})
     _creep(monkeypatch, 3, 8, lambda position: 8.0)
     fitter = Fitter(body, cams, p)
     res = fitter.fit(frames)
-    monkeypatch.setattr(anneal, "TRACK_DROP", 0.0)
+    fitter.tuning = replace(fitter.tuning, track_drop=0.0)  # never tracked back
     unmended = fitter.fit(frames)
     knee = body.axis_labels.index("b_knee.flex")
     assert all(abs(unmended[k].angles_deg[knee] - angles[k, knee]) > 5 for k in range(3, 9))
@@ -882,15 +883,16 @@ def test_a_tracked_frame_whose_e_spikes_above_its_neighbours_is_ambiguous():
     around it is flagged; noise on a clean video is not."""
     from dataclasses import replace
 
-    from kinematics.anneal import TRACK_JUMP_PX, TRACK_SPIKE, flag_e_spikes
+    from kinematics.fit import flag_e_spikes
+    from kinematics.fit.tuning import TUNING
 
     body, cams = plane_arm()
     truth = np.linspace(-40.0, 40.0, 30)
     res = Fitter(body, cams, AnnealParams(start="track", segment_length=32, **FAST)).fit(
         frames_of(body, cams, truth))
     assert not [r.frame for r in res if r.status == "ambiguous"]
-    bar = (TRACK_SPIKE * np.median([r.error for r in res])
-           + TRACK_JUMP_PX * np.isfinite(res[0].marker_residuals).sum())
+    bar = (TUNING.track_spike * np.median([r.error for r in res])
+           + TUNING.track_jump_px * np.isfinite(res[0].marker_residuals).sum())
     spiked = [replace(r, error=2 * bar) if k in (0, 12, 29) else
               replace(r, error=0.9 * bar) if k == 20 else r for k, r in enumerate(res)]
     out = list(flag_e_spikes(spiked))
@@ -921,7 +923,6 @@ def test_a_free_body_tracked_is_right_or_flagged():
     fits the two views about as well) is flagged. Before the merge, the mending and the
     flag: 18 of 40 frames wrong, 3 of them flagged; after, 10, all flagged."""
     from kinematics.model import Axis, Body, Chain, Joint, Marker, Root, Segment
-    from tests.kinematics.test_partitions import leg, top_and_side
 
     legs = (leg("a", (4.0, 0, 6.0), 45.0), leg("b", (0.0, 0, 8.0), 90.0),
             leg("c", (-4.0, 0, 6.0), 135.0))
@@ -968,7 +969,7 @@ def test_path_kernel_equals_its_numpy_twin(seed):
 
 def scored(worst: list[float], left: list[int]) -> list:
     """Fitted frames' results with these worst marker residuals and unexplained counts."""
-    from kinematics.anneal import FrameResult
+    from kinematics.fit import FrameResult
 
     return [FrameResult(frame=k, angles_deg=np.zeros(3), error=1.0,
                         error_per_view=np.zeros(1), runs=2, iterations=1, seed=0, status="ok",
@@ -981,7 +982,7 @@ def test_a_marker_off_its_point_with_a_detection_left_over_is_misplaced():
     detections unexplained than its neighbours do: a limb on another limb's points leaves
     its own over; an occluded marker leaves nothing, ghosts are unexplained in every
     frame."""
-    from kinematics.anneal import misplaced
+    from kinematics.fit import misplaced
 
     rng = np.random.default_rng(1)
     worst = list(8.0 + rng.normal(0, 1.0, 40))  # a fly: residuals of ~8 px, no ghosts
@@ -1006,10 +1007,11 @@ def test_a_marker_off_its_point_with_a_detection_left_over_is_misplaced():
 def test_misplaced_frames_are_flagged_as_they_stream_and_when_resumed():
     """``flag_misplaced`` yields every result in order, judged among the results on either
     side; resumed with the results before it, it judges the rest as the whole stream did."""
-    from kinematics.anneal import MISPLACED_HALF, flag_misplaced
+    from kinematics.fit import flag_misplaced
+    from kinematics.fit.tuning import TUNING
 
     rng = np.random.default_rng(2)
-    n = 3 * MISPLACED_HALF
+    n = 3 * TUNING.misplaced_half
     worst = 8.0 + rng.normal(0, 1.0, n)
     left = (rng.uniform(size=n) < 0.1).astype(int)
     for k in (3, 40, n - 2):

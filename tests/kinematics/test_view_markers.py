@@ -8,14 +8,15 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from kinematics.anneal import AnnealParams, Fitter
 from kinematics.error_function import posture_error
 from kinematics.errors import KinematicsError
+from kinematics.fit import AnnealParams, Fitter
 from kinematics.fk import forward_kinematics, forward_kinematics_reference
 from kinematics.refine import refine, refine_many
 from kinematics.settings import ErrorOptions
-from tests.kinematics.test_cloud_objective import ring
-from tests.kinematics.test_partitions import marker_errors, planted, three_legs
+from tests.fixtures.bodies import three_legs
+from tests.fixtures.cameras import ring
+from tests.fixtures.planted import marker_errors, planted_postures
 from videotrack.motion import smooth_random_motion
 from videotrack.paper_setup import locust_cameras
 
@@ -128,7 +129,7 @@ def test_legs_of_two_colours_fitted_in_3d_each_colour_triangulated_apart():
     cams = ring()
     names = body.marker_names
     green = [m for m in names if m.startswith("b")]
-    angles, _ = planted(body, cams, 6, seed=3)
+    angles, _ = planted_postures(body, cams, 6, seed=3)
     rng = np.random.default_rng(0)
     views, shows, split = {}, {}, []
     for name, cam in cams.items():

@@ -19,10 +19,8 @@ import pytest
 import tomli_w
 
 import ui  # noqa: F401  (before the QApplication: ui sets the shared OpenGL context)
+from tests.fixtures.settings import SHORT_ANNEAL
 from videotrack.cli import main
-
-#: A short annealing schedule (the paper's proportions) so fits take a fraction of a second.
-SHORT_ANNEAL = {"n_end": 3000, "n_l": 300, "n_tau": 130}
 
 
 @pytest.fixture(scope="session")
@@ -49,7 +47,7 @@ def project(synth_project, tmp_path):
 @pytest.fixture
 def session(qtbot, project):
     """An opened :class:`ui.session.Session`; ``session.messages`` collects its errors."""
-    from ui.session import Session
+    from ui.state import Session
 
     s = Session()
     s.messages = []
@@ -64,7 +62,7 @@ def open_window(qtbot, project):
     discarded)."""
     from PySide6.QtWidgets import QMessageBox
 
-    from ui.main_window import MainWindow
+    from ui.views.main_window import MainWindow
 
     w = MainWindow()  # the 3D view decides: OpenGL on a real display, 2D offscreen
     w.ask_unsaved = lambda: QMessageBox.StandardButton.Discard

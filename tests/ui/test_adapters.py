@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from kinematics.anneal import FrameResult
 from kinematics.errors import KinematicsError
+from kinematics.fit import FrameResult
 from kinematics.fk import forward_kinematics
 from kinematics.histograms import Histogram
 from kinematics.model import validate_body

@@ -47,7 +47,7 @@ os.environ["QT_QPA_PLATFORM"] = "offscreen"
 from PySide6.QtCore import QTimer
 from PySide6.QtWidgets import QApplication
 app = QApplication([])
-from ui.main_window import MainWindow
+from ui.views.main_window import MainWindow
 from videotrack.cli import main
 
 def close_soon():

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import tomli_w
 
-from tests.ui.conftest import SHORT_ANNEAL
+from tests.fixtures.settings import SHORT_ANNEAL
 from videotrack.cli import main
 
 

@@ -11,8 +11,9 @@ import numpy as np
 from PySide6.QtCore import Qt
 from PySide6.QtGui import QKeySequence
 
-from ui import adapters, shortcuts
-from ui.correction_panel import SETTLE_MS
+from ui import adapters
+from ui.views import shortcuts
+from ui.views.correction_panel import SETTLE_MS
 
 DOCS = Path(__file__).resolve().parents[2] / "docs" / "gui.md"
 K = Qt.Key
@@ -150,7 +151,7 @@ def _with_statuses(s, statuses: dict[int, str]) -> None:
 
 
 def _result(s, frame, angles):
-    from ui import backend
+    from ui.state import backend
 
     return backend.manual_result(frame, angles, s.body.root_positions(), 1.0,
                                  np.ones(len(s.views)), 0)

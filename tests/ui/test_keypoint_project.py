@@ -14,13 +14,14 @@ from PySide6.QtCore import Qt
 
 from kinematics.error_function import labelled_error
 from kinematics.fk import forward_kinematics
-from ui import adapters, backend
-from ui.session import FIT_CONTEXT, Session
+from ui import adapters
+from ui.state import Session, backend
+from ui.state.fitting import FIT_CONTEXT
 from videotrack.cli import main
 from videotrack.config import load_config
-from videotrack.pipeline import plan_project
 from videotrack.results import read_results, read_sidecar
 from videotrack.synth_keypoints import write_session
+from videotrack.workflow import plan_project
 
 N_FRAMES = 8
 #: The markerless tests' seed with the GUI tests' short schedule (a fit takes a second).
@@ -265,7 +266,7 @@ def test_a_keypoint_hidden_in_a_view_counts_as_missing(made, tmp_path, wait_idle
 
 def test_triangulated_route_fits_3d_points_and_draws_2d_keypoints(made, tmp_path, qtbot,
                                                                    wait_idle):
-    from ui.main_window import MainWindow
+    from ui.views.main_window import MainWindow
 
     project, truth = copy_of(made, tmp_path, "3d")
     cli = read_results(made[0] / "cli3d" / RESULTS)

@@ -11,7 +11,8 @@ from PySide6.QtGui import QImage
 from PySide6.QtWidgets import QMessageBox
 
 from kinematics.fk import forward_kinematics
-from ui import adapters, style
+from ui import adapters
+from ui.views import style
 from videotrack.detections import load_detections
 
 
@@ -103,7 +104,7 @@ def test_background_fit_updates_table_timeline_and_views(window, qtbot, wait_idl
 
 
 def test_table_highlights_sorts_and_jumps(window, qtbot, wait_idle):
-    from kinematics.anneal import AnnealParams
+    from kinematics.fit import AnnealParams
 
     s = window.session
     s.set_params(AnnealParams.paper())  # errors of a few px, a threshold among them
@@ -133,8 +134,8 @@ def test_table_highlights_sorts_and_jumps(window, qtbot, wait_idle):
 
 
 def test_cancel_from_the_window(window, qtbot, wait_idle, monkeypatch):
-    from kinematics.anneal import AnnealParams
-    from ui import backend
+    from kinematics.fit import AnnealParams
+    from ui.state import backend
 
     monkeypatch.setattr(backend, "fit_chunk_size", lambda: 2)  # whatever the core count
     s = window.session
@@ -153,8 +154,8 @@ def test_window_stays_responsive_while_fitting(window, qtbot, monkeypatch):
 
     from PySide6.QtCore import QTimer
 
-    from kinematics.anneal import AnnealParams
-    from ui import backend
+    from kinematics.fit import AnnealParams
+    from ui.state import backend
 
     monkeypatch.setattr(backend, "fit_chunk_size", lambda: 2)
     s = window.session
@@ -463,7 +464,7 @@ def test_an_ambiguous_frame_shows_the_posture_a_swaps_to(window, wait_idle):
     counts the frames left to check."""
     from dataclasses import replace
 
-    from kinematics.anneal import Candidate
+    from kinematics.fit import Candidate
 
     s = window.session
     s.fit([3])

@@ -8,8 +8,8 @@ import tomllib
 
 import tomli_w
 
-from tests.ui.conftest import SHORT_ANNEAL
-from tests.videotrack.test_match_3d import cluttered_leg_project
+from tests.fixtures.projects import cluttered_leg_project
+from tests.fixtures.settings import SHORT_ANNEAL
 from videotrack.cli import main
 
 

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from ui.posture_view import SOFTWARE_RENDERERS
+from ui.views.posture_view import SOFTWARE_RENDERERS
 
 HERE = Path(__file__).resolve().parent
 XVFB = shutil.which("Xvfb")
@@ -64,7 +64,7 @@ def on_display(display: str, **more: str) -> dict:
 PROBE = """
 import ui
 from PySide6.QtWidgets import QApplication
-from ui.posture_view import opengl_choice, opengl_renderer
+from ui.views.posture_view import opengl_choice, opengl_renderer
 app = QApplication([])
 print("|".join(map(str, (app.platformName(), opengl_renderer(), *opengl_choice()))))
 """

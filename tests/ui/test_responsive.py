@@ -7,12 +7,12 @@ import time
 
 import pytest
 
-from ui import backend
+from ui.state import backend
 
 
 def test_cancel_returns_at_once_and_a_new_fit_may_start(session, qtbot, wait_idle,
                                                         monkeypatch):
-    from kinematics.anneal import AnnealParams
+    from kinematics.fit import AnnealParams
 
     s = session
     s.fit([0])  # a parallel kernel has run: numba's threading layer is known

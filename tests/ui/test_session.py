@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 import tomli_w
 
-from kinematics.anneal import AnnealParams, Fitter
+from kinematics.fit import AnnealParams, Fitter
 from kinematics.fk import forward_kinematics
 from kinematics.histogram_xml import archive_from_body, load_archive
-from ui.session import Session
+from ui.state import Session
 from videotrack.detections import load_detections
 from videotrack.results import read_results
 from videotrack.video import open_videos
@@ -81,7 +81,7 @@ def test_background_fit_to_completion_then_undo_redo(session, qtbot, wait_idle):
 
 
 def test_cancel_a_fit_midway_keeps_what_arrived(session, qtbot, wait_idle, monkeypatch):
-    from ui import backend
+    from ui.state import backend
 
     monkeypatch.setattr(backend, "fit_chunk_size", lambda: 2)  # whatever the core count
     s = session
@@ -303,7 +303,7 @@ def test_open_a_trial_of_a_project_folder(synth_project, tmp_path, qtbot, wait_i
 
 
 def test_an_alternative_posture_is_one_key_away(session, wait_idle, tmp_path):
-    from kinematics.anneal import Candidate
+    from kinematics.fit import Candidate
 
     s = session
     s.fit([3])
@@ -337,7 +337,7 @@ def test_an_alternative_posture_carries_along_the_stretch_on_the_same_branch(ses
     (each kept the right posture as a candidate, near the chosen one), not frame 2, on the
     right branch; frame 6 kept no other candidate and is flagged instead; one undo restores
     them all."""
-    from kinematics.anneal import Candidate
+    from kinematics.fit import Candidate
 
     s = session
     s.fit()
@@ -386,7 +386,7 @@ def test_an_alternative_posture_carries_along_the_stretch_on_the_same_branch(ses
 
 
 def test_reopened_results_keep_the_bar_their_fit_used(session, project, wait_idle):
-    from ui.session import Session
+    from ui.state import Session
 
     s = session
     assert s.fit()
@@ -407,9 +407,9 @@ def test_a_re_fit_forward_keeps_the_carried_branch_only_when_the_anneal_left_it(
     (far from the neighbour's posture refined in place, which is nearer the neighbour) for
     an E not much lower, then the refined posture with the anneal's as its alternative; a
     refinement stuck far from the data never wins."""
-    from kinematics.anneal import Candidate
-    from ui import backend
-    from ui.session import carried_or_annealed
+    from kinematics.fit import Candidate
+    from ui.state import backend
+    from ui.state.corrections import carried_or_annealed
 
     def result(theta, error):
         angles = np.array([0.0, theta])

@@ -150,12 +150,12 @@ def test_a_failing_trial_does_not_stop_the_others(project, capsys):
 
 
 def test_run_trial_reports_unexpected_errors(project, monkeypatch):
-    import videotrack.pipeline
+    import videotrack.workflow.run
 
     def boom(*args, **kwargs):
         raise ZeroDivisionError("a bug")
 
-    monkeypatch.setattr(videotrack.pipeline, "fit_project", boom)
+    monkeypatch.setattr(videotrack.workflow.run, "fit_project", boom)
     trial = open_project(project).trials[0]
     report = run_trial(trial)
     assert isinstance(report, TrialReport) and report.state == "failed"
@@ -194,7 +194,7 @@ KILLER = textwrap.dedent("""\
     import contextlib, sys, time
     from pathlib import Path
     import kinematics.fileio as fileio
-    import videotrack.pipeline as pipeline
+    import videotrack.workflow.checkpoint as pipeline
     project, mark, point = sys.argv[1:4]
 
     def stop_here():

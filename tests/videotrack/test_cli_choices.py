@@ -92,7 +92,7 @@ def project(tmp_path_factory):
 
 
 def test_fit_start_track_reaches_the_fitter(project, monkeypatch, capsys):
-    import videotrack.pipeline as pipeline  # where the fitter class is looked up
+    import videotrack.workflow.model as pipeline  # where the fitter class is looked up
 
     seen = []
 

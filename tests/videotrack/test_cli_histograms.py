@@ -12,7 +12,7 @@ from videotrack.results import results_from_fit, write_results
 
 @pytest.fixture
 def results_file(tmp_path, locust):
-    from kinematics.anneal import FrameResult
+    from kinematics.fit import FrameResult
 
     chain = tmp_path / "chain.xml"
     from kinematics.chain_xml import save_body

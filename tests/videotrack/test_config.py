@@ -23,7 +23,7 @@ from videotrack.config import (
 )
 from videotrack.detect import default_output, settings_from_config, video_paths
 from videotrack.errors import VideoTrackError
-from videotrack.pipeline import anneal_params, load_model
+from videotrack.workflow import anneal_params, load_model
 
 MINIMAL = """\
 [video]

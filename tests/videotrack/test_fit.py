@@ -85,8 +85,9 @@ def test_results_round_trip(project, tmp_path):
 
 
 def test_resume_after_interruption_gives_identical_file(project, tmp_path, monkeypatch):
-    from videotrack import pipeline
+    from videotrack import workflow as pipeline
     from videotrack.detections import load_detections
+    from videotrack.workflow import checkpoint
 
     config = load_config(project / "project.toml")
     model = pipeline.load_model(config, n_end=2000)
@@ -94,7 +95,7 @@ def test_resume_after_interruption_gives_identical_file(project, tmp_path, monke
     det = load_detections(det_path)
     full = tmp_path / "full.csv"
     pipeline.fit_project(model, det, det_path, full)
-    monkeypatch.setattr(pipeline, "CHECKPOINT_SECONDS", 0.0)
+    monkeypatch.setattr(checkpoint, "CHECKPOINT_SECONDS", 0.0)
     cut = tmp_path / "cut.csv"
     seen = []
 
@@ -139,7 +140,7 @@ def test_fit_bad_inputs_are_one_line(project, tmp_path, capsys):
 
 
 def test_frames_without_detections_get_nan_points(locust, tmp_path):
-    from kinematics.anneal import FrameResult
+    from kinematics.fit import FrameResult
 
     nan = np.full(locust.n_axes, np.nan)
     r = FrameResult(0, nan, np.nan, np.array([np.nan, np.nan]), 0, 0, 0, "no-detections",

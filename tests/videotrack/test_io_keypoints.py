@@ -13,6 +13,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.fixtures.keypoint_files import (
+    PARTS,
+    planted_tracks,
+    write_analysis_h5,
+    write_dlc_csv,
+    write_dlc_h5,
+    write_openpose,
+)
 from videotrack.errors import VideoTrackError
 from videotrack.io.keypoints import (
     align_cameras,
@@ -25,80 +33,11 @@ from videotrack.io.keypoints import (
 )
 
 DATA = Path(__file__).parents[2] / ".." / "shared" / "data"
-PARTS = ("snout", "ear", "tail")
-
-
-def planted(n=6, k=3, seed=0):
-    """(xy, score) of k keypoints over n frames, one point missing."""
-    rng = np.random.default_rng(seed)
-    xy = rng.uniform(10, 500, (n, k, 2)).round(3)
-    score = rng.uniform(0.1, 1.0, (n, k)).round(4)
-    xy[2, 1] = np.nan
-    score[2, 1] = np.nan
-    return xy, score
-
-
-def _cell(v) -> str:
-    return "" if not np.isfinite(v) else repr(float(v))
-
-
-def write_dlc_csv(path, xy, score, parts=PARTS, individuals=None, frames=None,
-                  likelihood=True):
-    """A DeepLabCut CSV as DLC writes it: header rows scorer, [individuals,] bodyparts,
-    coords; ``individuals`` = list of names, xy then (n, n_ind, k, 2)."""
-    coords = ["x", "y", "likelihood"] if likelihood else ["x", "y"]
-    inds = individuals or [None]
-    xy = xy if individuals else xy[:, None]
-    score = score if individuals else score[:, None]
-    cols = [(ind, bp, c) for ind in inds for bp in parts for c in coords]
-    rows = [["scorer"] + ["DLC_resnet50"] * len(cols)]
-    if individuals:
-        rows.append(["individuals"] + [c[0] for c in cols])
-    rows.append(["bodyparts"] + [c[1] for c in cols])
-    rows.append(["coords"] + [c[2] for c in cols])
-    frames = range(len(xy)) if frames is None else frames
-    for f, fr in enumerate(frames):
-        row = [str(fr)]
-        for i in range(len(inds)):
-            for k in range(len(parts)):
-                row += [_cell(xy[f, i, k, 0]), _cell(xy[f, i, k, 1])]
-                if likelihood:
-                    row.append(_cell(score[f, i, k]))
-        rows.append(row)
-    Path(path).write_text("\n".join(",".join(r) for r in rows) + "\n")
-    return path
-
-
-def write_dlc_h5(path, xy, score, parts=PARTS):
-    """A DeepLabCut h5 as DLC writes it (pandas, key df_with_missing, table format)."""
-    import pandas as pd
-
-    cols = pd.MultiIndex.from_product([["DLC_resnet50"], list(parts),
-                                       ["x", "y", "likelihood"]],
-                                      names=["scorer", "bodyparts", "coords"])
-    values = np.concatenate([xy, score[..., None]], axis=2).reshape(len(xy), -1)
-    pd.DataFrame(values, columns=cols).to_hdf(path, key="df_with_missing", format="table",
-                                              mode="w")
-    return path
-
-
-def write_openpose(folder, people_per_frame, prefix="cam1"):
-    """One JSON per frame; people_per_frame[f] = list of (k, 3) arrays (c = 0: missing)."""
-    folder = Path(folder)
-    folder.mkdir()
-    for f, people in enumerate(people_per_frame):
-        data = {"version": 1.3, "people": [
-            {"person_id": [-1], "pose_keypoints_2d": np.nan_to_num(p).ravel().tolist(),
-             "face_keypoints_2d": []} for p in people]}
-        (folder / f"{prefix}.{f:04d}.json").write_text(json.dumps(data))
-    return folder
-
-
 # -- DeepLabCut --------------------------------------------------------------------------------
 
 
 def test_dlc_csv_single_animal(tmp_path):
-    xy, score = planted()
+    xy, score = planted_tracks()
     t = read_keypoints(write_dlc_csv(tmp_path / "a.csv", xy, score, frames=range(10, 16)))
     assert t.names == PARTS and t.frames.tolist() == list(range(10, 16))
     np.testing.assert_allclose(t.xy, xy)
@@ -107,7 +46,7 @@ def test_dlc_csv_single_animal(tmp_path):
 
 
 def test_dlc_csv_multi_animal_chooses_individual_and_keeps_others_as_candidates(tmp_path):
-    xy, score = planted(k=3)
+    xy, score = planted_tracks(k=3)
     xy2 = np.stack([xy, xy + 100.0], axis=1)  # (n, 2 animals, k, 2)
     s2 = np.stack([score, score / 2], axis=1)
     path = write_dlc_csv(tmp_path / "ma.csv", xy2, s2, individuals=["mouse1", "mouse2"])
@@ -124,7 +63,7 @@ def test_dlc_csv_multi_animal_chooses_individual_and_keeps_others_as_candidates(
 
 
 def test_dlc_hand_labels_without_likelihood_score_one(tmp_path):
-    xy, score = planted()
+    xy, score = planted_tracks()
     t = read_keypoints(write_dlc_csv(tmp_path / "CollectedData_me.csv", xy, score,
                                      likelihood=False))
     assert np.all(t.score[~t.missing] == 1.0) and np.isnan(t.score[2, 1])
@@ -132,7 +71,7 @@ def test_dlc_hand_labels_without_likelihood_score_one(tmp_path):
 
 def test_dlc_csv_with_three_index_columns(tmp_path):
     """DeepLabCut >= 2.3 hand labels: labeled-data, video, image name as three index columns."""
-    xy, score = planted(n=3)
+    xy, score = planted_tracks(n=3)
     path = write_dlc_csv(tmp_path / "CollectedData_me.csv", xy, score, likelihood=False)
     lines = path.read_text().splitlines()
     lines = [line.replace(",", ",,,", 1) for line in lines[:3]] + [
@@ -145,7 +84,7 @@ def test_dlc_csv_with_three_index_columns(tmp_path):
 
 
 def test_dlc_h5_matches_csv(tmp_path):
-    xy, score = planted()
+    xy, score = planted_tracks()
     h5 = read_keypoints(write_dlc_h5(tmp_path / "a.h5", xy, score))
     assert detect_format(tmp_path / "a.h5") == "dlc"
     np.testing.assert_allclose(h5.xy, xy)
@@ -157,7 +96,7 @@ def test_dlc_h5_matches_csv(tmp_path):
 def test_dlc_write_round_trip_csv_and_h5(tmp_path):
     from videotrack.io import dlc
 
-    xy, score = planted()
+    xy, score = planted_tracks()
     t = make_tracks(PARTS, xy, score, np.arange(3, 9), "mem")
     for name in ("out.csv", "out.h5"):
         dlc.write(tmp_path / name, t)
@@ -168,7 +107,7 @@ def test_dlc_write_round_trip_csv_and_h5(tmp_path):
 
 
 def test_dlc_bad_files_give_located_errors(tmp_path):
-    xy, score = planted()
+    xy, score = planted_tracks()
     path = write_dlc_csv(tmp_path / "bad.csv", xy, score)
     lines = path.read_text().splitlines()
     lines[5] = lines[5].replace(lines[5].split(",")[2], "abc", 1)
@@ -188,7 +127,7 @@ def test_dlc_bad_files_give_located_errors(tmp_path):
 
 
 def test_lightning_pose_csv(tmp_path):
-    xy, score = planted()
+    xy, score = planted_tracks()
     path = write_dlc_csv(tmp_path / "predictions.csv", xy, score)
     path.write_text(path.read_text().replace("DLC_resnet50", "heatmap_mhcrnn_tracker"))
     assert detect_format(path) == "lightning-pose"
@@ -200,7 +139,7 @@ def test_lightning_pose_csv(tmp_path):
 
 def test_sleap_slp_written_with_sleap_io(tmp_path):
     sio = pytest.importorskip("sleap_io")
-    xy, score = planted(n=5, k=3)
+    xy, score = planted_tracks(n=5, k=3)
     skeleton = sio.Skeleton(list(PARTS))
     video = sio.Video(filename=str(tmp_path / "cam.mp4"))
     tracks = [sio.Track("mouse_a"), sio.Track("mouse_b")]
@@ -222,7 +161,7 @@ def test_sleap_slp_written_with_sleap_io(tmp_path):
 
 def test_sleap_slp_untracked_instances(tmp_path):
     sio = pytest.importorskip("sleap_io")
-    xy, _ = planted(n=3, k=3)
+    xy, _ = planted_tracks(n=3, k=3)
     skeleton = sio.Skeleton(list(PARTS))
     video = sio.Video(filename=str(tmp_path / "cam.mp4"))
     frames = [sio.LabeledFrame(video=video, frame_idx=f, instances=[
@@ -236,20 +175,8 @@ def test_sleap_slp_untracked_instances(tmp_path):
     assert np.all(t.score[~t.missing] == 1.0)  # hand labels are certain
 
 
-def write_analysis_h5(path, xy, score, track_names=("track_0",)):
-    """A SLEAP analysis h5 in its stored (transposed, MATLAB) layout."""
-    import h5py
-
-    with h5py.File(path, "w") as f:
-        f["tracks"] = xy[:, None].transpose(1, 3, 2, 0)  # (tracks, 2, nodes, frames)
-        f["point_scores"] = score[:, None].transpose(1, 2, 0)
-        f["node_names"] = np.array([p.encode() for p in PARTS])
-        f["track_names"] = np.array([n.encode() for n in track_names])
-    return path
-
-
 def test_sleap_analysis_h5(tmp_path):
-    xy, score = planted()
+    xy, score = planted_tracks()
     path = write_analysis_h5(tmp_path / "cam.analysis.h5", xy, score)
     assert detect_format(path) == "sleap"
     t = read_keypoints(path, crop_offset=(100, 20), frame_offset=50)
@@ -299,7 +226,7 @@ def test_openpose_bad_files(tmp_path):
 
 
 def test_align_cameras_on_union_of_frames():
-    xy, score = planted()
+    xy, score = planted_tracks()
     a = make_tracks(PARTS, xy, score, np.arange(0, 6), "a")
     b = make_tracks(PARTS[::-1], xy[:3, ::-1], score[:3, ::-1], [4, 6, 8], "b")
     names, frames, axy, ascore = align_cameras({"left": a, "right": b})
@@ -316,7 +243,7 @@ def test_align_cameras_on_union_of_frames():
 
 
 def test_map_to_markers():
-    xy, score = planted()
+    xy, score = planted_tracks()
     t = make_tracks(PARTS, xy, score, np.arange(6), "a.h5")
     mxy, mscore = map_to_markers(t, ["M0", "M1", "M2", "M3"], {"tail": "M0", "snout": "M2"})
     np.testing.assert_allclose(mxy[:, 0], xy[:, 2])
@@ -333,7 +260,7 @@ def test_map_to_markers():
 
 
 def test_npz_round_trip(tmp_path):
-    xy, score = planted()
+    xy, score = planted_tracks()
     cams = {"a": make_tracks(PARTS, xy, score, np.arange(6), "a"),
             "b": make_tracks(PARTS, xy + 1, score, np.arange(2, 8), "b")}
     write_npz(tmp_path / "k.npz", cams)
@@ -352,7 +279,7 @@ def test_unknown_files(tmp_path):
     with pytest.raises(VideoTrackError, match="format: unknown keypoint format"):
         read_keypoints(tmp_path / "x.txt", "mat")
     with pytest.raises(VideoTrackError, match="crop_offset"):
-        read_keypoints(write_dlc_csv(tmp_path / "a.csv", *planted()), crop_offset=(1,))
+        read_keypoints(write_dlc_csv(tmp_path / "a.csv", *planted_tracks()), crop_offset=(1,))
 
 
 # -- real files --------------------------------------------------------------------------------

@@ -2,19 +2,12 @@
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 import pytest
 
+from tests.fixtures.keypoint_files import planted_tracks, write_analysis_h5, write_dlc_csv
 from videotrack import cli
 from videotrack.io.keypoints import read_keypoints, read_npz
-
-_spec = importlib.util.spec_from_file_location(
-    "kp_files", Path(__file__).with_name("test_io_keypoints.py"))
-kp_files = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(kp_files)
 
 
 def test_the_command_is_listed():
@@ -23,13 +16,13 @@ def test_the_command_is_listed():
 
 @pytest.fixture
 def two_cameras(tmp_path):
-    xy, score = kp_files.planted(n=30)
+    xy, score = planted_tracks(n=30)
     xy = 100.0 + np.arange(30)[:, None, None] * np.array([[2.0, 1.0], [0.5, 3.0], [1.0, 1.0]])
     xy[2, 1] = np.nan  # smooth tracks, one point missing
-    a = kp_files.write_dlc_csv(tmp_path / "left.csv", xy, score)
+    a = write_dlc_csv(tmp_path / "left.csv", xy, score)
     xy2 = xy.copy()
     xy2[5, 0] += 300.0  # an outlier the median filter drops
-    b = kp_files.write_analysis_h5(tmp_path / "right.analysis.h5", xy2, score)
+    b = write_analysis_h5(tmp_path / "right.analysis.h5", xy2, score)
     return a, b, xy
 
 

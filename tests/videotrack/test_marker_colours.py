@@ -18,11 +18,11 @@ from videotrack.evaluate import evaluate_files
 from videotrack.filters import FilterChain
 from videotrack.marker_colours import bgr, colour_of_markers, hsv_range, parse_colour
 from videotrack.markers import MarkerSettings
-from videotrack.pipeline import load_model, plan_project, run_project
 from videotrack.render import render_markers
 from videotrack.results import read_results, read_sidecar
 from videotrack.video import VideoSource
 from videotrack.views import View
+from videotrack.workflow import load_model, plan_project, run_project
 
 COLOURS = ["--colour", "red=M0,M1,M2", "--colour", "green=M3"]
 VIEWS = ["side_red", "side_green", "top_red", "top_green"]

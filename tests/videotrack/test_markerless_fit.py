@@ -54,7 +54,7 @@ def test_fit_to_2d_keypoints_matches_truth_then_is_up_to_date(session, capsys):
 
 
 def test_changed_keypoint_file_or_setting_makes_results_stale(session, tmp_path, capsys):
-    from videotrack.pipeline import plan_project
+    from videotrack.workflow import plan_project
 
     folder = tmp_path / "copy"
     moved = write_session(folder, N_FRAMES, noise_px=1.0, bad_share=0.1, project_text=ANNEAL)
@@ -111,11 +111,14 @@ def test_resume_after_interruption_gives_identical_file(tmp_path, monkeypatch):
     """A resumed fit keeps the checkpoint's leading whole windows of the path through time
     (here of 2 x 4 frames, every 4), and the threshold that judged them, so the rest is
     decided as the whole fit decided it."""
-    from kinematics import anneal
-    from videotrack import pipeline
-    from videotrack.markerless import load_keypoints
+    from dataclasses import replace
 
-    monkeypatch.setattr(anneal, "PATH_LAG", 4)
+    from kinematics.fit import tuning
+    from videotrack import workflow as pipeline
+    from videotrack.markerless import load_keypoints
+    from videotrack.workflow import checkpoint
+
+    monkeypatch.setattr(tuning, "TUNING", replace(tuning.TUNING, path_lag=4))
 
     # every root marker in every frame: the free root's seed of a frame does not depend on
     # the frames fitted before it (with gaps it is carried over from them; see the report)
@@ -126,7 +129,7 @@ def test_resume_after_interruption_gives_identical_file(tmp_path, monkeypatch):
     data = load_keypoints(config, model)
     full = tmp_path / "full.csv"
     pipeline.fit_project(model, data, None, full)
-    monkeypatch.setattr(pipeline, "CHECKPOINT_SECONDS", 0.0)
+    monkeypatch.setattr(checkpoint, "CHECKPOINT_SECONDS", 0.0)
     cut = tmp_path / "cut.csv"
     seen = []
 
@@ -146,7 +149,7 @@ def test_resume_after_interruption_gives_identical_file(tmp_path, monkeypatch):
     assert meta["threshold"] > 0
     for bad in (True, "12", -1.0, float("inf"), None):
         side.write_text(json.dumps({**meta, "threshold": bad}))
-        frames, threshold = pipeline._resume(partial, meta)
+        frames, threshold = checkpoint._resume(partial, meta)
         assert threshold is None and len(frames) == 5, bad
     side.write_text(json.dumps(meta))
     kept = []
@@ -161,7 +164,7 @@ def test_resume_after_interruption_gives_identical_file(tmp_path, monkeypatch):
 
 def test_the_2d_route_defaults_to_a_keypoint_sized_cap(session, tmp_path):
     from videotrack.config import load_config
-    from videotrack.pipeline import KEYPOINT_CAP_PX, anneal_params
+    from videotrack.workflow import KEYPOINT_CAP_PX, anneal_params
 
     assert anneal_params(load_config(session.project)).error.cap_px == KEYPOINT_CAP_PX
     own = tmp_path / "own.toml"

@@ -5,41 +5,20 @@ import numpy as np
 
 from kinematics.cameras import PinholeCamera
 from kinematics.chain_xml import loads_body
+from tests.fixtures.bodies import LEG_XML
+from tests.fixtures.cameras import four_cameras
+from tests.fixtures.projects import cluttered_leg_project
 from videotrack.cli import main
 from videotrack.config import load_config
 from videotrack.detections import load_detections
-from videotrack.pipeline import load_model, not_streamable
 from videotrack.results import read_results, read_sidecar
 from videotrack.synth import SynthOptions, write_synthetic_project
 from videotrack.tables import read_table
+from videotrack.workflow import load_model, not_streamable
 
-LEG = """<joint name="{n}_hip"><axis rot="y" name="yaw" min="-40" max="40"/>
-  <axis rot="x" name="rx" locked="0"/><axis rot="z" name="lift" min="-30" max="50"/>
-  <segment name="{n}_femur" length="12"><marker name="{n}_knee_mk"/>
-    <joint name="{n}_knee"><axis rot="y" name="ry" locked="0"/>
-      <axis rot="x" name="rx" locked="0"/><axis rot="z" name="flex" min="-120" max="-20"/>
-      <segment name="{n}_tibia" length="10"><marker name="{n}_tip"/></segment>
-    </joint></segment></joint>"""
 CHAIN = ('<body name="two-legs" units="mm" format="1">' + "".join(
-    f'<chain name="{n}"><root mode="fixed" position="{x} 0 0"/>{LEG.format(n=n)}</chain>'
+    f'<chain name="{n}"><root mode="fixed" position="{x} 0 0"/>{LEG_XML.format(n=n)}</chain>'
     for n, x in (("front", 3), ("hind", -3))) + "</body>")
-
-
-def four_cameras() -> dict:
-    k = [[900.0, 0, 320], [0, 900.0, 240], [0, 0, 1]]
-    return {f"cam{i}": PinholeCamera(f"cam{i}", k, rvec=[0.5, yaw, 0], t=[0, 0, 120],
-                                     size=(640, 480))
-            for i, yaw in enumerate((-0.9, -0.3, 0.3, 0.9))}
-
-
-def cluttered_leg_project(folder) -> None:
-    """One leg (two markers) in four views, each with four static ghosts: three detections
-    per marker image."""
-    chain = ('<body name="one-leg" units="mm" format="1"><chain name="front"><root '
-             'mode="fixed" position="3 0 0"/>' + LEG.format(n="front") + "</chain></body>")
-    angles = np.array([[15 * np.sin(f / 4), 0, 20, 0, 0, -60] for f in range(8)])
-    write_synthetic_project(folder, loads_body(chain), chain, four_cameras(), angles,
-                            SynthOptions(layout="separate", seed=1, static_ghosts=4))
 
 
 def test_run_matches_a_two_legged_body_in_3d(tmp_path, capsys):
@@ -92,7 +71,7 @@ def test_a_video_whose_match_is_decided_on_its_detections_is_detected_before_the
 def test_a_match_decided_by_the_caller_is_not_decided_again(tmp_path):
     """``fit_project(match=...)`` fits with the match its caller decided (and printed), and
     the sidecar keeps the project's 'auto'."""
-    from videotrack import pipeline
+    from videotrack import workflow as pipeline
 
     cluttered_leg_project(tmp_path)
     model = load_model(load_config(tmp_path / "project.toml"), n_end=2000)
@@ -110,11 +89,11 @@ def test_a_match_decided_by_the_caller_is_not_decided_again(tmp_path):
 def test_frames_with_detections_but_no_3d_point_are_named():
     """A frame whose markers only two views see has no 3D point: the fit warns by name
     instead of reporting a frame without detections and nothing else."""
-    from kinematics.anneal import AnnealParams, Fitter
+    from kinematics.fit import AnnealParams, Fitter
     from kinematics.fk import forward_kinematics
     from videotrack.detections import build_detections
-    from videotrack.pipeline import fit_warnings
     from videotrack.results import results_from_fit
+    from videotrack.workflow import fit_warnings
 
     body = loads_body(CHAIN)
     k = [[900.0, 0, 320], [0, 900.0, 240], [0, 0, 1]]

@@ -9,10 +9,10 @@ from pathlib import Path
 
 import pytest
 
-import videotrack.pipeline as pipeline
+import videotrack.workflow as pipeline
 from videotrack.cli import main
 from videotrack.config import load_config
-from videotrack.pipeline import Cancelled, not_streamable, run_project
+from videotrack.workflow import Cancelled, checkpoint, not_streamable, run_project, streaming
 
 N_FRAMES = 40
 #: One answer per frame and a fixed re-analysis threshold (streamable), a short schedule.
@@ -35,7 +35,7 @@ def rendered(tmp_path_factory):
 @pytest.fixture
 def project(rendered, tmp_path, capsys, monkeypatch):
     """A fresh copy of :func:`rendered`, fitted in chunks of 7 records (the last one short)."""
-    monkeypatch.setattr(pipeline, "STREAM_CHUNK", 7)
+    monkeypatch.setattr(streaming, "STREAM_CHUNK", 7)
     capsys.readouterr()
     return Path(shutil.copytree(rendered, tmp_path / "project")) / "project.toml"
 
@@ -105,7 +105,7 @@ def test_cancel_while_detecting_leaves_nothing_and_reruns_the_same(project, refe
 
 
 def test_cancel_while_fitting_keeps_a_checkpoint_and_resumes(project, reference, monkeypatch):
-    monkeypatch.setattr(pipeline, "CHECKPOINT_SECONDS", 0.0)
+    monkeypatch.setattr(checkpoint, "CHECKPOINT_SECONDS", 0.0)
     config = load_config(project)
     seen = []
 

@@ -13,8 +13,8 @@ from kinematics.errors import LocatedError
 from videotrack.cli import main
 from videotrack.config import load_config
 from videotrack.errors import VideoTrackError, VideoTrackWarning
-from videotrack.pipeline import Cancelled, plan_project, run_project
 from videotrack.results import read_sidecar
+from videotrack.workflow import Cancelled, plan_project, run_project
 
 #: A short schedule in the paper's proportions, so a fit takes a fraction of a second.
 SHORT = {"n_end": 2000, "n_l": 200, "n_tau": 86}
@@ -192,14 +192,16 @@ def test_demo_writes_what_run_project_writes(tmp_path, capsys):
 
 def test_fit_says_when_it_resumed(project, capsys, monkeypatch):
     # issue 16: 'fit' did not say when it resumed from a checkpoint
-    import videotrack.pipeline as pipeline
-    from kinematics import anneal
+    from dataclasses import replace
+
+    from kinematics.fit import tuning
+    from videotrack.workflow import checkpoint
 
     # a resumed fit keeps whole windows of the path through time: here of 2 x 4 frames
-    monkeypatch.setattr(anneal, "PATH_LAG", 4)
+    monkeypatch.setattr(tuning, "TUNING", replace(tuning.TUNING, path_lag=4))
     config = load_config(project)
     run_project(config, fit=False)
-    monkeypatch.setattr(pipeline, "CHECKPOINT_SECONDS", 0.0)
+    monkeypatch.setattr(checkpoint, "CHECKPOINT_SECONDS", 0.0)
     seen = []
 
     def enough() -> bool:

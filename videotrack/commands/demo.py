@@ -79,8 +79,8 @@ def run(args) -> int:
         TABLE2_SYMBOLS,
         write_paper_project,
     )
-    from videotrack.pipeline import run_project
     from videotrack.tables import read_table, text_table
+    from videotrack.workflow import run_project
 
     if args.frames < 1:
         raise VideoTrackError(f"must be at least 1, got {args.frames}", field="--frames")

@@ -108,9 +108,9 @@ def run_fit(args, detect: bool = False) -> int:
         step_bars,
     )
     from videotrack.errors import VideoTrackError
-    from videotrack.pipeline import run_project
     from videotrack.project import command_config
     from videotrack.video import parse_frame_range
+    from videotrack.workflow import run_project
 
     config = command_config(args.config, args.trial)
     frames = None
