@@ -34,13 +34,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from _report import machine, print_table
 
-from kinematics import _refine_kernels as rk
-from kinematics.chain_xml import load_body
+from kinematics._kernels import refine as rk
 from kinematics.fit import AnnealParams, Fitter, anneal_reference
 from kinematics.fit.inputs import as_ragged
-from kinematics.fk import forward_kinematics
-from kinematics.observations import ObservationArrays
-from kinematics.refine import refine_reference
+from kinematics.fit.refine import refine_reference
+from kinematics.model.chain_xml import load_body
+from kinematics.model.fk import forward_kinematics
+from kinematics.observe.observations import ObservationArrays
 from videotrack.motion import smooth_random_motion
 from videotrack.paper_setup import bundled_chain, locust_cameras
 

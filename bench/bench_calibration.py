@@ -27,9 +27,9 @@ from threadpoolctl import threadpool_limits
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _report import machine, print_table
 
-from kinematics.calibration_math import triangulate
-from kinematics.camera_io import import_anipose_toml
 from kinematics.cameras import PinholeCamera
+from kinematics.cameras.calibration_math import triangulate
+from kinematics.cameras.files import import_anipose_toml
 from videotrack.calibration.boards import Board, load_board
 from videotrack.calibration.bundle import Options, calibrate
 from videotrack.calibration.detect import Corners, Source, detect_all

@@ -33,8 +33,8 @@ import json, sys, time
 import numba, numpy as np
 from kinematics.fit import AnnealParams, Fitter
 from kinematics.cameras import PinholeCamera
-from kinematics.chain_xml import load_body
-from kinematics.fk import forward_kinematics
+from kinematics.model.chain_xml import load_body
+from kinematics.model.fk import forward_kinematics
 from videotrack.motion import smooth_random_motion
 from videotrack.paper_setup import bundled_chain, locust_cameras
 

@@ -65,7 +65,7 @@ from _report import in_out_folder, machine, print_table
 from bench_gui import make_project, run_loop_until
 
 import ui  # noqa: F401  (before the QApplication: ui sets the shared OpenGL context)
-from kinematics.histograms import wrap_deg
+from kinematics.model.histograms import wrap_deg
 
 #: A posture is right when every free axis is within this many degrees of the truth.
 RIGHT_DEG = 10.0

@@ -215,7 +215,7 @@ class LegFit:
 
     def __init__(self, chain, units="mm", widen=None):
         from kinematics.model import Body
-        from kinematics.packing import pack_body
+        from kinematics.model.packing import pack_body
 
         self.body = Body("leg", (chain,), units=units)
         self.arrays = pack_body(self.body)
@@ -234,7 +234,7 @@ class LegFit:
         return a
 
     def markers(self, q):
-        from kinematics.fk import forward_kinematics
+        from kinematics.model.fk import forward_kinematics
 
         return forward_kinematics(self.arrays, self.posture(q), self.root).markers
 
@@ -466,7 +466,7 @@ def fit(body, cams, det, params, colours=()):
 
 
 def fitted_markers(body, angles, roots=None):
-    from kinematics.fk import forward_kinematics
+    from kinematics.model.fk import forward_kinematics
 
     if roots is None:
         roots = np.broadcast_to(body.root_positions(), (len(angles), len(body.chains), 3))
@@ -599,8 +599,8 @@ def recall_precision(flagged: np.ndarray, off: np.ndarray) -> tuple[str, str]:
 
 
 def run(args, out: Path, keep: bool) -> int:
-    from kinematics.chain_xml import load_body, save_body
     from kinematics.model import Body
+    from kinematics.model.chain_xml import load_body, save_body
 
     numba.set_num_threads(max(1, min(args.threads, numba.config.NUMBA_NUM_THREADS)))
     pts = load_clip(args.data)

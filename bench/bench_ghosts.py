@@ -34,9 +34,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _report import machine, print_table
 from bench_table2 import COLUMNS, render_and_detect
 
-from kinematics.chain_xml import load_body
-from kinematics.error_function import ErrorOptions
 from kinematics.fit import AnnealParams, Fitter
+from kinematics.fit.error_function import ErrorOptions
+from kinematics.model.chain_xml import load_body
 from videotrack.motion import smooth_random_motion
 from videotrack.paper_setup import bundled_chain, locust_cameras
 from videotrack.synth import SynthOptions

@@ -27,9 +27,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from _report import machine, print_table
 
-from kinematics.chain_xml import load_body
 from kinematics.fit import AnnealParams, Fitter
-from kinematics.fk import forward_kinematics
+from kinematics.model.chain_xml import load_body
+from kinematics.model.fk import forward_kinematics
 from videotrack.motion import smooth_random_motion
 from videotrack.paper_setup import bundled_chain, locust_cameras
 

@@ -49,11 +49,11 @@ sys.path.insert(0, str(REPO))
 from _report import machine, print_table  # noqa: E402
 
 from kinematics.cameras import PinholeCamera  # noqa: E402
-from kinematics.chain_xml import load_body  # noqa: E402
 from kinematics.fit import AnnealParams, Fitter  # noqa: E402
-from kinematics.fk import forward_kinematics  # noqa: E402
-from kinematics.observations import Observations  # noqa: E402
-from kinematics.rotations import euler_yxz  # noqa: E402
+from kinematics.model.chain_xml import load_body  # noqa: E402
+from kinematics.model.fk import forward_kinematics  # noqa: E402
+from kinematics.model.rotations import euler_yxz  # noqa: E402
+from kinematics.observe.observations import Observations  # noqa: E402
 from videotrack.motion import smooth_random_motion  # noqa: E402
 from videotrack.paper_setup import bundled_chain, locust_cameras  # noqa: E402
 

@@ -271,7 +271,7 @@ def fit_observations(body, cams, obs, params):
 def labelled_inputs(body, cams, truth, args):
     """Labelled 2D keypoints (true projections + ``--kp-noise`` px, ``--kp-missing`` of them
     NaN) and labelled 3D points (truth + ``--noise-3d`` mm), as Observations."""
-    from kinematics.observations import Observations
+    from kinematics.observe.observations import Observations
 
     rng = np.random.default_rng(args.seed + 1)
     names = body.marker_names
@@ -288,8 +288,8 @@ def floor_fit(body, truth, frames):
     """Least squares of the chain to the true 3D markers: root position + all free angles."""
     from scipy.optimize import least_squares
 
-    from kinematics.fk import forward_kinematics
-    from kinematics.packing import pack_body
+    from kinematics.model.fk import forward_kinematics
+    from kinematics.model.packing import pack_body
 
     arrays = pack_body(body)
     free = ~body.locked_mask()
@@ -323,7 +323,7 @@ def floor_fit(body, truth, frames):
 
 def fitted_markers(body, fits):
     """(frame -> (n_markers, 3)) of fitted postures and roots."""
-    from kinematics.fk import forward_kinematics
+    from kinematics.model.fk import forward_kinematics
 
     frames = sorted(fits)
     if not frames:
@@ -405,10 +405,10 @@ def main() -> int:
 
 def run(args, out: Path, keep: bool) -> int:
     import kinematics.model as km
-    from kinematics.camera_io import save_cameras
-    from kinematics.chain_xml import loads_body
-    from kinematics.error_function import ErrorOptions
+    from kinematics.cameras.files import save_cameras
     from kinematics.fit import AnnealParams
+    from kinematics.fit.error_function import ErrorOptions
+    from kinematics.model.chain_xml import loads_body
     from videotrack.detect import detect_project
     from videotrack.project import command_config
     from videotrack.synth import SynthOptions, read_points, write_points_project

@@ -5,7 +5,7 @@ calibration (``calibration/Calib.qca.txt``, mm, with its true lens distortion; t
 toml's distortions are divided by 64, so it is not used), OpenPose BODY_25B JSON per camera
 (person 0, keypoints with confidence < 0.3 dropped, as Pose2Sim's config does) and Pose2Sim's
 TRC files (m, Y-up: trc (X, Y, Z) = Z-up (Y, Z, X)). The JSON is triangulated with the linear
-(DLT), RANSAC and optimisation backends of ``kinematics.triangulation`` and every result is
+(DLT), RANSAC and optimisation backends of ``kinematics.observe.triangulation`` and every result is
 compared, marker by marker (matched by name), with Pose2Sim's raw triangulation
 (``*_0-100.trc``) and with its Butterworth-filtered version (``*_filt_butterworth.trc``); the
 LSTM file's first 21 markers are the filtered ones and its other 43 are augmented markers
@@ -39,7 +39,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from _report import machine, print_table
 
-from kinematics.triangulation import triangulate_linear, triangulate_optim, triangulate_ransac
+from kinematics.observe.triangulation import (
+    triangulate_linear,
+    triangulate_optim,
+    triangulate_ransac,
+)
 from videotrack.io.camera_formats import load_qca
 from videotrack.io.keypoints import align_cameras, read_keypoints
 from videotrack.io.trc import read_trc

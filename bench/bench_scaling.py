@@ -30,10 +30,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _report import machine, print_table
 
 from kinematics.cameras import PinholeCamera
-from kinematics.chain_xml import load_body
 from kinematics.fit import AnnealParams, ErrorOptions, Fitter
-from kinematics.fk import forward_kinematics
-from kinematics.rotations import euler_yxz
+from kinematics.model.chain_xml import load_body
+from kinematics.model.fk import forward_kinematics
+from kinematics.model.rotations import euler_yxz
 from videotrack.paper_setup import bundled_chain, locust_cameras
 
 

@@ -60,8 +60,8 @@ from _report import machine, print_table
 from bench_ghosts import GROSS_DEG
 from bench_table2 import COLUMNS, render_and_detect
 
-from kinematics.chain_xml import load_body
 from kinematics.fit import AnnealParams, Fitter
+from kinematics.model.chain_xml import load_body
 from videotrack.motion import smooth_random_motion
 from videotrack.paper_setup import bundled_chain, locust_cameras
 from videotrack.synth import SynthOptions

@@ -33,8 +33,8 @@ from _report import machine, print_table
 from bench_table2 import render_and_detect
 
 from kinematics.cameras import OrthographicCamera
-from kinematics.chain_xml import load_body
 from kinematics.fit import AnnealParams, Fitter
+from kinematics.model.chain_xml import load_body
 from videotrack.paper_setup import bundled_chain
 from videotrack.synth import SynthOptions
 

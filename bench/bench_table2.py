@@ -15,7 +15,7 @@ weighted centroids), fitted with the Table 1 defaults. Reported: per-axis RMSE o
 view error E; the same with 2 static + 2 flickering ghost markers per view and 2 %
 occlusions; the clean video with binary centroids (paper-like detection noise); with
 Levenberg-Marquardt refinement, next to the Cramér-Rao bound of the
-measured centroid noise (``kinematics.refine.cramer_rao_bound`` at each true posture, marker
+measured centroid noise (``kinematics.fit.refine.cramer_rao_bound`` at each true posture, marker
 images that were occluded left out); and a sweep of shorter annealing schedules with
 refinement and a re-analysis threshold suited to refined errors.
 """
@@ -36,10 +36,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from kinematics.chain_xml import load_body
-from kinematics.error_function import ErrorOptions
 from kinematics.fit import AnnealParams, Fitter
-from kinematics.refine import cramer_rao_bound
+from kinematics.fit.error_function import ErrorOptions
+from kinematics.fit.refine import cramer_rao_bound
+from kinematics.model.chain_xml import load_body
 from videotrack.detect import detect_video
 from videotrack.detections import DetectSettings
 from videotrack.filters import FilterChain
@@ -134,7 +134,7 @@ def noise_model(res: np.ndarray) -> tuple[float, float, np.ndarray, int]:
 
 
 def covariance(sigma: float, rho: np.ndarray, n_markers: int) -> np.ndarray:
-    """Centroid covariance in :func:`kinematics.refine.projection_jacobian` row order (view,
+    """Centroid covariance in :func:`kinematics.fit.refine.projection_jacobian` row order (view,
     marker, coordinate) for two views: σ² on the diagonal, ρ_c σ² between the two views'
     coordinate c of the same marker."""
     n = 2 * 2 * n_markers

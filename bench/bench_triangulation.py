@@ -29,10 +29,10 @@ from threadpoolctl import threadpool_limits
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _report import machine, print_table
 
-from kinematics.camera_io import import_anipose_toml
 from kinematics.cameras import PinholeCamera
-from kinematics.rotations import euler_yxz
-from kinematics.triangulation import (
+from kinematics.cameras.files import import_anipose_toml
+from kinematics.model.rotations import euler_yxz
+from kinematics.observe.triangulation import (
     triangulate_linear,
     triangulate_optim,
     triangulate_ransac,

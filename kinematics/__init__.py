@@ -1,3 +1,3 @@
 """Kinematic chains, histograms, forward kinematics, cameras and the annealing fitter."""
 
-from kinematics import _numba_cache  # noqa: F401  (numba's cache folder, before any kernel)
+from kinematics._kernels import cache as _numba_cache  # noqa: F401  (numba's cache, first)

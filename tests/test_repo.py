@@ -14,7 +14,7 @@ from tests.fixtures.paths import BIND_TESTS_PACKAGE, REPO, TESTS
 def test_core_packages_never_import_qt():
     code = (
         "import sys, kinematics, videotrack, videotrack.cli\n"
-        "import kinematics.fk, kinematics.histograms, kinematics.model\n"
+        "import kinematics.model.fk, kinematics.model.histograms, kinematics.model\n"
         "videotrack.cli.build_parser()\n"
         "qt = ('PySide6', 'pyqtgraph', 'ui')\n"
         "bad = sorted(m for m in sys.modules if m.split('.')[0] in qt)\n"
@@ -44,7 +44,7 @@ def test_ci_runs_the_readme_test_command():
 def test_numba_cache_stays_out_of_the_package(tmp_path):
     """Compiled kernels are cached under the user's cache folder, never in site-packages
     (files pip does not know would survive an uninstall and shadow the next install)."""
-    code = ("import numpy as np\nfrom kinematics.fk import forward_kinematics\n"
+    code = ("import numpy as np\nfrom kinematics.model.fk import forward_kinematics\n"
             "from kinematics.model import *\n" + BIND_TESTS_PACKAGE +
             "from tests.fixtures.bodies import locust_body\nb = locust_body()\n"
             "forward_kinematics(b, b.mean_posture_deg())\n")

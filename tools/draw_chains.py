@@ -17,8 +17,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
-from kinematics.chain_xml import load_body
-from kinematics.fk import forward_kinematics
+from kinematics.model.chain_xml import load_body
+from kinematics.model.fk import forward_kinematics
 
 REPO = Path(__file__).resolve().parents[1]
 

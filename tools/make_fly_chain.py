@@ -28,8 +28,8 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from kinematics.chain_xml import save_body
 from kinematics.model import Axis, Body, Chain, Joint, Marker, Root, Segment
+from kinematics.model.chain_xml import save_body
 
 REPO = Path(__file__).resolve().parents[1]
 DESCRIPTION = (

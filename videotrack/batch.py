@@ -13,232 +13,55 @@ seed and the frame number, never on the thread count or on the other trials.
 
 Every output is written atomically, so a killed run leaves complete files or none, plus
 temporary files named like :func:`kinematics.fileio.atomic_write` names them, which
-:func:`remove_stray_temporaries` deletes when the trial is run again.
+:func:`~videotrack.batch_trial.remove_stray_temporaries` deletes when the trial is run again.
 
 A trial's warnings (stored with its detections and results, so reported again by every run)
 make it ``done-with-warnings`` or ``up-to-date-with-warnings``; a trial whose video(s) could
 not be read to the end, or of which no frame could be fitted, is ``incomplete``.
+
+One trial is :mod:`videotrack.batch_trial`; the worker processes :mod:`videotrack.batch_pool`,
+the Dask tasks :mod:`videotrack.batch_dask`; here: running many, and the summary and log.
 """
 
 from __future__ import annotations
 
 import contextlib
 import csv
-import glob
 import io
 import os
 import platform
-import sys
-import threading
 import time
-import traceback
-import uuid
-import warnings
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass, replace
 from pathlib import Path
 
-import numpy as np
-
-from kinematics.errors import LocatedError
 from kinematics.fileio import atomic_write_text
+from videotrack.batch_dask import (
+    _run_dask,
+    connect,  # noqa: F401  (public: a client of a Dask cluster)
+)
+from videotrack.batch_pool import _run_pool
+from videotrack.batch_trial import (
+    FAILED,
+    INCOMPLETE,
+    STATES,
+    UP_TO_DATE,
+    UP_TO_DATE_WARNINGS,
+    Progress,
+    TrialReport,
+    plan_trial,  # noqa: F401  (public: what a run would do)
+    project_inputs,  # noqa: F401  (public: what the trials read)
+    run_trial,
+)
 from videotrack.cores import available_cores
-from videotrack.errors import VideoTrackError, VideoTrackWarning
-from videotrack.project import Project, Trial, TrialOutputs, trial_outputs
+from videotrack.errors import VideoTrackError
+from videotrack.project import Project, Trial
 from videotrack.tables import text_table
 
-#: States of a finished trial.
-DONE, UP_TO_DATE, FAILED = "done", "up to date", "failed"
-DONE_WARNINGS, UP_TO_DATE_WARNINGS = "done-with-warnings", "up-to-date-with-warnings"
-INCOMPLETE = "incomplete"
-#: Every state, in the order counts are listed.
-STATES = (DONE, DONE_WARNINGS, UP_TO_DATE, UP_TO_DATE_WARNINGS, INCOMPLETE, FAILED)
 #: Columns of the project summary table.
 SUMMARY_COLUMNS = ("trial", "state", "frames", "median_error_px", "bad_frames_pct", "time_s",
                    "message", "warnings")
 #: How the warnings of a trial are joined in one cell of the summary.
 WARNINGS_SEPARATOR = " | "
-
-#: progress(frames done, frames added to the total) — the frames bar of a batch.
-Progress = Callable[[int, int], object]
-
-
-@dataclass(frozen=True)
-class TrialReport:
-    """How one trial went.
-
-    Attributes
-    ----------
-    name : str
-    state : str
-        ``done`` or ``done-with-warnings`` (computed in this run), ``up to date`` or
-        ``up-to-date-with-warnings`` (nothing to do), ``incomplete`` (the video(s) could not
-        be read to the end, or no frame was fitted: ``message`` says why), ``failed``.
-    frames : int
-        Rows of the results file (0 when there is none).
-    median_error : float
-        Median view error E of the results, pixels (NaN without results).
-    bad_pct : float
-        Percentage of frames whose fit failed or that had no detections.
-    seconds : float
-        Time this run spent on the trial.
-    message : str
-        Why it failed or is incomplete, one line.
-    steps : tuple of str
-        What was computed: ``"detect"``, ``"fit"``, ``"plot"``.
-    log : tuple of str
-        Lines for the run's log file (notes, the traceback of an unexpected error).
-    warnings : tuple of str
-        Warnings of the trial (truncated video, view without markers, many failed frames,
-        ...): those of this run and those stored with its detections and results.
-    """
-
-    name: str
-    state: str
-    frames: int = 0
-    median_error: float = float("nan")
-    bad_pct: float = float("nan")
-    seconds: float = 0.0
-    message: str = ""
-    steps: tuple[str, ...] = ()
-    log: tuple[str, ...] = ()
-    warnings: tuple[str, ...] = ()
-
-
-# -- one trial --------------------------------------------------------------------------------
-def run_trial(trial: Trial, force: bool = False, threads: int = 1,
-              progress: Progress | None = None) -> TrialReport:
-    """Detect and fit one trial (each step skipped when its outputs are up to date).
-
-    Parameters
-    ----------
-    trial : Trial
-    force : bool
-        Recompute although the outputs are up to date.
-    threads : int
-        numba threads for fitting, unless the trial's ``[fit] jobs`` sets them.
-    progress : callable, optional
-        ``progress(done, added_to_total)``: the frames to fit are announced once, then each
-        fitted frame counts one.
-
-    Returns
-    -------
-    TrialReport
-        Problems of the trial (bad config, unreadable video, ...) are a ``failed`` report,
-        never an exception; only KeyboardInterrupt passes. A trial with warnings is
-        ``done-with-warnings`` / ``up-to-date-with-warnings``, one that could not be
-        completed ``incomplete``.
-    """
-    t0 = time.perf_counter()
-    lines: list[str] = []
-    if trial.config is None:
-        return TrialReport(trial.name, FAILED, message=trial.error or "no config")
-    # (The warnings machinery is per process: on a Dask worker running several trials in
-    # threads, a warning may be listed with another of its trials.)
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always", VideoTrackWarning)
-        try:
-            report = _run_trial(trial, force, threads, progress, lines)
-        except LocatedError as err:
-            report = TrialReport(trial.name, FAILED, message=str(err))
-        except Exception as err:  # a bug must not stop the other trials; the log has it
-            lines.append(traceback.format_exc().rstrip())
-            report = TrialReport(trial.name, FAILED, message=f"{type(err).__name__}: {err}")
-    notes = (*(f"VideoTrackWarning: {w}" for w in report.warnings),
-             *(f"{w.category.__name__}: {w.message}" for w in caught))
-    found = tuple(dict.fromkeys((*report.warnings, *(
-        str(w.message) for w in caught if issubclass(w.category, VideoTrackWarning)))))
-    return replace(report, state=_with_warnings(report.state, found),
-                   seconds=time.perf_counter() - t0, log=(*lines, *notes), warnings=found)
-
-
-def _with_warnings(state: str, found: Sequence[str]) -> str:
-    """``done`` / ``up to date`` become their ``-with-warnings`` states when there are."""
-    if not found:
-        return state
-    return {DONE: DONE_WARNINGS, UP_TO_DATE: UP_TO_DATE_WARNINGS}.get(state, state)
-
-
-def _run_trial(trial: Trial, force: bool, threads: int, progress: Progress | None,
-               lines: list[str]) -> TrialReport:
-    from videotrack.pipeline import run_project
-
-    config = trial.config
-    for path in remove_stray_temporaries(trial_outputs(config)):
-        lines.append(f"removed {path.name}, left by an interrupted run")
-    run = run_project(config, force=force, threads=config["fit"]["jobs"] or threads,
-                      progress=_frames_progress(progress), log=lines.append)
-    err = run.results.error[np.isfinite(run.results.error)]
-    state = INCOMPLETE if run.incomplete else DONE if run.steps else UP_TO_DATE
-    return TrialReport(trial.name, state, frames=run.n_frames,
-                       median_error=float(np.median(err)) if err.size else float("nan"),
-                       bad_pct=100.0 * run.n_bad / run.n_frames if run.n_frames
-                       else float("nan"), message=run.incomplete, steps=run.steps,
-                       warnings=run.warnings)
-
-
-def _frames_progress(progress: Progress | None):
-    """A run's progress as the batch's frames bar: the frames to fit are announced when the
-    fit starts, then each fitted frame counts one."""
-    if progress is None:
-        return None
-
-    def on_step(p) -> None:
-        if p.step == "fit":
-            progress(*((0, p.total) if p.done == 0 else (1, 0)))
-
-    return on_step
-
-
-def remove_stray_temporaries(outputs: TrialOutputs) -> list[Path]:
-    """Delete the temporary files a killed run left beside a trial's outputs.
-
-    :func:`kinematics.fileio.atomic_write` writes ``NAME`` through ``.NAME.<random>.tmp``;
-    only such files of this trial's outputs are removed. Returns the paths removed.
-    """
-    removed = []
-    for path in outputs.files():
-        for tmp in path.parent.glob(f".{glob.escape(path.name)}.*.tmp"):
-            with contextlib.suppress(FileNotFoundError):
-                tmp.unlink()
-                removed.append(tmp)
-    return removed
-
-
-def plan_trial(trial: Trial, force: bool = False) -> tuple[str, str]:
-    """What :func:`run_trial` would do, without doing it: ``(action, why)``.
-
-    Actions: ``"detect + fit"``, ``"fit"``, ``"plot"``, ``"up to date"``, ``"fails"``
-    (:func:`videotrack.pipeline.plan_project`). Reads the videos' headers, the detections
-    and the results' sidecars; writes nothing.
-    """
-    from videotrack.pipeline import plan_project
-
-    if trial.config is None:
-        return "fails", trial.error or "no config"
-    try:
-        return plan_project(trial.config, force=force)
-    except LocatedError as err:
-        return "fails", str(err)
-
-
-def project_inputs(trials: Sequence[Trial]) -> dict[Path, str]:
-    """Every file the trials read, by what it is (config files, chains, camera files,
-    histogram archives, videos): what no output of a batch may replace."""
-    from videotrack.detect import detection_inputs
-
-    found: dict[Path, str] = {}
-    for trial in trials:
-        if trial.config is None:
-            continue
-        config = trial.config
-        found.update(detection_inputs(config))
-        for section, key, what in (("chain", "path", "a chain"),
-                                   ("chain", "histograms", "a histogram archive"),
-                                   ("cameras", "path", "a camera file")):
-            if config[section][key]:
-                found[Path(config[section][key])] = what
-    return found
 
 
 # -- many trials --------------------------------------------------------------------------------
@@ -287,140 +110,6 @@ def run_batch(
     else:
         _run_pool(trials, force, jobs, finished, progress)
     return [reports[t.name] for t in trials]
-
-
-#: The frames-progress queue of a pool worker (set by :func:`_init_worker`).
-_QUEUE = None
-
-
-def _init_worker(queue, parent: int) -> None:
-    """Pool worker start: report progress through ``queue``; die with the batch process."""
-    global _QUEUE
-    _QUEUE = queue
-    if sys.platform.startswith("linux"):  # a killed batch must not leave workers writing
-        import ctypes
-        import signal
-
-        with contextlib.suppress(OSError, AttributeError):
-            ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
-        if os.getppid() != parent:  # the parent died before prctl took effect
-            os._exit(1)
-
-
-def _queue_progress(done: int, total: int) -> None:
-    _QUEUE.put((done, total))
-
-
-def _run_pool(trials, force, jobs, finished, progress) -> None:
-    """Trials on ``jobs`` worker processes; a crashed worker costs its trials one retry."""
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor, as_completed
-    from concurrent.futures.process import BrokenProcessPool
-
-    # spawn: fork would copy the locks of this process's threads (progress bars, queues)
-    ctx = multiprocessing.get_context("spawn")
-    queue = ctx.SimpleQueue()
-    threads = max(1, available_cores() // jobs)
-    drain = None
-    if progress is not None:
-        def pump() -> None:
-            while (item := queue.get()) is not None:
-                progress(*item)
-
-        drain = threading.Thread(target=pump, daemon=True)
-        drain.start()
-    order = {t.name: i for i, t in enumerate(trials)}
-    pending, crashes = list(trials), dict.fromkeys(order, 0)
-    try:
-        while pending:
-            pool = ProcessPoolExecutor(min(jobs, len(pending)), mp_context=ctx,
-                                       initializer=_init_worker, initargs=(queue, os.getpid()))
-            try:
-                futures = {pool.submit(run_trial, t, force, threads,
-                                       _queue_progress if progress else None): t
-                           for t in pending}
-                pending = []
-                for future in as_completed(futures):
-                    trial = futures[future]
-                    try:
-                        finished(future.result())
-                    except BrokenProcessPool:
-                        crashes[trial.name] += 1
-                        if crashes[trial.name] < 2:
-                            pending.append(trial)
-                        else:
-                            finished(TrialReport(trial.name, FAILED, message=(
-                                "its worker process died twice (killed, or out of memory?)")))
-            except BaseException:  # Ctrl-C: stop the workers now, not after their trials
-                workers = list((getattr(pool, "_processes", None) or {}).values())
-                pool.shutdown(wait=False, cancel_futures=True)
-                for proc in workers:
-                    with contextlib.suppress(OSError):
-                        proc.kill()
-                raise
-            pool.shutdown()
-            pending.sort(key=lambda t: order[t.name])
-    finally:
-        if drain is not None:
-            queue.put(None)
-            drain.join(timeout=5)
-
-
-def connect(address: str, timeout: float = 30.0):
-    """A Dask client for a scheduler address or a scheduler file (waits for the file, as
-    when the scheduler has just been started beside).
-
-    Raises
-    ------
-    VideoTrackError
-        dask.distributed missing, no scheduler file after ``timeout``, scheduler unreachable.
-    """
-    try:
-        from dask.distributed import Client
-    except ImportError:
-        raise VideoTrackError("needs dask.distributed: python -m pip install "
-                              "'videotrack[dask]'", field="--scheduler") from None
-    is_file = "://" not in address and (address.endswith(".json") or Path(address).is_file())
-    try:
-        if is_file:
-            deadline = time.monotonic() + timeout
-            while not Path(address).is_file():
-                if time.monotonic() > deadline:
-                    raise VideoTrackError(f"no scheduler file after {timeout:g} s",
-                                          file=address, field="--scheduler")
-                time.sleep(0.1)
-            return Client(scheduler_file=address, timeout=timeout)
-        return Client(address, timeout=timeout)
-    except (OSError, TimeoutError, ValueError) as err:
-        raise VideoTrackError(f"cannot connect to the Dask scheduler {address}: {err}",
-                              field="--scheduler") from None
-
-
-def _run_dask(trials, force, address, finished, progress) -> None:
-    """Trials as tasks of a Dask cluster; a lost task is a failed trial."""
-    from dask.distributed import as_completed
-
-    client = connect(address)
-    batch = uuid.uuid4().hex[:8]
-    with client:
-        futures = {client.submit(run_trial, t, force, 1, None, pure=False,
-                                 key=f"videotrack-{batch}-{i}"): t
-                   for i, t in enumerate(trials)}
-        try:
-            for future in as_completed(futures):
-                trial = futures[future]
-                try:
-                    report = future.result()
-                except Exception as err:  # a worker died, or the cluster lost the task
-                    report = TrialReport(trial.name, FAILED,
-                                         message=f"Dask task failed: {type(err).__name__}: "
-                                                 f"{err}")
-                if progress is not None and "fit" in report.steps:
-                    progress(report.frames, report.frames)
-                finished(report)
-        except BaseException:
-            client.cancel(list(futures))
-            raise
 
 
 # -- reporting ----------------------------------------------------------------------------------

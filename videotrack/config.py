@@ -11,7 +11,7 @@ A later module adds its section with ``register_section(Section("name", [...]))`
 and reads ``config["name"]``; the module must be imported before :func:`load_config` (the
 commands that read a section import its module). A section can also be derived from a frozen
 settings record whose fields carry their metadata (:func:`record_section`, used for
-``[anneal]`` from :class:`kinematics.settings.AnnealParams`); :func:`record_from_table` builds
+``[anneal]`` from :class:`kinematics.fit.settings.AnnealParams`); :func:`record_from_table` builds
 the record back from the checked section.
 
 Inheritance (projects, :mod:`videotrack.project`): each file is first checked on its own by

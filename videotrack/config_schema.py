@@ -7,7 +7,7 @@ doc, an extra ``check``); :meth:`Section.validate` checks a TOML table against i
 tag key selects its section (filter steps by ``type``).
 
 A section can be derived from a frozen settings record whose fields carry their metadata
-(:func:`kinematics.settings.setting`): :func:`record_section` makes one :class:`Key` per field
+(:func:`kinematics.fit.settings.setting`): :func:`record_section` makes one :class:`Key` per field
 (:func:`record_keys`), and :func:`record_from_table` builds the record back from the checked
 table, re-raising the record's own validation errors against the file and key.
 
@@ -217,7 +217,7 @@ def record_keys(record: type, default=None) -> list[RecordKey]:
     ``X | None`` field is written as its ``none`` metadata value in the file), its default (from
     ``default``, an instance, or ``record()``) and its metadata ``doc``, ``min``, ``max`` and
     ``choices``. A field that is itself a record contributes its own fields as keys when its
-    metadata has ``flatten`` (a mapping renaming some of them). See :mod:`kinematics.settings`.
+    metadata has ``flatten`` (a mapping renaming some of them). See :mod:`kinematics.fit.settings`.
     """
     default = record() if default is None else default
     hints = typing.get_type_hints(record)

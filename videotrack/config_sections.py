@@ -4,10 +4,10 @@ steps), ``[markers]``, ``[output]``, ``[chain]``, ``[cameras]``, ``[anneal]``, `
 
 Each is declared once with the schema mechanism of :mod:`videotrack.config_schema`: by hand as
 :class:`~videotrack.config_schema.Key` entries, or derived from a settings record
-(``[anneal]`` from :class:`kinematics.settings.AnnealParams`, ``[keypoints.filter]`` from
+(``[anneal]`` from :class:`kinematics.fit.settings.AnnealParams`, ``[keypoints.filter]`` from
 :class:`videotrack.keypoint_filters.KeypointFilterSettings`). Allowed values that a command's
 options share come from one definition: the start modes and profiles of
-:mod:`kinematics.settings`, the keypoint formats of :data:`videotrack.io.keypoints.FORMATS`,
+:mod:`kinematics.fit.settings`, the keypoint formats of :data:`videotrack.io.keypoints.FORMATS`,
 and :data:`TRIANGULATION_METHODS` here. Import them from :mod:`videotrack.config`.
 """
 
@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-from kinematics.settings import PROFILES, AnnealParams
+from kinematics.fit.settings import PROFILES, AnnealParams
 from videotrack.config_schema import (
     Key,
     Section,
@@ -28,7 +28,7 @@ from videotrack.config_schema import (
 from videotrack.io.keypoints import FORMATS as KEYPOINT_FORMATS
 
 #: Backends of the 3D keypoint route and of ``videotrack triangulate --method``: the
-#: functions ``triangulate_<method>`` of :mod:`kinematics.triangulation`.
+#: functions ``triangulate_<method>`` of :mod:`kinematics.observe.triangulation`.
 TRIANGULATION_METHODS = ("linear", "ransac", "optim")
 #: Starting points of the optimised triangulation (``videotrack triangulate --init``).
 TRIANGULATION_INITS = ("linear", "ransac")
@@ -219,7 +219,7 @@ CAMERAS = register_section(Section("cameras", (
 ), doc="Where the cameras of the views are described."))
 
 # Every field of AnnealParams (and of its ErrorOptions, flattened: ``error`` is the mode) is a
-# key, with the type, default, bounds and doc declared in kinematics/settings.py.
+# key, with the type, default, bounds and doc declared in kinematics/fit/settings.py.
 _ANNEAL_DOC = ("Simulated annealing (Eq. 6), the error function (Eq. 5 or a variant) and the "
                "choice among candidate postures; defaults are the best measured settings, "
                "profile = \"paper\" gives the paper's (Table 1, Eq. 5).")

@@ -14,7 +14,7 @@ edit is void, e.g. after detecting again with other filters); added points join 
 record's detections in that view. Coordinates are view image pixels, as in the detections
 file. ``hidden`` names model markers the user saw to be hidden in that view of the record
 (occluded, or merged with another's blob): the fit leaves them out of that view
-(:meth:`kinematics.observations.Observations.with_hidden`); a name the chain no longer has
+(:meth:`kinematics.observe.observations.Observations.with_hidden`); a name the chain no longer has
 is void. Files without marks are written as version 1 (no ``hidden``), as before, and
 version 1 files are read as they are. Everything here is pure (no
 Qt): the GUI edits, fits and computes E with :func:`edited_detections` and
@@ -171,7 +171,7 @@ def is_hidden(edits: Edits, record: int, view: int, marker: str) -> bool:
 def hidden_marks(edits: Edits, n_records: int, n_views: int, marker_names: Sequence[str]
                  ) -> np.ndarray | None:
     """The hidden marks as the fitter takes them, (n_records, n_views, n_markers) of bool
-    (:meth:`kinematics.observations.Observations.with_hidden`); None when no mark names a
+    (:meth:`kinematics.observe.observations.Observations.with_hidden`); None when no mark names a
     marker of ``marker_names`` in a record and view that exist."""
     where = {m: k for k, m in enumerate(marker_names)}
     out = None

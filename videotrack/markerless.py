@@ -5,8 +5,9 @@ reads each camera's 2D keypoints (:func:`videotrack.io.keypoints.read_keypoints`
 crop and frame offsets), filters them (``[keypoints.filter]``,
 :func:`videotrack.keypoint_filters.apply_filters`), puts the cameras on common frames, maps
 the keypoints to the chain's markers (``[keypoints.markers]``) and builds the
-:class:`~kinematics.observations.Observations`: the labelled 2D keypoints (route ``"2d"``), or
-the 3D points triangulated from them (route ``"3d"``, :mod:`kinematics.triangulation`).
+:class:`~kinematics.observe.observations.Observations`: the labelled 2D keypoints (route
+``"2d"``), or
+the 3D points triangulated from them (route ``"3d"``, :mod:`kinematics.observe.triangulation`).
 
 The :class:`KeypointInput` it returns stands where the marker route has its detections:
 records are the aligned frames, and :meth:`KeypointInput.sidecar` is what a results sidecar
@@ -23,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from kinematics.observations import Observations
+from kinematics.observe.observations import Observations
 from videotrack.errors import VideoTrackError
 
 #: Frames per second of the results' time column when ``[video] fps`` is 0 (as for image
@@ -260,7 +261,7 @@ def rigid_pairs(body, markers) -> tuple[list[tuple[int, int]], np.ndarray]:
 def _triangulate(model, xy: np.ndarray, score: np.ndarray, table, markers) -> np.ndarray:
     """(frames, points, 4): the triangulated points with weight 1 (NaN where not placed);
     the optimised backend holds the distances of markers on one segment."""
-    from kinematics import triangulation
+    from kinematics.observe import triangulation
 
     method = getattr(triangulation, f"triangulate_{table['triangulation']}")
     extra = {}

@@ -57,8 +57,8 @@ def write_paper_project(out_dir, frames: int = PAPER_FRAMES, sequences: int = PA
     :class:`~videotrack.synth.SynthOptions` (default: the paper's clean 4-px markers).
     Returns the :class:`~videotrack.synth.SynthProject`.
     """
-    from kinematics.chain_xml import loads_body
     from kinematics.fileio import atomic_write_text
+    from kinematics.model.chain_xml import loads_body
     from videotrack.motion import smooth_random_motion
     from videotrack.synth import SynthOptions, write_synthetic_project
 
@@ -81,7 +81,7 @@ def write_example_project(root, trials=3, frames: int = 40, anneal=None):
     ``trials`` is a count (``session<s>/trial<tt>``, ten per session) or a list of folder
     names; trial k moves with motion seed k. Returns the trial folders.
     """
-    from kinematics.chain_xml import loads_body
+    from kinematics.model.chain_xml import loads_body
     from videotrack.motion import smooth_random_motion
     from videotrack.synth import SynthOptions, trial_names, write_synthetic_batch_project
 

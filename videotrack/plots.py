@@ -54,7 +54,7 @@ def median_text(values, unit: str = "px") -> str:
 
 def plot_histograms(items, path: str | os.PathLike) -> Path:
     """PNG of bar plots, one per (name, Histogram) in ``items``, zoomed on each support."""
-    from kinematics.histograms import bin_centres
+    from kinematics.model.histograms import bin_centres
 
     plt = _pyplot()
 

@@ -27,7 +27,7 @@ With candidate postures (``[anneal] candidates`` > 1) a third file,
 ``<results stem>.candidates.csv``, holds every frame's distinct postures: ``frame, rank,
 chosen, error, <joint>.<axis> ..., <chain>.root.x/y/z ...``, rank 0 the lowest E, ``chosen``
 1 for the posture in the results. The path through time can be chosen again from it without
-refitting (:func:`read_candidates`, :func:`kinematics.temporal.choose_path`).
+refitting (:func:`read_candidates`, :func:`kinematics.fit.temporal.choose_path`).
 """
 
 from __future__ import annotations
@@ -45,9 +45,9 @@ import numpy as np
 
 from kinematics.fileio import atomic_write_text
 from kinematics.fit.result import TRUSTED, Status
-from kinematics.fk import forward_kinematics
 from kinematics.model import Body
-from kinematics.packing import pack_body
+from kinematics.model.fk import forward_kinematics
+from kinematics.model.packing import pack_body
 from videotrack.errors import VideoTrackError
 from videotrack.tables import format_cell
 

@@ -81,9 +81,9 @@ def write_session(folder, n_frames: int = 40, n_cameras: int = 4, noise_px: floa
     keypoint of the same camera and frame, the swapped ones scored 0.6) and ``project.toml``
     (chain, cameras, ``[keypoints] files``, then ``project_text``). The cameras are
     :func:`pinhole_ring` at ``distance`` mm (at 350 mm the 20 mm femur is about 80 px long)."""
-    from kinematics.camera_io import save_cameras
-    from kinematics.chain_xml import loads_body
-    from kinematics.fk import forward_kinematics
+    from kinematics.cameras.files import save_cameras
+    from kinematics.model.chain_xml import loads_body
+    from kinematics.model.fk import forward_kinematics
     from videotrack.io import dlc
     from videotrack.io.keypoints import make_tracks
     from videotrack.motion import smooth_random_motion

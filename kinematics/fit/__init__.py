@@ -31,9 +31,9 @@ from kinematics.fit.result import (
     FrameResult,
     Status,
 )
+from kinematics.fit.settings import START_MODES, AnnealParams, ErrorOptions
 from kinematics.fit.status import auto_threshold, marker_images
 from kinematics.fit.tuning import TUNING, Tuning
-from kinematics.settings import START_MODES, AnnealParams, ErrorOptions
 
 __all__ = [
     "ATTENTION",

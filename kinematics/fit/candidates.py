@@ -11,17 +11,17 @@ from dataclasses import replace
 import numba
 import numpy as np
 
-from kinematics import _anneal_kernels as _ak
-from kinematics import temporal
-from kinematics.fit.result import Candidate
-from kinematics.fk import forward_kinematics
-from kinematics.observations import Observations
-from kinematics.problem import (
+from kinematics._kernels import anneal as _ak
+from kinematics.fit import temporal
+from kinematics.fit.problem import (
     FitOutputs,
     schedule_of,
 )
-from kinematics.rotations import euler_yxz
-from kinematics.settings import AnnealParams
+from kinematics.fit.result import Candidate
+from kinematics.fit.settings import AnnealParams
+from kinematics.model.fk import forward_kinematics
+from kinematics.model.rotations import euler_yxz
+from kinematics.observe.observations import Observations
 
 
 class CandidatesMixin:

@@ -10,22 +10,22 @@ import warnings
 import numba
 import numpy as np
 
-from kinematics import _anneal_kernels as _ak
-from kinematics import _cuda_kernels as _ck
-from kinematics import _lane_codegen as _codegen
-from kinematics import _lane_kernels as _lk
+from kinematics._kernels import anneal as _ak
+from kinematics._kernels import cuda as _ck
+from kinematics._kernels import lane_codegen as _codegen
+from kinematics._kernels import lanes as _lk
 from kinematics.cameras import CameraArrays
 from kinematics.errors import KinematicsError
-from kinematics.fit.result import FrameResult
-from kinematics.observations import ObservationArrays, Observations
-from kinematics.problem import (
+from kinematics.fit.problem import (
     ErrorArgs,
     FitOutputs,
     error_args,
     partitions_of,
     schedule_of,
 )
-from kinematics.settings import AnnealParams
+from kinematics.fit.result import FrameResult
+from kinematics.fit.settings import AnnealParams
+from kinematics.observe.observations import ObservationArrays, Observations
 
 
 class DispatchMixin:
@@ -136,7 +136,7 @@ class DispatchMixin:
     def _fused_kernel(self, arrays: ObservationArrays, error: ErrorArgs,
                       single: bool = False):
         """The lane kernel generated for this body, its views and the block's detections
-        per view (:mod:`kinematics._lane_codegen`) and the detections it scans; the general
+        per view (:mod:`kinematics._kernels.lane_codegen`) and the detections it scans; the general
         loops (``no_fused``, 0) where none is made: for a body too large or a view of the
         block with too many detections, with ``VIDEOTRACK_NO_CODEGEN`` set, or where the
         kernel cannot be made (a read-only cache folder: a warning, the same results).
@@ -166,7 +166,7 @@ class DispatchMixin:
 
     def lane_frames(self) -> int:
         """Frames whose runs fill the lanes of every numba thread once, or with backend
-        'cuda' half a GPU launch (:data:`kinematics._cuda_kernels.GPU_RUNS`); ``iter_fit``
+        'cuda' half a GPU launch (:data:`kinematics._kernels.cuda.GPU_RUNS`); ``iter_fit``
         fits blocks of twice this, the pipeline hands the fitting thread four times."""
         runs = _ck.GPU_RUNS if self.params.backend == "cuda" else (
             _lk.LANES * numba.get_num_threads())
@@ -179,7 +179,7 @@ class DispatchMixin:
         kernel does — unlabelled points, labelled 2D keypoints or 3D points, one partition
         and independent frames, without markers marked hidden (``hidden``) — else 'scalar'.
         'auto' also wants a few runs per thread for the lanes
-        (:data:`kinematics._lane_kernels.MIN_RUNS_PER_THREAD`: a single frame, as the GUI
+        (:data:`kinematics._kernels.lanes.MIN_RUNS_PER_THREAD`: a single frame, as the GUI
         fits, goes to the scalar kernel), and never takes the GPU: its results equal the
         scalar kernel's to within rounding only, and a result file should not depend on
         the machine (docs/fitting.md, 'Reproducibility')."""

@@ -6,13 +6,13 @@ video as a generator of :class:`FrameResult` in frame order, computing chunks of
 parallel on all of numba's threads. Closing the generator cancels the run (between chunks).
 The generator never prints and never touches files.
 
-Per frame (numba kernels in :mod:`kinematics._anneal_kernels`; the jobs around them
+Per frame (numba kernels in :mod:`kinematics._kernels.anneal`; the jobs around them
 in the mixins of :mod:`kinematics.fit`):
 
 1. start from the histogram means (Sect. 3.1) or the previous frame's result;
 2. anneal (Eq. 6 steps, histogram plausibility, Metropolis, τ and l schedules, stop after
    ``n_end`` iterations or once E < ε), keeping the best posture seen;
-3. optionally refine it locally (:mod:`kinematics.refine`) and score it by E again;
+3. optionally refine it locally (:mod:`kinematics.fit.refine`) and score it by E again;
 4. if E > ``reanalysis_threshold`` fit again on a new random stream, at most ``max_runs``
    runs in all, keeping the run with the lowest E (Table 1 note).
 
@@ -52,8 +52,7 @@ from dataclasses import replace
 import numba
 import numpy as np
 
-from kinematics import _anneal_kernels as _ak
-from kinematics.cloud import cloud_observations
+from kinematics._kernels import anneal as _ak
 from kinematics.errors import KinematicsError
 from kinematics.fit import tuning as _tuning
 from kinematics.fit.candidates import CandidatesMixin
@@ -63,18 +62,19 @@ from kinematics.fit.inputs import Ragged, as_ragged, unseen_markers
 from kinematics.fit.match import MatchMixin
 from kinematics.fit.path import PathMixin
 from kinematics.fit.polish import PolishMixin, held_limb
+from kinematics.fit.problem import (
+    FitProblem,
+    error_args,
+)
 from kinematics.fit.result import Candidate, FrameResult
 from kinematics.fit.roots import RootsMixin
+from kinematics.fit.settings import AnnealParams
 from kinematics.fit.status import StatusMixin
 from kinematics.fit.tracking import TrackingMixin
 from kinematics.fit.tuning import Tuning
 from kinematics.model import Body
-from kinematics.observations import Observations
-from kinematics.problem import (
-    FitProblem,
-    error_args,
-)
-from kinematics.settings import AnnealParams
+from kinematics.observe.cloud import cloud_observations
+from kinematics.observe.observations import Observations
 
 
 class Fitter(MatchMixin, RootsMixin, DispatchMixin, StatusMixin, PolishMixin, CandidatesMixin,
@@ -104,7 +104,7 @@ class Fitter(MatchMixin, RootsMixin, DispatchMixin, StatusMixin, PolishMixin, Ca
     Attributes
     ----------
     problem : FitProblem
-        The packed problem every backend uses (:mod:`kinematics.problem`).
+        The packed problem every backend uses (:mod:`kinematics.fit.problem`).
 
     Raises
     ------
@@ -188,7 +188,8 @@ class Fitter(MatchMixin, RootsMixin, DispatchMixin, StatusMixin, PolishMixin, Ca
         return np.ascontiguousarray(self.unseen.T, dtype=float)
 
     def observations(self, data) -> Observations:
-        """``data`` as :class:`~kinematics.observations.Observations`: an Observations object
+        """``data`` as :class:`~kinematics.observe.observations.Observations`: an
+        Observations object
         (checked against the cameras), or unlabelled detections in any form
         :meth:`iter_fit` takes."""
         if isinstance(data, Observations):
@@ -269,7 +270,7 @@ class Fitter(MatchMixin, RootsMixin, DispatchMixin, StatusMixin, PolishMixin, Ca
         ----------
         angles_deg : array_like, shape (n_axes,)
         detections_frame : sequence of array_like (n_c, 2), one per view, or one record's
-            :class:`~kinematics.observations.Observations` (labelled keypoints or 3D points:
+            :class:`~kinematics.observe.observations.Observations` (labelled keypoints or 3D points:
             E is then the objective they are fitted by)
         root_positions : array_like, shape (n_chains, 3), optional
         hidden : array_like of bool, shape (n_views, n_markers), optional

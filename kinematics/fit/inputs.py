@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from kinematics.errors import KinematicsError
-from kinematics.observations import sorted_by_x
+from kinematics.observe.observations import sorted_by_x
 
 
 @dataclass(frozen=True)

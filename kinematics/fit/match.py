@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from kinematics.cloud import cloud_observations, view_groups
 from kinematics.fit.status import marker_images
-from kinematics.observations import Observations
+from kinematics.observe.cloud import cloud_observations, view_groups
+from kinematics.observe.observations import Observations
 
 
 class MatchMixin:
@@ -74,7 +74,7 @@ class MatchMixin:
 
     def covered(self, data) -> float:
         """The share of frames with detections whose triangulated points are at least as
-        many as the body's markers (:func:`~kinematics.cloud.cloud_observations`; on up to
+        many as the body's markers (:func:`~kinematics.observe.cloud.cloud_observations`; on up to
         ``Tuning.match_sample`` frames spread over the video): where it is low, markers are
         often absent or seen by fewer than 3 views, and matching in 3D lets a limb fold onto
         the points that are there (docs/fitting.md, 'When the defaults match in 3D')."""

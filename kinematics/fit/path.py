@@ -11,11 +11,11 @@ from dataclasses import replace
 
 import numpy as np
 
-from kinematics import temporal
+from kinematics.fit import temporal
 from kinematics.fit.result import Candidate, FrameResult, Status
+from kinematics.fit.settings import AnnealParams
 from kinematics.fit.status import marker_images
-from kinematics.observations import Observations
-from kinematics.settings import AnnealParams
+from kinematics.observe.observations import Observations
 
 
 class PathMixin:

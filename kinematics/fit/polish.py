@@ -9,12 +9,12 @@ from dataclasses import replace
 
 import numpy as np
 
-from kinematics import _anneal_kernels as _ak
-from kinematics import _refine_kernels as _rk
-from kinematics.cloud import SUPPORT_PX
+from kinematics._kernels import anneal as _ak
+from kinematics._kernels import refine as _rk
 from kinematics.fit.result import WITHIN, Candidate, FrameResult, Status
-from kinematics.observations import Observations
-from kinematics.settings import AnnealParams
+from kinematics.fit.settings import AnnealParams
+from kinematics.observe.cloud import SUPPORT_PX
+from kinematics.observe.observations import Observations
 
 
 class PolishMixin:
@@ -131,7 +131,7 @@ class PolishMixin:
 def _unclaimed(cameras, cloud: np.ndarray, points: np.ndarray, offsets: np.ndarray
                ) -> np.ndarray:
     """Which of one frame's detections (``points``, ``offsets`` per view) support no point
-    of its ``cloud``: farther than :data:`~kinematics.cloud.SUPPORT_PX` (the support the
+    of its ``cloud``: farther than :data:`~kinematics.observe.cloud.SUPPORT_PX` (the support the
     fitter triangulates with) from every point's projection."""
     xyz = cloud[cloud[:, 3] > 0, :3]
     free = np.ones(len(points), bool)

@@ -9,10 +9,10 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from kinematics.error_function import projection_error
-from kinematics.fk import forward_kinematics_reference
+from kinematics.fit.error_function import projection_error
+from kinematics.fit.settings import AnnealParams
 from kinematics.model import Body
-from kinematics.settings import AnnealParams
+from kinematics.model.fk import forward_kinematics_reference
 
 _MASK64 = (1 << 64) - 1
 
@@ -44,8 +44,8 @@ def anneal_reference(body: Body, cameras, detections_frame, params: AnnealParams
                      *, frame: int = 0, run: int = 0, start_deg=None, root_positions=None
                      ) -> tuple[np.ndarray, float, int]:
     """One annealing run written plainly (Sect. 2.3, Eq. 6): the specification of
-    :func:`kinematics._anneal_kernels.anneal_chain`, on the same random stream, with E from
-    :func:`kinematics.error_function.posture_error` (4×4 forward kinematics, NumPy
+    :func:`kinematics._kernels.anneal.anneal_chain`, on the same random stream, with E from
+    :func:`kinematics.fit.error_function.posture_error` (4×4 forward kinematics, NumPy
     projection). Slow (tens of microseconds per iteration); for tests and benchmarks.
 
     Returns

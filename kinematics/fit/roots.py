@@ -1,15 +1,15 @@
 """Root placement for a fit: root markers tracked, free roots placed from the detections
-or from labelled 3D points (the maths is :mod:`kinematics.placement`).
+or from labelled 3D points (the maths is :mod:`kinematics.fit.placement`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from kinematics import _anneal_kernels as _ak
-from kinematics import placement
-from kinematics.fk import forward_kinematics_reference
-from kinematics.observations import Observations
+from kinematics._kernels import anneal as _ak
+from kinematics.fit import placement
+from kinematics.model.fk import forward_kinematics_reference
+from kinematics.observe.observations import Observations
 
 
 class RootsMixin:
@@ -27,7 +27,7 @@ class RootsMixin:
         from the configured root position (the manual offset of the paper) with the root
         marker where the start posture puts it; the root then moves by the tracked marker's
         displacement. Free roots get their per-frame seed position
-        (:mod:`kinematics.placement`); fixed chains keep their position.
+        (:mod:`kinematics.fit.placement`); fixed chains keep their position.
         """
         obs = self.observations(detections)
         idx = self._frame_indices(frames, obs.n_frames)

@@ -8,10 +8,10 @@ from dataclasses import replace
 
 import numpy as np
 
-from kinematics import _anneal_kernels as _ak
+from kinematics._kernels import anneal as _ak
 from kinematics.fit.result import FrameResult, Status
-from kinematics.observations import Observations
-from kinematics.settings import AnnealParams
+from kinematics.fit.settings import AnnealParams
+from kinematics.observe.observations import Observations
 
 
 class StatusMixin:

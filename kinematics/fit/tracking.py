@@ -14,9 +14,9 @@ import numpy as np
 
 from kinematics.fit.flags import flag_e_spikes
 from kinematics.fit.result import Candidate, FrameResult, Status, reanalysed
+from kinematics.fit.settings import AnnealParams
 from kinematics.fit.status import marker_images
-from kinematics.observations import Observations
-from kinematics.settings import AnnealParams
+from kinematics.observe.observations import Observations
 
 
 class TrackingMixin:

@@ -1,6 +1,6 @@
 """The fitter's tuning constants, in one record, each with the reason for its value.
 
-These are not settings a user chooses (those are :class:`kinematics.settings.AnnealParams`):
+These are not settings a user chooses (those are :class:`kinematics.fit.settings.AnnealParams`):
 they are the measured choices behind the path through time, tracking, matching and the
 flags. The measurements that chose them are in ``docs/benchmarks.md``; the experiments that
 led there are in the project's history. A :class:`~kinematics.fit.Fitter` reads the record

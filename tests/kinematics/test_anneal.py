@@ -9,13 +9,13 @@ import numba
 import numpy as np
 import pytest
 
-from kinematics import _anneal_kernels as ak
-from kinematics.error_function import ErrorOptions
+from kinematics._kernels import anneal as ak
 from kinematics.errors import KinematicsError
 from kinematics.fit import AnnealParams, Fitter, SplitMix64, anneal_reference
-from kinematics.histograms import Histogram
+from kinematics.fit.error_function import ErrorOptions
+from kinematics.fit.problem import histogram_tables
 from kinematics.model import Body, Chain
-from kinematics.problem import histogram_tables
+from kinematics.model.histograms import Histogram
 from tests.fixtures.cameras import stick_cameras
 from tests.fixtures.planted import moving_roots, planted_detections
 from videotrack.motion import smooth_random_motion

@@ -10,7 +10,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from kinematics.camera_io import (
+from kinematics.cameras import OrthographicCamera, PinholeCamera
+from kinematics.cameras.files import (
     camera_from_table,
     camera_to_table,
     import_anipose_toml,
@@ -19,7 +20,6 @@ from kinematics.camera_io import (
     load_cameras,
     save_cameras,
 )
-from kinematics.cameras import OrthographicCamera, PinholeCamera
 from kinematics.errors import KinematicsError, LocatedError
 
 REPO = Path(__file__).resolve().parents[2]

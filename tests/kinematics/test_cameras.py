@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from numba import njit
 
-from kinematics._camera_kernels import project_point
+from kinematics._kernels.camera import project_point
 from kinematics.cameras import (
     CameraArrays,
     OrthographicCamera,

@@ -15,16 +15,16 @@ import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from kinematics.chain_xml import body_to_string, load_body, loads_body
 from kinematics.errors import KinematicsError
-from kinematics.histogram_xml import (
+from kinematics.model import Body
+from kinematics.model.chain_xml import body_to_string, load_body, loads_body
+from kinematics.model.histogram_xml import (
     HistogramArchive,
     apply_archive,
     archive_from_body,
     archive_to_string,
     loads_archive,
 )
-from kinematics.model import Body
 
 REPO = Path(__file__).resolve().parents[2]
 EXAMPLES = int(os.environ.get("VIDEOTRACK_FUZZ_EXAMPLES", "2500"))

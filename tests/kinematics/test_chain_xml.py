@@ -10,11 +10,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from kinematics.chain_xml import body_to_string, load_body, loads_body, save_body
 from kinematics.errors import KinematicsError
-from kinematics.histogram_xml import loads_archive
-from kinematics.histograms import Histogram
 from kinematics.model import Axis, Body, Chain, Joint, Marker, Root, Segment
+from kinematics.model.chain_xml import body_to_string, load_body, loads_body, save_body
+from kinematics.model.histogram_xml import loads_archive
+from kinematics.model.histograms import Histogram
 
 REPO = Path(__file__).resolve().parents[2]
 CHAIN_FILES = sorted((REPO / "chains").glob("*.xml"))
@@ -245,7 +245,7 @@ def test_every_xml_example_in_the_format_docs_loads():
 def test_description_survives_save_and_load(tmp_path, locust):
     import dataclasses
 
-    from kinematics.chain_xml import load_body, save_body
+    from kinematics.model.chain_xml import load_body, save_body
 
     body = dataclasses.replace(locust, description="Lengths from Fig. 5 & the <paper>.")
     save_body(tmp_path / "c.xml", body)

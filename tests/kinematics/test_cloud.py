@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from kinematics.cameras import OrthographicCamera, PinholeCamera
-from kinematics.cloud import Cloud, _fundamental, _linear_matrix, triangulate_unlabelled
 from kinematics.errors import KinematicsError
-from kinematics.rotations import euler_yxz
+from kinematics.model.rotations import euler_yxz
+from kinematics.observe.cloud import Cloud, _fundamental, _linear_matrix, triangulate_unlabelled
 
 
 def ring_cameras(n=6, f=6000.0, distance=60.0, aim=0.12,

@@ -9,15 +9,15 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from kinematics import _anneal_kernels as ak
-from kinematics import _refine_kernels as rk
-from kinematics.error_function import cloud_error
+from kinematics._kernels import anneal as ak
+from kinematics._kernels import refine as rk
 from kinematics.errors import KinematicsError
 from kinematics.fit import AnnealParams, Candidate, Fitter, FrameResult
+from kinematics.fit.error_function import cloud_error
 from kinematics.fit.polish import held_limb
-from kinematics.fk import forward_kinematics_reference
-from kinematics.observations import Observations
-from kinematics.settings import ErrorOptions
+from kinematics.fit.settings import ErrorOptions
+from kinematics.model.fk import forward_kinematics_reference
+from kinematics.observe.observations import Observations
 from tests.fixtures.bodies import three_legs
 from tests.fixtures.cameras import ring
 from tests.fixtures.planted import marker_errors, planted_postures, random_cloud

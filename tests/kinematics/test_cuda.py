@@ -10,13 +10,13 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from kinematics import _anneal_kernels as _ak
-from kinematics import _cuda_kernels as _ck
-from kinematics import _lane_kernels as _lk
+from kinematics._kernels import anneal as _ak
+from kinematics._kernels import cuda as _ck
+from kinematics._kernels import lanes as _lk
 from kinematics.errors import KinematicsError
 from kinematics.fit import AnnealParams, Fitter
-from kinematics.problem import FitOutputs, schedule_of
-from kinematics.settings import ErrorOptions
+from kinematics.fit.problem import FitOutputs, schedule_of
+from kinematics.fit.settings import ErrorOptions
 from tests.fixtures.assertions import assert_same
 from tests.fixtures.bodies import mouse_like
 from tests.fixtures.cameras import three_pinholes

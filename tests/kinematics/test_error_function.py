@@ -3,20 +3,20 @@
 import numpy as np
 import pytest
 
-from kinematics import _anneal_kernels as ak
+from kinematics._kernels import anneal as ak
 from kinematics.cameras import OrthographicCamera, PinholeCamera
-from kinematics.error_function import (
+from kinematics.errors import KinematicsError
+from kinematics.fit import AnnealParams, Fitter
+from kinematics.fit.error_function import (
     NAN_MARKER_COST,
     ErrorOptions,
     nearest_residuals,
     posture_error,
     projection_error,
 )
-from kinematics.errors import KinematicsError
-from kinematics.fit import AnnealParams, Fitter
-from kinematics.fk import forward_kinematics_reference
+from kinematics.fit.problem import fold_body
 from kinematics.model import Axis, Body, Chain, Joint, Marker, Segment
-from kinematics.problem import fold_body
+from kinematics.model.fk import forward_kinematics_reference
 from tests.fixtures.settings import ERROR_VARIANT_IDS, ERROR_VARIANTS
 from videotrack.paper_setup import locust_cameras
 

@@ -5,9 +5,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from kinematics.fk import forward_kinematics, forward_kinematics_reference
-from kinematics.packing import pack_body
-from kinematics.rotations import euler_yxz, rot_x, rot_y, rot_z
+from kinematics.model.fk import forward_kinematics, forward_kinematics_reference
+from kinematics.model.packing import pack_body
+from kinematics.model.rotations import euler_yxz, rot_x, rot_y, rot_z
 
 CHAINS = Path(__file__).resolve().parents[2] / "chains"
 
@@ -159,7 +159,7 @@ def test_branched_multichain_body_numba_matches_reference():
 
 
 def test_bundled_chains_load_and_fly_body_scales():
-    from kinematics.chain_xml import load_body
+    from kinematics.model.chain_xml import load_body
 
     fly = load_body(CHAINS / "fly_six_legs.xml")
     assert len(fly.chains) == 6 and len(fly.marker_names) == 30 and fly.n_axes == 72
@@ -176,7 +176,7 @@ def test_bundled_chains_load_and_fly_body_scales():
 
 
 def test_stick_insect_file_matches_the_python_built_chain(stick_insect):
-    from kinematics.chain_xml import load_body
+    from kinematics.model.chain_xml import load_body
 
     assert load_body(CHAINS / "stick_insect_frontleg.xml") == stick_insect
 

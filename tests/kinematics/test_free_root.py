@@ -7,22 +7,22 @@ import numpy as np
 import pytest
 
 from kinematics.cameras import OrthographicCamera
-from kinematics.chain_xml import body_to_string as body_to_xml
-from kinematics.chain_xml import loads_body as parse_body
 from kinematics.errors import KinematicsError
 from kinematics.fit import AnnealParams, Fitter
-from kinematics.fk import forward_kinematics_reference
-from kinematics.model import Axis, Body, Chain, Joint, Marker, Root, Segment
-from kinematics.placement import (
+from kinematics.fit.placement import (
     RootModel,
     kabsch,
     register_root,
     root_windows,
     triangulate_candidates,
 )
-from kinematics.problem import FitProblem, euler_yxz_from_matrix
-from kinematics.refine import refine
-from kinematics.rotations import euler_yxz
+from kinematics.fit.problem import FitProblem, euler_yxz_from_matrix
+from kinematics.fit.refine import refine
+from kinematics.model import Axis, Body, Chain, Joint, Marker, Root, Segment
+from kinematics.model.chain_xml import body_to_string as body_to_xml
+from kinematics.model.chain_xml import loads_body as parse_body
+from kinematics.model.fk import forward_kinematics_reference
+from kinematics.model.rotations import euler_yxz
 from tests.fixtures.bodies import mouse_like
 from tests.fixtures.cameras import three_pinholes
 from tests.fixtures.planted import joint_errors, planted_frames
@@ -209,7 +209,7 @@ def planar_pelvis() -> Body:
 
 
 def test_mirror_symmetric_root_is_told_apart_by_the_limbs():
-    from kinematics.placement import ambiguous, search_poses
+    from kinematics.fit.placement import ambiguous, search_poses
 
     body = planar_pelvis()
     cams = three_pinholes()

@@ -8,13 +8,13 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from kinematics import _anneal_kernels as ak
-from kinematics import _refine_kernels as rk
-from kinematics.error_function import posture_error, projection_error
+from kinematics._kernels import anneal as ak
+from kinematics._kernels import refine as rk
 from kinematics.errors import KinematicsError
 from kinematics.fit import AnnealParams, Fitter
+from kinematics.fit.error_function import posture_error, projection_error
 from kinematics.fit.roots import _emptied
-from kinematics.observations import Observations
+from kinematics.observe.observations import Observations
 from tests.fixtures.cameras import stick_cameras
 from tests.fixtures.planted import moving_roots, planted_detections
 from tests.fixtures.settings import ERROR_VARIANT_IDS, ERROR_VARIANTS

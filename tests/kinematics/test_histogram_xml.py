@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from kinematics.errors import KinematicsError
-from kinematics.histogram_xml import (
+from kinematics.model.histogram_xml import (
     HistogramArchive,
     apply_archive,
     archive_from_body,
@@ -20,7 +20,7 @@ from kinematics.histogram_xml import (
     save_archive,
     update_archive,
 )
-from kinematics.histograms import Histogram
+from kinematics.model.histograms import Histogram
 
 PHI = ("hindleg", "J0", "phi")
 BETA = ("hindleg", "J1", "beta")

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from kinematics.errors import KinematicsError
-from kinematics.histograms import Histogram, bin_index, merge_histograms
+from kinematics.model.histograms import Histogram, bin_index, merge_histograms
 
 
 def test_uniform_sets_bins_of_the_range_only():

@@ -16,7 +16,7 @@ from tests.fixtures.paths import BIND_TESTS_PACKAGE, REPO
 SCRIPT = BIND_TESTS_PACKAGE + r"""
 import json, numpy as np
 from kinematics.fit import AnnealParams, Fitter
-from kinematics.observations import Observations
+from kinematics.observe.observations import Observations
 from tests.fixtures.bodies import mouse_like
 from tests.fixtures.cameras import three_pinholes
 from tests.fixtures.planted import planted_frames

@@ -1,4 +1,4 @@
-"""The lane kernels generated per body (kinematics/_lane_codegen.py): the same E as the
+"""The lane kernels generated per body (kinematics/_kernels/lane_codegen.py): the same E as the
 scalar kernel to the last bit, literal folding, kernels shared and cached."""
 
 from __future__ import annotations
@@ -8,13 +8,13 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from kinematics import _anneal_kernels as _ak
-from kinematics import _lane_codegen as cg
-from kinematics import _lane_kernels as _lk
-from kinematics._lane_kernels import PAD
-from kinematics.chain_xml import load_body
+from kinematics._kernels import anneal as _ak
+from kinematics._kernels import lane_codegen as cg
+from kinematics._kernels import lanes as _lk
+from kinematics._kernels.lanes import PAD
 from kinematics.fit import AnnealParams, Fitter
-from kinematics.rotations import euler_yxz
+from kinematics.model.chain_xml import load_body
+from kinematics.model.rotations import euler_yxz
 from tests.fixtures.bodies import mouse_like
 from tests.fixtures.cameras import three_pinholes
 from tests.fixtures.planted import planted_detections

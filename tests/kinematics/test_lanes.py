@@ -10,14 +10,14 @@ import numba
 import numpy as np
 import pytest
 
-from kinematics import _anneal_kernels as _ak
-from kinematics import _lane_kernels as _lk
+from kinematics._kernels import anneal as _ak
+from kinematics._kernels import lanes as _lk
 from kinematics.errors import KinematicsError
 from kinematics.fit import AnnealParams, Fitter
-from kinematics.fk import forward_kinematics, forward_kinematics_reference
-from kinematics.observations import Observations
-from kinematics.problem import FitOutputs, error_args, partitions_of, schedule_of
-from kinematics.settings import ErrorOptions
+from kinematics.fit.problem import FitOutputs, error_args, partitions_of, schedule_of
+from kinematics.fit.settings import ErrorOptions
+from kinematics.model.fk import forward_kinematics, forward_kinematics_reference
+from kinematics.observe.observations import Observations
 from tests.fixtures.assertions import assert_same
 from tests.fixtures.bodies import mouse_like
 from tests.fixtures.cameras import three_pinholes

@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 
 from kinematics.fit import AnnealParams, Fitter
+from kinematics.fit.settings import ErrorOptions
 from kinematics.fit.tuning import TUNING
-from kinematics.fk import forward_kinematics_reference
 from kinematics.model import Body, Chain, Root
-from kinematics.observations import Observations
-from kinematics.settings import ErrorOptions
+from kinematics.model.fk import forward_kinematics_reference
+from kinematics.observe.observations import Observations
 from tests.fixtures.bodies import leg
 from tests.fixtures.cameras import ring
 from tests.fixtures.planted import planted_postures

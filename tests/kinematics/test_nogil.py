@@ -9,7 +9,7 @@ import time
 import numpy as np
 import pytest
 
-from kinematics import _anneal_kernels as ak
+from kinematics._kernels import anneal as ak
 from kinematics.fit import AnnealParams, Fitter
 from tests.fixtures.planted import planted_detections
 from videotrack.motion import smooth_random_motion

@@ -6,13 +6,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from kinematics import _anneal_kernels as ak
-from kinematics.error_function import labelled_error, points3d_error
+from kinematics._kernels import anneal as ak
 from kinematics.errors import KinematicsError
 from kinematics.fit import AnnealParams, Fitter
-from kinematics.fk import forward_kinematics_reference
-from kinematics.observations import Observations
-from kinematics.settings import ErrorOptions
+from kinematics.fit.error_function import labelled_error, points3d_error
+from kinematics.fit.settings import ErrorOptions
+from kinematics.model.fk import forward_kinematics_reference
+from kinematics.observe.observations import Observations
 from tests.fixtures.bodies import mouse_like
 from tests.fixtures.cameras import three_pinholes
 from tests.fixtures.planted import joint_errors, planted_frames

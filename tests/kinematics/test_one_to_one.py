@@ -9,12 +9,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from kinematics import _anneal_kernels as ak
-from kinematics.error_function import cloud_error, one_to_one, projection_error
+from kinematics._kernels import anneal as ak
 from kinematics.errors import KinematicsError
 from kinematics.fit import AnnealParams, Fitter
-from kinematics.fk import forward_kinematics_reference
-from kinematics.settings import ErrorOptions
+from kinematics.fit.error_function import cloud_error, one_to_one, projection_error
+from kinematics.fit.settings import ErrorOptions
+from kinematics.model.fk import forward_kinematics_reference
 from tests.fixtures.bodies import three_legs
 from tests.fixtures.cameras import ring
 from tests.fixtures.planted import planted_postures, random_cloud

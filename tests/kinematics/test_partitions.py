@@ -8,12 +8,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from kinematics import _anneal_kernels as ak
-from kinematics.chain_xml import load_body
+from kinematics._kernels import anneal as ak
 from kinematics.errors import KinematicsError
 from kinematics.fit import AnnealParams, Fitter
+from kinematics.fit.problem import FitProblem, partitions_of
 from kinematics.model import Body
-from kinematics.problem import FitProblem, partitions_of
+from kinematics.model.chain_xml import load_body
 from tests.fixtures.bodies import three_legs
 from tests.fixtures.cameras import top_and_side
 from tests.fixtures.paths import CHAINS

@@ -8,14 +8,14 @@ import pytest
 
 from kinematics.errors import KinematicsError
 from kinematics.fit import AnnealParams, Fitter
-from kinematics.fk import forward_kinematics
-from kinematics.refine import (
+from kinematics.fit.refine import (
     cramer_rao_bound,
     projection_jacobian,
     refine,
     refine_many,
     refine_reference,
 )
+from kinematics.model.fk import forward_kinematics
 from tests.fixtures.bodies import three_legs
 from tests.fixtures.cameras import top_and_side
 from tests.fixtures.planted import planted_postures
@@ -203,8 +203,8 @@ def test_kernel_equals_scipy_on_a_branched_body():
 def test_entry_spans_are_subtrees_or_the_whole_body():
     """A free entry moves its joint's subtree (joints and markers contiguous in depth-first
     order); where the order breaks that, the whole body (never too little)."""
-    from kinematics._refine_kernels import entry_spans
-    from kinematics.problem import FitProblem
+    from kinematics._kernels.refine import entry_spans
+    from kinematics.fit.problem import FitProblem
 
     body = three_legs()
     pr = FitProblem.build(body, top_and_side())

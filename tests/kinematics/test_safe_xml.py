@@ -11,10 +11,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from kinematics import safe_xml
-from kinematics.chain_xml import load_body, loads_body
 from kinematics.errors import KinematicsError
-from kinematics.histogram_xml import loads_archive
+from kinematics.model import safe_xml
+from kinematics.model.chain_xml import load_body, loads_body
+from kinematics.model.histogram_xml import loads_archive
 
 REPO = Path(__file__).resolve().parents[2]
 LOCUST = REPO / "chains" / "locust_hindleg.xml"
@@ -273,7 +273,7 @@ def test_only_safe_xml_imports_lxml():
         for p in (REPO / pkg).rglob("*.py")
         if re.search(r"^\s*(import lxml|from lxml)", p.read_text(), re.M)
     )
-    assert importers == ["kinematics/safe_xml.py"]
+    assert importers == ["kinematics/model/safe_xml.py"]
 
 
 def test_chains_load_from_many_threads_at_once():
@@ -281,8 +281,8 @@ def test_chains_load_from_many_threads_at_once():
     from concurrent.futures import ThreadPoolExecutor
     from pathlib import Path
 
-    from kinematics import safe_xml
-    from kinematics.chain_xml import load_body
+    from kinematics.model import safe_xml
+    from kinematics.model.chain_xml import load_body
 
     safe_xml._schema.cache_clear()
     path = Path(__file__).resolve().parents[2] / "chains" / "fly_six_legs.xml"

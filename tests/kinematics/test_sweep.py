@@ -1,5 +1,5 @@
 """The spatial lookup of detections: views with many detections are kept sorted by x and
-searched by a sweep along x (``_anneal_kernels.nearest_sorted``); it must give exactly
+searched by a sweep along x (``_kernels.anneal.nearest_sorted``); it must give exactly
 the nearest detection of a scan, and a fit must not depend on the order of detections."""
 
 from __future__ import annotations
@@ -7,12 +7,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from kinematics import _anneal_kernels as ak
-from kinematics.error_function import projection_error
+from kinematics._kernels import anneal as ak
 from kinematics.fit import AnnealParams, Fitter
+from kinematics.fit.error_function import projection_error
 from kinematics.fit.inputs import as_ragged
-from kinematics.observations import Observations
-from kinematics.settings import ErrorOptions
+from kinematics.fit.settings import ErrorOptions
+from kinematics.observe.observations import Observations
 from tests.fixtures.bodies import three_legs
 from tests.fixtures.cameras import ring
 from tests.fixtures.planted import planted_postures

@@ -1,4 +1,4 @@
-"""Candidate postures per frame and the path through time (kinematics.temporal, and the
+"""Candidate postures per frame and the path through time (kinematics.fit.temporal, and the
 Fitter's use of them with ``candidates`` > 1)."""
 
 from __future__ import annotations
@@ -11,13 +11,10 @@ import numba
 import numpy as np
 import pytest
 
-from kinematics._temporal_kernels import path_dp
+from kinematics._kernels.temporal import path_dp
 from kinematics.cameras import OrthographicCamera
 from kinematics.fit import AnnealParams, Candidate, Fitter
-from kinematics.fit.tuning import TUNING
-from kinematics.fk import forward_kinematics
-from kinematics.model import Body, Chain, Marker, Root, Segment
-from kinematics.temporal import (
+from kinematics.fit.temporal import (
     BREAK_COST,
     JUMP_CAP,
     WRONG_STRETCH,
@@ -30,6 +27,9 @@ from kinematics.temporal import (
     transition_costs,
     transitions,
 )
+from kinematics.fit.tuning import TUNING
+from kinematics.model import Body, Chain, Marker, Root, Segment
+from kinematics.model.fk import forward_kinematics
 from tests.fixtures.bodies import hinge, leg, three_legs
 from tests.fixtures.cameras import top_and_side
 

@@ -7,11 +7,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from kinematics import _triangulation_kernels as _k
+from kinematics._kernels import triangulation as _k
 from kinematics.cameras import OrthographicCamera, PinholeCamera, pack_cameras
 from kinematics.errors import KinematicsError
-from kinematics.rotations import euler_yxz
-from kinematics.triangulation import (
+from kinematics.model.rotations import euler_yxz
+from kinematics.observe.triangulation import (
     LOSSES,
     _dlt_numpy,
     _inputs,
@@ -256,7 +256,7 @@ def test_residual_kernel_matches_numpy_twin(loss):
 
 
 def test_triangulate_labelled_uses_the_linear_backend():
-    from kinematics.placement import triangulate_labelled
+    from kinematics.fit.placement import triangulate_labelled
 
     cams, truth = ring_cameras(3), chain_motion(1)[0]
     views = [c.project(truth) for c in cams]

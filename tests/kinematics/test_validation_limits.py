@@ -9,12 +9,16 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from kinematics import safe_xml
-from kinematics.chain_xml import body_to_string, load_body, loads_body, save_body
 from kinematics.errors import KinematicsError
-from kinematics.histogram_xml import HistogramArchive, apply_archive, load_archive, loads_archive
-from kinematics.histograms import MAX_BIN_VALUE, Histogram
-from kinematics.model import Root, validate_body
+from kinematics.model import Root, safe_xml, validate_body
+from kinematics.model.chain_xml import body_to_string, load_body, loads_body, save_body
+from kinematics.model.histogram_xml import (
+    HistogramArchive,
+    apply_archive,
+    load_archive,
+    loads_archive,
+)
+from kinematics.model.histograms import MAX_BIN_VALUE, Histogram
 
 BETA = ("hindleg", "J1", "beta")
 
@@ -92,7 +96,7 @@ def test_histogram_outside_the_range_is_refused_where_it_is_read(locust, tmp_pat
 
     outside = Histogram(np.r_[np.zeros(270), np.ones(30), np.zeros(60)])  # 90..120
     path = tmp_path / "learned.xml"
-    from kinematics.histogram_xml import save_archive
+    from kinematics.model.histogram_xml import save_archive
 
     save_archive(path, HistogramArchive({BETA: outside}))
     with pytest.raises(KinematicsError, match=rf"^{path}: chain 'hindleg' joint 'J1' axis "

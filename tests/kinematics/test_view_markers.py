@@ -8,12 +8,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from kinematics.error_function import posture_error
 from kinematics.errors import KinematicsError
 from kinematics.fit import AnnealParams, Fitter
-from kinematics.fk import forward_kinematics, forward_kinematics_reference
-from kinematics.refine import refine, refine_many
-from kinematics.settings import ErrorOptions
+from kinematics.fit.error_function import posture_error
+from kinematics.fit.refine import refine, refine_many
+from kinematics.fit.settings import ErrorOptions
+from kinematics.model.fk import forward_kinematics, forward_kinematics_reference
 from tests.fixtures.bodies import three_legs
 from tests.fixtures.cameras import ring
 from tests.fixtures.planted import marker_errors, planted_postures
@@ -169,7 +169,7 @@ def test_markers_a_view_never_shows_are_kept_per_view_not_per_frame(locust):
     """with_unseen keeps one (views, markers) array however long the video; the kernels get
     it with the user's marks of each frame; keypoints of a marker a view does not show
     count as missing."""
-    from kinematics.observations import Observations
+    from kinematics.observe.observations import Observations
 
     cams, shows = colour_views(locust_cameras())
     fitter = Fitter(locust, cams, view_markers=shows)

@@ -8,9 +8,9 @@ import pytest
 
 from kinematics.errors import KinematicsError
 from kinematics.fit import FrameResult
-from kinematics.fk import forward_kinematics
-from kinematics.histograms import Histogram
 from kinematics.model import validate_body
+from kinematics.model.fk import forward_kinematics
+from kinematics.model.histograms import Histogram
 from ui import adapters
 from videotrack.paper_setup import locust_cameras
 
@@ -149,8 +149,8 @@ def test_root_settings_choose_mode_marker_and_windows(locust):
     assert (root.mode, root.translation_window, root.rotation_window_deg) == ("free", 2.5, None)
     for b in (follow, free):
         validate_body(b)
-    # empty windows take the defaults of kinematics.placement.root_windows
-    from kinematics.placement import root_windows
+    # empty windows take the defaults of kinematics.fit.placement.root_windows
+    from kinematics.fit.placement import root_windows
 
     assert adapters.default_root_windows(locust, "hindleg") == tuple(
         root_windows(adapters.edit_root(locust, "hindleg", mode="free"))[0])

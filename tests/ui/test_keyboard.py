@@ -185,7 +185,7 @@ def test_accept_and_go_to_the_next_frame_needing_attention(window, qtbot):
 
 def test_alt_arrows_nudge_the_clicked_marker_and_refit_once_after_a_pause(window, qtbot,
                                                                           wait_idle):
-    from kinematics.fk import forward_kinematics
+    from kinematics.model.fk import forward_kinematics
 
     s = window.session
     _activate(window, qtbot)

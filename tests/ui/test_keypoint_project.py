@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 from PySide6.QtCore import Qt
 
-from kinematics.error_function import labelled_error
-from kinematics.fk import forward_kinematics
+from kinematics.fit.error_function import labelled_error
+from kinematics.model.fk import forward_kinematics
 from ui import adapters
 from ui.state import Session, backend
 from ui.state.fitting import FIT_CONTEXT

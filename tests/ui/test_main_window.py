@@ -10,7 +10,7 @@ from PySide6.QtCore import Qt
 from PySide6.QtGui import QImage
 from PySide6.QtWidgets import QMessageBox
 
-from kinematics.fk import forward_kinematics
+from kinematics.model.fk import forward_kinematics
 from ui import adapters
 from ui.views import style
 from videotrack.detections import load_detections
@@ -209,7 +209,7 @@ def test_chain_editor_length_edit_reprojects_and_commits(window, qtbot):
 
 
 def test_chain_editor_sliders_preview_and_cancel(window, tmp_path):
-    from kinematics.chain_xml import load_body
+    from kinematics.model.chain_xml import load_body
 
     s = window.session
     before = window.video_views[1].drawn()["markers"].copy()
@@ -319,7 +319,7 @@ def test_drag_a_marker_in_a_video_view(window, qtbot, wait_idle):
 
 
 def test_histogram_dialog_bars_and_learning(window, qtbot, wait_idle, tmp_path):
-    from kinematics.histogram_xml import load_archive
+    from kinematics.model.histogram_xml import load_archive
 
     s = window.session
     s.fit()

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from PySide6.QtCore import Qt
 
-from kinematics.fk import forward_kinematics
+from kinematics.model.fk import forward_kinematics
 from videotrack.detection_edits import edits_path, load_edits
 
 

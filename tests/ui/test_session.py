@@ -11,8 +11,8 @@ import pytest
 import tomli_w
 
 from kinematics.fit import AnnealParams, Fitter
-from kinematics.fk import forward_kinematics
-from kinematics.histogram_xml import archive_from_body, load_archive
+from kinematics.model.fk import forward_kinematics
+from kinematics.model.histogram_xml import archive_from_body, load_archive
 from ui.state import Session
 from videotrack.detections import load_detections
 from videotrack.results import read_results
@@ -257,7 +257,7 @@ def test_detect_in_the_background_with_edited_filters(session, project, qtbot, w
 
 
 def test_another_chain_file_replaces_the_chain(session, project, wait_idle):
-    from kinematics.chain_xml import save_body
+    from kinematics.model.chain_xml import save_body
     from ui import adapters
 
     s = session

@@ -274,9 +274,10 @@ def test_help_teaches(capsys):
 
 def test_bad_arguments_are_one_line(project, capsys, monkeypatch):
     import videotrack.batch
+    import videotrack.batch_dask
 
     connect = videotrack.batch.connect  # a scheduler file is waited for: not that long here
-    monkeypatch.setattr(videotrack.batch, "connect", lambda address: connect(address, 0.2))
+    monkeypatch.setattr(videotrack.batch_dask, "connect", lambda address: connect(address, 0.2))
     for args, needle in ((["--jobs", "-1"], "--jobs: must be at least 0"),
                          (["--trial", "nope/*"], "no trial matches 'nope/*'"),
                          (["--scheduler", str(project / "sched.json")],

@@ -9,8 +9,8 @@ import re
 import numpy as np
 import pytest
 
-from kinematics.calibration_math import project, rodrigues, triangulate
 from kinematics.cameras import PinholeCamera
+from kinematics.cameras.calibration_math import project, rodrigues, triangulate
 from videotrack.calibration.boards import Board, board_from_table, load_board
 from videotrack.calibration.bundle import Options, calibrate
 from videotrack.calibration.detect import Corners, Source, detect_all
@@ -349,7 +349,7 @@ def test_command_calibrates_rendered_views(tmp_path, capsys, monkeypatch):
     assert cli(*args) == 0
     text = capsys.readouterr().out
     assert "square size" in text and "spanning tree" in text
-    from kinematics.camera_io import import_anipose_toml, load_camera_file
+    from kinematics.cameras.files import import_anipose_toml, load_camera_file
 
     got = load_camera_file(out)
     assert got.units == "mm"
@@ -362,7 +362,7 @@ def test_command_calibrates_rendered_views(tmp_path, capsys, monkeypatch):
 
 
 def test_command_calibrates_an_aruco_grid_and_names_a_mismatched_one(tmp_path, capsys):
-    from kinematics.camera_io import load_camera_file
+    from kinematics.cameras.files import load_camera_file
 
     cams = rig(3)
     _render_folder(tmp_path, GRID, cams, 8)
@@ -485,19 +485,19 @@ def test_refinement_from_animal_points_recovers_poses():
 
 
 def test_schur_step_gives_the_dense_solution(monkeypatch):
-    from videotrack.calibration import bundle
+    from videotrack.calibration import bundle_adjust
 
     cams = rig(2)
     corners, _ = projected_corners(CHARUCO, cams, n_views=8, noise=0.3)
     dense = calibrate(corners, CHARUCO.object_points, Options(restarts=1, n_dist=4))
-    monkeypatch.setattr(bundle, "_DENSE_MAX", 0)  # as for hundreds of views
+    monkeypatch.setattr(bundle_adjust, "_DENSE_MAX", 0)  # as for hundreds of views
     schur = calibrate(corners, CHARUCO.object_points, Options(restarts=1, n_dist=4))
     for a, b in zip(dense.cameras, schur.cameras, strict=True):
         assert np.allclose(a.K, b.K, rtol=1e-6) and np.allclose(a.t, b.t, atol=1e-4)
 
 
 def test_command_refines_an_imported_calibration(tmp_path, capsys):
-    from kinematics.camera_io import load_cameras, save_cameras
+    from kinematics.cameras.files import load_cameras, save_cameras
 
     cams = in_reference_frame(rig(3))
     rng = np.random.default_rng(4)
@@ -529,7 +529,7 @@ def test_command_intrinsics_only_from_unsynchronised_images(tmp_path, capsys):
                f"--camera=cam1={tmp_path / 'b' / 'cam1'}", "--intrinsics-only",
                "--distortion", "4", "-o", tmp_path / "k.toml", "--report-png",
                tmp_path / "k.png") == 0
-    from kinematics.camera_io import load_cameras
+    from kinematics.cameras.files import load_cameras
 
     got = load_cameras(tmp_path / "k.toml")
     for cam in cams:

@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from kinematics.camera_io import import_anipose_toml, import_opencv_yaml, load_camera_file
 from kinematics.cameras import PinholeCamera
+from kinematics.cameras.files import import_anipose_toml, import_opencv_yaml, load_camera_file
 from kinematics.errors import KinematicsError
 from videotrack.calibration.formats import guess_format, read_cameras
 from videotrack.io.camera_formats import (

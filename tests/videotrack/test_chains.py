@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from kinematics.chain_xml import load_body
-from kinematics.fk import forward_kinematics
+from kinematics.model.chain_xml import load_body
+from kinematics.model.fk import forward_kinematics
 
 REPO = Path(__file__).resolve().parents[2]
 FLY = REPO / "chains" / "fly_six_legs.xml"

@@ -72,8 +72,8 @@ FREE_ROOT = """<?xml version="1.0"?>
 
 
 def test_show_free_root_with_default_windows(tmp_path, capsys):
-    from kinematics.chain_xml import load_body
-    from kinematics.placement import root_windows
+    from kinematics.fit.placement import root_windows
+    from kinematics.model.chain_xml import load_body
 
     path = tmp_path / "mouse.xml"
     path.write_text(FREE_ROOT.format(windows="", more='<marker name="tail" offset="-22 2 0"/>'))

@@ -5,7 +5,7 @@ import argparse
 
 import pytest
 
-from kinematics.settings import PROFILES, START_MODES
+from kinematics.fit.settings import PROFILES, START_MODES
 from videotrack.cli import build_parser, main
 from videotrack.config import (
     ANNEAL,
@@ -46,7 +46,7 @@ def test_triangulation_choices_are_the_configs():
     assert KEYPOINTS.key("triangulation").choices == TRIANGULATION_METHODS
     assert tuple(option("triangulate", "--init").choices) == TRIANGULATION_INITS
     assert set(TRIANGULATION_INITS) < set(TRIANGULATION_METHODS)
-    from kinematics import triangulation
+    from kinematics.observe import triangulation
 
     for method in TRIANGULATION_METHODS:  # what markerless.py calls for [keypoints] route 3d
         assert callable(getattr(triangulation, f"triangulate_{method}"))

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from kinematics.chain_xml import load_body
-from kinematics.histogram_xml import load_archive
-from kinematics.histograms import bin_index
+from kinematics.model.chain_xml import load_body
+from kinematics.model.histogram_xml import load_archive
+from kinematics.model.histograms import bin_index
 from videotrack.cli import main
 from videotrack.results import results_from_fit, write_results
 
@@ -15,7 +15,7 @@ def results_file(tmp_path, locust):
     from kinematics.fit import FrameResult
 
     chain = tmp_path / "chain.xml"
-    from kinematics.chain_xml import save_body
+    from kinematics.model.chain_xml import save_body
 
     save_body(chain, locust)
     base = locust.mean_posture_deg()

@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from kinematics.camera_io import save_cameras
 from kinematics.cameras import PinholeCamera
-from kinematics.rotations import euler_yxz
+from kinematics.cameras.files import save_cameras
+from kinematics.model.rotations import euler_yxz
 from videotrack import cli
 from videotrack.errors import VideoTrackError
 from videotrack.io.pose3d import is_pose3d, read_pose3d, write_pose3d

@@ -6,7 +6,7 @@ from pathlib import Path
 import pytest
 
 from kinematics.errors import KinematicsError, LocatedError
-from kinematics.settings import AnnealParams, ErrorOptions, setting
+from kinematics.fit.settings import AnnealParams, ErrorOptions, setting
 from videotrack.config import (
     ANNEAL,
     FILTER_STEPS,
@@ -142,7 +142,7 @@ def test_describe_is_generated_from_the_schema():
         assert all(f"`{k.name}`" in steps for k in section.keys)
 
 
-# -- [anneal]: derived from kinematics.settings (AnnealParams, ErrorOptions) -------------------
+# -- [anneal]: derived from kinematics.fit.settings (AnnealParams, ErrorOptions) -------------------
 
 def _anneal_config(tmp_path, body: str):
     return parse_config(MINIMAL + "[anneal]\n" + body, tmp_path / "p.toml")

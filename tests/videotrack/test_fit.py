@@ -47,7 +47,7 @@ def test_run_fits_planted_postures(project, capsys):
 def test_candidates_file_round_trip_and_stale_removal(project, tmp_path):
     from dataclasses import replace
 
-    from kinematics.chain_xml import load_body
+    from kinematics.model.chain_xml import load_body
     from videotrack.results import attach_candidates, frame_results, write_candidates
 
     fitted = project / "detections.results.csv"

@@ -4,7 +4,7 @@ matches its markers in 3D by default (match 'auto') and fits the planted movemen
 import numpy as np
 
 from kinematics.cameras import PinholeCamera
-from kinematics.chain_xml import loads_body
+from kinematics.model.chain_xml import loads_body
 from tests.fixtures.bodies import LEG_XML
 from tests.fixtures.cameras import four_cameras
 from tests.fixtures.projects import cluttered_leg_project
@@ -90,7 +90,7 @@ def test_frames_with_detections_but_no_3d_point_are_named():
     """A frame whose markers only two views see has no 3D point: the fit warns by name
     instead of reporting a frame without detections and nothing else."""
     from kinematics.fit import AnnealParams, Fitter
-    from kinematics.fk import forward_kinematics
+    from kinematics.model.fk import forward_kinematics
     from videotrack.detections import build_detections
     from videotrack.results import results_from_fit
     from videotrack.workflow import fit_warnings

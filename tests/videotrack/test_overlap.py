@@ -159,7 +159,7 @@ def test_records_go_to_the_fit_in_blocks_that_fill_the_lanes(rendered):
     half-empty lanes, so a block fills them four times."""
     import numba
 
-    from kinematics._lane_kernels import LANES
+    from kinematics._kernels.lanes import LANES
 
     model = pipeline.load_model(load_config(rendered / "project.toml"))
     with pipeline.FitAlongside(model) as stream:

@@ -4,7 +4,7 @@ import cv2
 import numpy as np
 import pytest
 
-from kinematics.fk import forward_kinematics
+from kinematics.model.fk import forward_kinematics
 from videotrack.errors import VideoTrackError
 from videotrack.motion import smooth_random_motion
 from videotrack.paper_setup import VIEW_SIZE, locust_cameras

@@ -4,8 +4,8 @@ absent markers left out, detections at the ground truth, bad points files one li
 import numpy as np
 import pytest
 
-from kinematics.camera_io import save_cameras
 from kinematics.cameras import PinholeCamera
+from kinematics.cameras.files import save_cameras
 from videotrack.cli import main
 from videotrack.detections import load_detections
 from videotrack.errors import VideoTrackError

@@ -13,12 +13,12 @@ from videotrack.errors import VideoTrackError, VideoTrackWarning
 from videotrack.video import (
     VideoSet,
     VideoSource,
-    _Packets,
     natural_key,
     open_videos,
     parse_frame_range,
     resolve_frames,
 )
+from videotrack.video_backends import _Packets
 
 
 def noise_frames(n, shape=(48, 64), seed=0):
@@ -101,7 +101,7 @@ def ffmpeg_grey(path):
 
 def test_mjpeg_is_decoded_from_its_packets_with_exact_seeking(tmp_path, video_writer,
                                                              monkeypatch):
-    monkeypatch.setattr("videotrack.video.DECODE_THREADS", 4)  # decoded ahead on any runner
+    monkeypatch.setattr("videotrack.video_backends.DECODE_THREADS", 4)  # decoded ahead, any runner
     frames = smooth_colour_frames(24)
     path = video_writer(tmp_path / "m.avi", frames, fourcc="MJPG")
     truth = [cv2.cvtColor(f, cv2.COLOR_BGR2GRAY).astype(float) for f in frames]
@@ -131,7 +131,7 @@ def test_mjpeg_is_decoded_from_its_packets_with_exact_seeking(tmp_path, video_wr
 
 def test_reads_between_frames_of_a_paused_sequential_read(tmp_path, video_writer,
                                                           monkeypatch):
-    monkeypatch.setattr("videotrack.video.DECODE_THREADS", 4)
+    monkeypatch.setattr("videotrack.video_backends.DECODE_THREADS", 4)
     path = video_writer(tmp_path / "m.avi", smooth_colour_frames(40), fourcc="MJPG")
     with VideoSource(path) as v:
         whole = [f.copy() for _, f in v.frames()]
@@ -149,7 +149,7 @@ def test_reads_between_frames_of_a_paused_sequential_read(tmp_path, video_writer
 
 def test_mjpeg_packets_refused_fall_back_to_ffmpeg(tmp_path, video_writer, monkeypatch):
     path = video_writer(tmp_path / "m.avi", smooth_colour_frames(6), fourcc="MJPG")
-    monkeypatch.setattr("videotrack.video._PACKET_TOLERANCE", -1.0)  # no packet matches
+    monkeypatch.setattr("videotrack.video_backends._PACKET_TOLERANCE", -1.0)  # no packet matches
     with VideoSource(path) as v:
         assert not isinstance(v._backend, _Packets)
         got = [f.copy() for _, f in v.frames()]
@@ -158,7 +158,7 @@ def test_mjpeg_packets_refused_fall_back_to_ffmpeg(tmp_path, video_writer, monke
 
 
 def test_damaged_mjpeg_frames_are_decoded_by_ffmpeg(tmp_path, video_writer, monkeypatch):
-    monkeypatch.setattr("videotrack.video.DECODE_THREADS", 4)
+    monkeypatch.setattr("videotrack.video_backends.DECODE_THREADS", 4)
     path = video_writer(tmp_path / "d.avi", smooth_colour_frames(30), fourcc="MJPG")
     whole = [f.copy() for _, f in VideoSource(path).frames()]
     data = bytearray(path.read_bytes())

@@ -9,10 +9,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from kinematics.chain_xml import default_histogram
 from kinematics.errors import KinematicsError
-from kinematics.fk import forward_kinematics
 from kinematics.model import Axis, Body, Chain, Joint, Marker, Segment
+from kinematics.model.chain_xml import default_histogram
+from kinematics.model.fk import forward_kinematics
 
 
 # -- body edits (chain editor, manual correction) -------------------------------------------
@@ -81,7 +81,7 @@ def edit_root_settings(body: Body, chain: str, *, mode: str, position, marker: s
                        translation_text: str = "", rotation_text: str = "") -> Body:
     """The chain editor's root page applied: mode (fixed, marker, free), position, root
     marker (None for none) and the free root's windows as typed (empty = default, see
-    :func:`kinematics.placement.root_windows`).
+    :func:`kinematics.fit.placement.root_windows`).
 
     Raises :class:`~kinematics.errors.KinematicsError` for what the typed values cannot
     express (a window that is no number, a marker root without a marker); the rest is left
@@ -101,7 +101,7 @@ def default_root_windows(body: Body, chain: str) -> tuple[float, float] | None:
     """The windows a chain's root gets when made free with empty windows, (translation,
     rotation degrees), or None when it cannot be free (no markers on its root joint's
     segments)."""
-    from kinematics.placement import root_windows
+    from kinematics.fit.placement import root_windows
 
     ch = find_element(body, "chain", chain)
     if ch is None or not any(s.markers for s in ch.root_joint.segments):
@@ -126,7 +126,7 @@ def edit_axis(body: Body, index: int, *, min_deg: float | None = None,
     """Change the range or lock of the axis at posture index ``index``.
 
     The axis gets its default histogram again (uniform over the new range, or the single
-    bin of the locked value; :func:`kinematics.chain_xml.default_histogram`), because a
+    bin of the locked value; :func:`kinematics.model.chain_xml.default_histogram`), because a
     learned histogram does not fit another range. ``locked_deg=None`` frees the axis; leave
     it out to keep the lock as it is.
     """

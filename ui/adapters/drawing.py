@@ -1,7 +1,7 @@
 """Posture drawing: projected markers and skeleton lines per view, a frame's detections
 and keypoints, the blank canvas of a keypoint project without video (no Qt).
 
-The drawing adapters call :func:`kinematics.fk.forward_kinematics` and each camera's
+The drawing adapters call :func:`kinematics.model.fk.forward_kinematics` and each camera's
 ``project``; they never compute kinematics themselves."""
 
 from __future__ import annotations
@@ -11,9 +11,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kinematics.fk import forward_kinematics
-from kinematics.histograms import wrap_deg
 from kinematics.model import Body
+from kinematics.model.fk import forward_kinematics
+from kinematics.model.histograms import wrap_deg
 
 
 # -- posture drawing ------------------------------------------------------------------------

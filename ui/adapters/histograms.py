@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kinematics.histograms import Histogram, bin_centres
+from kinematics.model.histograms import Histogram, bin_centres
 
 
 # -- histograms -----------------------------------------------------------------------------

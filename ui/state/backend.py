@@ -26,7 +26,7 @@ from kinematics.fit import (
 )
 from kinematics.fit import unseen_markers as _unseen_markers
 from kinematics.model import Body
-from kinematics.observations import Observations
+from kinematics.observe.observations import Observations
 from ui.adapters import frame_detections
 from videotrack.markerless import (
     KeypointInput,

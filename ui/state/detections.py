@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 
 from kinematics.errors import LocatedError
-from kinematics.observations import Observations
+from kinematics.observe.observations import Observations
 from ui import adapters
 from ui.state import backend
 from ui.state.history import Edit
@@ -23,7 +23,7 @@ class DetectionsMixin:
     @property
     def fit_detections(self):
         """What the fit and E use: the detections file with the user's edits, or a keypoint
-        project's :class:`~kinematics.observations.Observations`; Observations with the
+        project's :class:`~kinematics.observe.observations.Observations`; Observations with the
         marks where markers are marked hidden in a view (None: nothing to fit)."""
         return self._edited_now()[1]
 

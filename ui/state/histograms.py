@@ -19,7 +19,7 @@ class HistogramsMixin:
         (corrected, or E ≤ :attr:`threshold` now, see :func:`ui.adapters.trusted`), or every
         fitted frame. Returns the number of frames learned from (0: nothing changed).
         """
-        from kinematics.histogram_xml import apply_archive, archive_from_body, update_archive
+        from kinematics.model.histogram_xml import apply_archive, archive_from_body, update_archive
 
         angles = (adapters.learning_angles(self.results, threshold=self.threshold)
                   if within_threshold else adapters.learning_angles(self.results, None))
@@ -34,7 +34,7 @@ class HistogramsMixin:
 
     def export_histograms(self, path) -> bool:
         """Write every axis' histogram to a histogram archive XML."""
-        from kinematics.histogram_xml import archive_from_body, save_archive
+        from kinematics.model.histogram_xml import archive_from_body, save_archive
 
         try:
             save_archive(path, archive_from_body(self.body))
@@ -47,7 +47,7 @@ class HistogramsMixin:
 
     def import_histograms(self, path) -> bool:
         """Apply a histogram archive to the chain (undoable)."""
-        from kinematics.histogram_xml import apply_archive, load_archive
+        from kinematics.model.histogram_xml import apply_archive, load_archive
 
         try:
             body = apply_archive(self.body, load_archive(path))

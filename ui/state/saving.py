@@ -17,7 +17,7 @@ class SavingMixin:
     # -- chain file ---------------------------------------------------------------------
     def save_chain_as(self, path, body: Body | None = None) -> bool:
         """Write the chain (or ``body``) as chain XML (histograms included)."""
-        from kinematics.chain_xml import save_body
+        from kinematics.model.chain_xml import save_body
 
         try:
             save_body(path, body or self.body)
@@ -31,8 +31,8 @@ class SavingMixin:
     # -- saving -------------------------------------------------------------------------
     def save(self) -> bool:
         """Write what changed: the project config, the chain file, the results file."""
-        from kinematics.chain_xml import save_body
         from kinematics.fileio import atomic_write_text
+        from kinematics.model.chain_xml import save_body
 
         try:
             if "config" in self._dirty:

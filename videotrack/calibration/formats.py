@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from kinematics.camera_io import load_cameras
+from kinematics.cameras.files import load_cameras
 from kinematics.errors import KinematicsError
 from videotrack.io.camera_formats import (
     import_anipose_toml,

@@ -11,11 +11,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from kinematics.calibration_math import camera_from_params, params_from_camera, triangulate
 from kinematics.cameras import PinholeCamera
-from videotrack.calibration.bundle import (
+from kinematics.cameras.calibration_math import camera_from_params, params_from_camera, triangulate
+from videotrack.calibration.bundle import Options
+from videotrack.calibration.bundle_adjust import (
     _N_CAM,
-    Options,
     Problem,
     adjust_iterative,
     project_by_camera,

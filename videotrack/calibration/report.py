@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from kinematics.calibration_math import triangulate
+from kinematics.cameras.calibration_math import triangulate
 from videotrack.calibration.boards import Board
 from videotrack.calibration.bundle import Calibration
 from videotrack.calibration.detect import Corners

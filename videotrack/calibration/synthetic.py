@@ -11,8 +11,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from kinematics.calibration_math import rodrigues
 from kinematics.cameras import PinholeCamera
+from kinematics.cameras.calibration_math import rodrigues
 from videotrack.calibration.boards import Board
 
 __all__ = ["board_image", "board_poses_facing", "render_view", "write_views"]

@@ -171,7 +171,7 @@ def _outputs(args) -> dict:
 
 
 def _write(args, cameras: dict, error: float | None, units: str | None = "mm") -> None:
-    from kinematics.camera_io import save_cameras
+    from kinematics.cameras.files import save_cameras
     from videotrack.io.camera_formats import save_anipose_toml, save_dlt_csv, save_opencv_yaml
 
     save_cameras(args.out, cameras, units=units)
@@ -229,7 +229,7 @@ def _calibrate(args, cams: dict, reference: str, cache: Path) -> int:
 
     from tqdm import tqdm
 
-    from kinematics.camera_io import load_cameras
+    from kinematics.cameras.files import load_cameras
     from videotrack.calibration.boards import load_board
     from videotrack.calibration.bundle import Options, calibrate
     from videotrack.calibration.detect import Source, detect_all

@@ -5,10 +5,10 @@ from __future__ import annotations
 import argparse
 import sys
 
-from kinematics.chain_xml import load_body
 from kinematics.errors import KinematicsError
+from kinematics.fit.placement import RootModel, root_windows
 from kinematics.model import Axis, Body, Joint
-from kinematics.placement import RootModel, root_windows
+from kinematics.model.chain_xml import load_body
 
 DESCRIPTION = """\
 Inspect kinematic chain files (XML; format in docs/formats.md).
@@ -91,7 +91,7 @@ def check_fittable(body: Body) -> None:
     """Build the fitting problem of ``body`` as a fit does (with a stand-in camera per chain),
     so that ``chain check`` refuses what a fit would (no markers, no free axis, ...)."""
     from kinematics.cameras import OrthographicCamera
-    from kinematics.problem import FitProblem
+    from kinematics.fit.problem import FitProblem
 
     FitProblem.build(body, [OrthographicCamera.from_axes("check", 1.0, ("x", "-y"), (0, 0))])
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from kinematics.settings import START_MODES
+from kinematics.fit.settings import START_MODES
 
 EXAMPLES = """\
 examples:

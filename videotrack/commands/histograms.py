@@ -91,9 +91,9 @@ def _load_with_locked(path: Path):
     is what a locked axis carries and learning never leaves)."""
     import numpy as np
 
-    from kinematics.chain_xml import load_body
     from kinematics.errors import KinematicsError
-    from kinematics.histogram_xml import archive_from_body, load_archive
+    from kinematics.model.chain_xml import load_body
+    from kinematics.model.histogram_xml import archive_from_body, load_archive
 
     try:
         archive = load_archive(path)
@@ -129,8 +129,8 @@ def _angles_for(body, results_paths, all_frames: bool):
 
 
 def run_update(args) -> int:
-    from kinematics.chain_xml import load_body, save_body
-    from kinematics.histogram_xml import (
+    from kinematics.model.chain_xml import load_body, save_body
+    from kinematics.model.histogram_xml import (
         apply_archive,
         archive_from_body,
         load_archive,
@@ -158,7 +158,7 @@ def run_update(args) -> int:
 
 
 def run_merge(args) -> int:
-    from kinematics.histogram_xml import merge_archives, save_archive
+    from kinematics.model.histogram_xml import merge_archives, save_archive
 
     guard_output(args.output, {p: "an input archive" for p in args.archives}, "xml",
                  args.force, "-o")

@@ -108,8 +108,8 @@ def add_parser(subparsers) -> None:
 
 
 def run(args) -> int:
-    from kinematics.camera_io import load_cameras
-    from kinematics.chain_xml import loads_body
+    from kinematics.cameras.files import load_cameras
+    from kinematics.model.chain_xml import loads_body
     from videotrack.motion import read_angles_csv, smooth_random_motion
     from videotrack.paper_setup import bundled_chain, locust_cameras
     from videotrack.synth import write_synthetic_project
@@ -193,7 +193,7 @@ def _options(args):
 
 def _write_points(args) -> int:
     """``--points``: render given 3D marker trajectories through the cameras."""
-    from kinematics.camera_io import load_camera_file
+    from kinematics.cameras.files import load_camera_file
     from videotrack.synth import read_points, write_points_project
 
     given = [name for name, value in (("--chain", args.chain), ("--angles", args.angles),

@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from kinematics.triangulation import LOSSES
+from kinematics.observe.triangulation import LOSSES
 from videotrack.config import TRIANGULATION_INITS, TRIANGULATION_METHODS
 from videotrack.io.keypoints import FORMATS
 
@@ -117,7 +117,7 @@ def load_any_cameras(path: Path) -> dict:
     an Anipose/Pose2Sim calibration.toml."""
     import tomllib
 
-    from kinematics.camera_io import import_anipose_toml, load_cameras
+    from kinematics.cameras.files import import_anipose_toml, load_cameras
 
     try:
         doc = tomllib.loads(path.read_text(encoding="utf-8"))
@@ -180,7 +180,7 @@ def run(args) -> int:
     import numpy as np
     from tqdm import tqdm
 
-    from kinematics import triangulation as tri
+    from kinematics.observe import triangulation as tri
     from videotrack.commands._common import note
     from videotrack.errors import VideoTrackError
     from videotrack.io.keypoints import align_cameras, read_keypoints

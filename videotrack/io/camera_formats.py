@@ -3,7 +3,7 @@
 
 Readers return ``{name: PinholeCamera}`` (world to camera, OpenCV pixel convention: origin
 at the centre of the top-left pixel, v down); writers are atomic. Reading Anipose TOML and
-OpenCV YAML is :mod:`kinematics.camera_io`'s; this module adds the writers and the other
+OpenCV YAML is :mod:`kinematics.cameras.files`'s; this module adds the writers and the other
 formats. Every problem is a one-line :class:`~kinematics.errors.KinematicsError` naming the
 file (and line or field).
 """
@@ -20,9 +20,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from kinematics.calibration_math import rotation_to_rvec
-from kinematics.camera_io import import_anipose_toml, import_opencv_yaml
 from kinematics.cameras import PinholeCamera
+from kinematics.cameras.calibration_math import rotation_to_rvec
+from kinematics.cameras.files import import_anipose_toml, import_opencv_yaml
 from kinematics.errors import KinematicsError
 from kinematics.fileio import atomic_write, atomic_write_text
 from videotrack.errors import VideoTrackWarning
@@ -271,7 +271,7 @@ def load_qca(path: str | os.PathLike) -> dict[str, PinholeCamera]:
     (checked against Pose2Sim's conversion of the same file). Distortion: radial k1-k3 and
     tangential p1, p2 (OpenCV's model).
     """
-    from kinematics.safe_xml import read_foreign
+    from kinematics.model.safe_xml import read_foreign
 
     root = read_foreign(path)
     cams = root.findall("./cameras/camera")

@@ -121,9 +121,9 @@ def anneal_params(config, **overrides) -> AnnealParams:
 
 def load_model(config, **overrides) -> ProjectModel:
     """Chain (+ archive), cameras of the views and annealing parameters of a project."""
-    from kinematics.camera_io import load_cameras
-    from kinematics.chain_xml import load_body
-    from kinematics.histogram_xml import apply_archive, load_archive
+    from kinematics.cameras.files import load_cameras
+    from kinematics.model.chain_xml import load_body
+    from kinematics.model.histogram_xml import apply_archive, load_archive
 
     chain_path = config["chain"]["path"]
     if not chain_path:
