@@ -41,8 +41,8 @@ from kinematics.fit.refine import refine_reference
 from kinematics.model.chain_xml import load_body
 from kinematics.model.fk import forward_kinematics
 from kinematics.observe.observations import ObservationArrays
-from videotrack.motion import smooth_random_motion
-from videotrack.paper_setup import bundled_chain, locust_cameras
+from videotrack.synth.motion import smooth_random_motion
+from videotrack.synth.paper_setup import bundled_chain, locust_cameras
 
 PAPER_FPS = 0.4  # Sect. 3.2: Table 1 schedule on a 1.8 GHz Pentium 4
 

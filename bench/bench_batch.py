@@ -5,7 +5,7 @@ Run from the repository root::
     python bench/bench_batch.py [--trials 20] [--frames 60] [--repeats 2] [--kills 3]
 
 A project of ``--trials`` synthetic trials (the paper's locust set-up, ``--frames`` frames
-each, Table 1 schedule unless ``--n-end``; ``videotrack.paper_setup.write_example_project``)
+each, Table 1 schedule unless ``--n-end``; ``videotrack.synth.paper_setup.write_example_project``)
 is processed by the ``videotrack batch`` command in a subprocess, as a user runs it, timing
 the wall clock of the whole command (start-up included), after one untimed run that fills
 numba's cache:
@@ -38,7 +38,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from videotrack.paper_setup import write_example_project
+from videotrack.synth.paper_setup import write_example_project
 
 INPUTS = {"video.avi", "truth.csv", "config.toml"}
 

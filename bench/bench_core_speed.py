@@ -35,8 +35,8 @@ from kinematics.fit import AnnealParams, Fitter
 from kinematics.cameras import PinholeCamera
 from kinematics.model.chain_xml import load_body
 from kinematics.model.fk import forward_kinematics
-from videotrack.motion import smooth_random_motion
-from videotrack.paper_setup import bundled_chain, locust_cameras
+from videotrack.synth.motion import smooth_random_motion
+from videotrack.synth.paper_setup import bundled_chain, locust_cameras
 
 numba.set_num_threads(1)
 n_frames = int(sys.argv[1])

@@ -78,7 +78,7 @@ class User:
 
     def __init__(self, app, window, truth_path: Path, log: bool, hide: bool = False) -> None:
         from ui import adapters
-        from videotrack.tables import read_table
+        from videotrack.results.tables import read_table
 
         self.app, self.window, self.s = app, window, window.session
         self.adapters, self.log = adapters, log

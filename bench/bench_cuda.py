@@ -44,8 +44,8 @@ from bench_lanes import detections  # noqa: E402
 from kinematics._kernels import cuda as _cuda_kernels  # noqa: E402
 from kinematics.fit import AnnealParams, Fitter  # noqa: E402
 from kinematics.model.chain_xml import load_body  # noqa: E402
-from videotrack.motion import smooth_random_motion  # noqa: E402
-from videotrack.paper_setup import bundled_chain, locust_cameras  # noqa: E402
+from videotrack.synth.motion import smooth_random_motion  # noqa: E402
+from videotrack.synth.paper_setup import bundled_chain, locust_cameras  # noqa: E402
 
 
 def timed(body, cams, dets, params):

@@ -7,7 +7,7 @@ Run from the repository root::
 Scene: 720 x 576 grey PAL frames holding two 360 x 576 views side by side (the right one
 mirrored), five 4-px-diameter markers per view (10 per frame) at random sub-pixel positions,
 background 20, marker intensity 200, Gaussian noise sigma = 2 grey levels, rendered
-anti-aliased by ``videotrack.render.render_markers``. Filter chain: a global threshold at 100.
+anti-aliased by ``videotrack.synth.render.render_markers``. Filter chain: a global threshold at 100.
 
 (a) accuracy: RMS distance between detected centroids and the planted positions, for the
 intensity-weighted centroid (default) and the binary centroid (the mean of the region's pixel
@@ -36,13 +36,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from _report import machine, print_table
 
-from videotrack.detect import FrameDetector, detect_video
-from videotrack.detections import DetectSettings
-from videotrack.filters import FilterChain
-from videotrack.markers import MarkerSettings
-from videotrack.render import render_markers
-from videotrack.video import VideoSource
-from videotrack.views import View
+from videotrack.detect.detections import DetectSettings
+from videotrack.detect.filters import FilterChain
+from videotrack.detect.markers import MarkerSettings
+from videotrack.detect.run import FrameDetector, detect_video
+from videotrack.detect.video import VideoSource
+from videotrack.detect.views import View
+from videotrack.synth.render import render_markers
 
 WIDTH, HEIGHT, PER_VIEW = 720, 576, 5
 VIEWS = (View("left", (0, 0, 360, 576)), View("right", (360, 0, 360, 576), flip_x=True))

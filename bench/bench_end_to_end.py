@@ -13,7 +13,7 @@ record). The project is the one synth writes (threshold 96, min_area 3).
 For each fitting setting, in one process after an untimed warm-up run (numba's cache loaded):
 
 - **decode**: every frame decoded to grey as the pipeline opens the video (MJPEG: its
-  packets decoded by libjpeg-turbo, ahead in threads; ``videotrack.video``);
+  packets decoded by libjpeg-turbo, ahead in threads; ``videotrack.detect.video``);
 - **decode + detect**: ``detect_video`` over the whole video;
 - **fit**: ``Fitter.iter_fit`` over the detections, all numba threads;
 - **whole**: ``run_project(force=True)`` as ``videotrack run --force`` runs it: detect, save
@@ -49,9 +49,9 @@ from _report import in_out_folder, machine, print_table
 from bench_detection import write as write_avi
 
 from videotrack.cli import main as cli
-from videotrack.config import load_config
-from videotrack.detect import detect_video, settings_from_config, video_paths
-from videotrack.video import open_videos
+from videotrack.detect.run import detect_video, settings_from_config, video_paths
+from videotrack.detect.video import open_videos
+from videotrack.project.config import load_config
 from videotrack.workflow import load_model, not_streamable, run_project
 
 CAMERAS = """\

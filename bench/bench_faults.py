@@ -124,9 +124,9 @@ def make_project(root: Path, trials: int, frames: int, anneal: dict) -> list[str
     """The synthetic project: raw (uncompressed) videos, the last trial a PNG folder."""
     import cv2
 
-    from videotrack.paper_setup import write_example_project
-    from videotrack.synth import trial_names
-    from videotrack.video import VideoSource
+    from videotrack.detect.video import VideoSource
+    from videotrack.synth.paper_setup import write_example_project
+    from videotrack.synth.project import trial_names
 
     names = trial_names(trials)
     write_example_project(root, names, frames, anneal)
@@ -268,7 +268,7 @@ def main() -> int:
         rows.append(row)
 
         # -- corrupt bytes, same size -------------------------------------------------------
-        from videotrack.identity import sha256_of
+        from videotrack.project.identity import sha256_of
 
         row = Row("random bytes over part of a video (same size)")
         for k in range(args.repeats):

@@ -37,7 +37,7 @@ Protocol:
 4. ``--cameras`` (6 or 3) pinhole cameras (640x640 px, 60 mm from the fly, ``--px-per-mm``
    100 at the fly) on a ring around it at elevations alternating 15 and 40 deg; the true 3D
    keypoints of ``--frames`` are written as a points CSV, rendered by ``videotrack synth --points``
-   (``videotrack.synth.write_points_project``) as ``--diameter`` px markers (4), one FFV1
+   (``videotrack.synth.project.write_points_project``) as ``--diameter`` px markers (4), one FFV1
    video per camera, and detected with the written project (``videotrack detect``). A
    second video draws only ``--leg``'s 5 markers.
 5. Fits, all frame-independent (``start="mean"``), unlabelled markers, refinement on (and,
@@ -367,10 +367,10 @@ def render_and_detect(out: Path, names, points, cams, diameter, seed, colours=()
     """Render points (n, m, 3) as a marker video per camera (markers in ``colours``: one
     view per camera and colour), detect them; (detections, seconds to render, seconds to
     detect)."""
-    from videotrack.detect import detect_project
-    from videotrack.project import command_config
-    from videotrack.synth import SynthOptions, read_points, write_points_project
-    from videotrack.tables import write_table
+    from videotrack.detect.run import detect_project
+    from videotrack.project.folders import command_config
+    from videotrack.results.tables import write_table
+    from videotrack.synth.project import SynthOptions, read_points, write_points_project
 
     out.mkdir(parents=True, exist_ok=True)
     cols = ["frame"] + [f"{m}.{a}" for m in names for a in "xyz"]

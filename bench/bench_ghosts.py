@@ -37,9 +37,9 @@ from bench_table2 import COLUMNS, render_and_detect
 from kinematics.fit import AnnealParams, Fitter
 from kinematics.fit.error_function import ErrorOptions
 from kinematics.model.chain_xml import load_body
-from videotrack.motion import smooth_random_motion
-from videotrack.paper_setup import bundled_chain, locust_cameras
-from videotrack.synth import SynthOptions
+from videotrack.synth.motion import smooth_random_motion
+from videotrack.synth.paper_setup import bundled_chain, locust_cameras
+from videotrack.synth.project import SynthOptions
 
 GROSS_DEG = 10.0
 VARIANTS = {

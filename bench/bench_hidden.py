@@ -30,8 +30,8 @@ from _report import machine, print_table
 from kinematics.fit import AnnealParams, Fitter
 from kinematics.model.chain_xml import load_body
 from kinematics.model.fk import forward_kinematics
-from videotrack.motion import smooth_random_motion
-from videotrack.paper_setup import bundled_chain, locust_cameras
+from videotrack.synth.motion import smooth_random_motion
+from videotrack.synth.paper_setup import bundled_chain, locust_cameras
 
 NOISE_PX = 0.2
 GHOSTS = (None, 6.0, 15.0, 25.0)  # px from the hidden tip; None: nothing there

@@ -54,8 +54,8 @@ from kinematics.model.chain_xml import load_body  # noqa: E402
 from kinematics.model.fk import forward_kinematics  # noqa: E402
 from kinematics.model.rotations import euler_yxz  # noqa: E402
 from kinematics.observe.observations import Observations  # noqa: E402
-from videotrack.motion import smooth_random_motion  # noqa: E402
-from videotrack.paper_setup import bundled_chain, locust_cameras  # noqa: E402
+from videotrack.synth.motion import smooth_random_motion  # noqa: E402
+from videotrack.synth.paper_setup import bundled_chain, locust_cameras  # noqa: E402
 
 
 def detections(body, cams, angles, ghosts: int, seed: int = 0) -> list:

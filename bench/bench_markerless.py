@@ -1,7 +1,7 @@
 """Markerless route, synthetic truth: the chain fitted to 2D keypoints against
 triangulate-then-fit with each triangulation backend.
 
-A free-root rat hind leg (videotrack.synth_keypoints: pelvis with both hips and the tail
+A free-root rat hind leg (videotrack.synth.keypoints: pelvis with both hips and the tail
 base, femur, tibia) moves through smooth random postures, seen by 4 calibrated pinhole
 cameras; every camera's DeepLabCut CSV has 2 px of noise and 10 % of its keypoints missing
 or swapped with another keypoint. Each project runs through ``videotrack.pipeline.run_project``
@@ -47,9 +47,9 @@ def _mean_error(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def run(folder: Path, frames: int, seed: int, distance: float) -> list[tuple]:
-    from videotrack.config import load_config
-    from videotrack.markerless import load_keypoints
-    from videotrack.synth_keypoints import write_session
+    from videotrack.markerless.route import load_keypoints
+    from videotrack.project.config import load_config
+    from videotrack.synth.keypoints import write_session
     from videotrack.workflow import load_model, run_project
 
     rows = []

@@ -28,7 +28,8 @@ Protocol:
    treadmill on the side of the leg, written as a camera TOML; every marker is checked to
    stay inside every image.
 4. The stretch (world: x anterior, y up, z right; mm) is written as a points CSV and rendered
-   by ``videotrack synth --points`` (``videotrack.synth.write_points_project``), 6-px markers,
+   by ``videotrack synth --points`` (``videotrack.synth.project.write_points_project``),
+   6-px markers,
    one FFV1 video per camera; markers absent in the mocap are not drawn. Markers are detected
    with the written project file (``videotrack detect``: ``detect_project``).
 5. Fits (refinement on, the schedule shortened to ``--n-end`` with N_l, N_tau scaled, re-
@@ -409,10 +410,10 @@ def run(args, out: Path, keep: bool) -> int:
     from kinematics.fit import AnnealParams
     from kinematics.fit.error_function import ErrorOptions
     from kinematics.model.chain_xml import loads_body
-    from videotrack.detect import detect_project
-    from videotrack.project import command_config
-    from videotrack.synth import SynthOptions, read_points, write_points_project
-    from videotrack.tables import read_table, write_table
+    from videotrack.detect.run import detect_project
+    from videotrack.project.folders import command_config
+    from videotrack.results.tables import read_table, write_table
+    from videotrack.synth.project import SynthOptions, read_points, write_points_project
 
     side = args.side
     labels, xyz = load_mocap(args.data)
@@ -571,7 +572,7 @@ def status_line(res, frames) -> str:
 
 
 def plot(series, frames, start, path):
-    from videotrack.plots import _pyplot, _save_png
+    from videotrack.results.plots import _pyplot, _save_png
 
     plt = _pyplot()
     fig, axes = plt.subplots(3, 1, figsize=(10, 7.5), sharex=True)

@@ -34,7 +34,7 @@ from kinematics.fit import AnnealParams, ErrorOptions, Fitter
 from kinematics.model.chain_xml import load_body
 from kinematics.model.fk import forward_kinematics
 from kinematics.model.rotations import euler_yxz
-from videotrack.paper_setup import bundled_chain, locust_cameras
+from videotrack.synth.paper_setup import bundled_chain, locust_cameras
 
 
 def ring(n: int, distance: float) -> dict:

@@ -62,9 +62,9 @@ from bench_table2 import COLUMNS, render_and_detect
 
 from kinematics.fit import AnnealParams, Fitter
 from kinematics.model.chain_xml import load_body
-from videotrack.motion import smooth_random_motion
-from videotrack.paper_setup import bundled_chain, locust_cameras
-from videotrack.synth import SynthOptions
+from videotrack.synth.motion import smooth_random_motion
+from videotrack.synth.paper_setup import bundled_chain, locust_cameras
+from videotrack.synth.project import SynthOptions
 
 ROOT = Path(__file__).resolve().parents[1]
 #: A frame is off by more than this many pixels when some projected marker is.

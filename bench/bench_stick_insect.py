@@ -35,8 +35,8 @@ from bench_table2 import render_and_detect
 from kinematics.cameras import OrthographicCamera
 from kinematics.fit import AnnealParams, Fitter
 from kinematics.model.chain_xml import load_body
-from videotrack.paper_setup import bundled_chain
-from videotrack.synth import SynthOptions
+from videotrack.synth.paper_setup import bundled_chain
+from videotrack.synth.project import SynthOptions
 
 #: Table 3 of the paper: median S.D. (°) of each axis after 100 analyses.
 TABLE3 = {"J0.pi": 0.50, "J0.rho": 0.91, "J1.alpha": 1.71, "J1.psi": 3.04, "J1.beta": 2.54,

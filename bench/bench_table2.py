@@ -6,10 +6,11 @@ Run from the repository root::
 
 Protocol (paper Sect. 3.2): the locust hind-leg chain shipped in ``chains/locust_hindleg.xml``
 (coxa 13, femur 91, tibia 77 px), two orthographic views side and top
-(``videotrack.paper_setup.locust_cameras``), 4-px markers at the joint centres and the tibia
+(``videotrack.synth.paper_setup.locust_cameras``), 4-px markers at the joint centres and the tibia
 tip, ``--frames`` frames made of 10 concatenated smooth random movement sequences
-(``videotrack.motion.smooth_random_motion``), rendered anti-aliased by ``videotrack.synth`` into
-a lossless FFV1 video, markers detected by ``videotrack.detect`` (threshold 125, intensity-
+(``videotrack.synth.motion.smooth_random_motion``), rendered anti-aliased by
+``videotrack.synth.project`` into
+a lossless FFV1 video, markers detected by ``videotrack.detect.run`` (threshold 125, intensity-
 weighted centroids), fitted with the Table 1 defaults. Reported: per-axis RMSE of φ, ψ, α, β,
 α+β, γ for both views, the side view only and the top view only, with the paper's values; the
 view error E; the same with 2 static + 2 flickering ghost markers per view and 2 %
@@ -40,13 +41,15 @@ from kinematics.fit import AnnealParams, Fitter
 from kinematics.fit.error_function import ErrorOptions
 from kinematics.fit.refine import cramer_rao_bound
 from kinematics.model.chain_xml import load_body
-from videotrack.detect import detect_video
-from videotrack.detections import DetectSettings
-from videotrack.filters import FilterChain
-from videotrack.markers import MarkerSettings
-from videotrack.motion import smooth_random_motion
-from videotrack.paper_setup import bundled_chain, locust_cameras
-from videotrack.synth import (
+from videotrack.detect.detections import DetectSettings
+from videotrack.detect.filters import FilterChain
+from videotrack.detect.markers import MarkerSettings
+from videotrack.detect.run import detect_video
+from videotrack.detect.video import VideoSource
+from videotrack.detect.views import View
+from videotrack.synth.motion import smooth_random_motion
+from videotrack.synth.paper_setup import bundled_chain, locust_cameras
+from videotrack.synth.project import (
     SynthOptions,
     VideoSink,
     camera_sizes,
@@ -54,8 +57,6 @@ from videotrack.synth import (
     simulate,
     view_rois,
 )
-from videotrack.video import VideoSource
-from videotrack.views import View
 
 AXES = ("φ", "ψ", "α", "β", "α+β", "γ")
 PAPER = {

@@ -63,7 +63,7 @@ def main() -> int:
     from PySide6.QtWidgets import QApplication, QMessageBox
 
     from ui.views.main_window import MainWindow
-    from videotrack.tables import read_table
+    from videotrack.results.tables import read_table
 
     app = QApplication.instance() or QApplication([])
     app.setApplicationName("VideoTrack")

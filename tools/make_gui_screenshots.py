@@ -92,7 +92,7 @@ def main() -> int:
     from bench_gui import make_project
     from PySide6.QtWidgets import QApplication
 
-    from videotrack.synth_keypoints import write_session
+    from videotrack.synth.keypoints import write_session
 
     app = QApplication.instance() or QApplication([])
     app.setApplicationName("VideoTrack")

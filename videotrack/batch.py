@@ -54,8 +54,8 @@ from videotrack.batch_trial import (
 )
 from videotrack.cores import available_cores
 from videotrack.errors import VideoTrackError
-from videotrack.project import Project, Trial
-from videotrack.tables import text_table
+from videotrack.project.folders import Project, Trial
+from videotrack.results.tables import text_table
 
 #: Columns of the project summary table.
 SUMMARY_COLUMNS = ("trial", "state", "frames", "median_error_px", "bad_frames_pct", "time_s",

@@ -21,7 +21,7 @@ import numpy as np
 
 from kinematics.errors import LocatedError
 from videotrack.errors import VideoTrackWarning
-from videotrack.project import Trial, TrialOutputs, trial_outputs
+from videotrack.project.folders import Trial, TrialOutputs, trial_outputs
 
 #: States of a finished trial.
 DONE, UP_TO_DATE, FAILED = "done", "up to date", "failed"
@@ -196,7 +196,7 @@ def plan_trial(trial: Trial, force: bool = False) -> tuple[str, str]:
 def project_inputs(trials: Sequence[Trial]) -> dict[Path, str]:
     """Every file the trials read, by what it is (config files, chains, camera files,
     histogram archives, videos): what no output of a batch may replace."""
-    from videotrack.detect import detection_inputs
+    from videotrack.detect.run import detection_inputs
 
     found: dict[Path, str] = {}
     for trial in trials:

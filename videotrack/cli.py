@@ -25,7 +25,7 @@ from videotrack.errors import VideoTrackWarning
 
 # FFmpeg prints its own lines ("[ffv1 @ 0x...] slice count 18 is invalid") on damaged videos;
 # VideoTrack reports those as one-line warnings. OpenCV reads this once, when its FFmpeg
-# backend starts, which may be before videotrack.video is imported (a user's value wins).
+# backend starts, which may be before videotrack.detect.video is imported (a user's value wins).
 os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
 
 #: Sub-command modules, in the order ``--help`` lists them.

@@ -43,7 +43,7 @@ class Ragged:
 
 
 def as_ragged(detections, view_names: Sequence[str]) -> Ragged:
-    """Accept a :class:`videotrack.detections.Detections`-like object (``points`` (n, 2),
+    """Accept a :class:`videotrack.detect.detections.Detections`-like object (``points`` (n, 2),
     ``offsets`` (n_frames * n_views + 1,), optional ``view_names``) or a sequence of frames,
     each a sequence of per-view (n_c, 2) arrays (or an object with such a ``points``)."""
     nv = len(view_names)

@@ -3,7 +3,8 @@ what the fitter adds) and :class:`ErrorOptions` (which error function, Eq. 5 or 
 
 One source per setting: every field is declared with :func:`setting`, which holds its
 user-facing metadata (doc, bounds, choices) in the field's ``metadata``. The project file's
-``[anneal]`` section (:mod:`videotrack.config`), its reference in docs/config.md and the GUI's
+``[anneal]`` section (:mod:`videotrack.project.config`), its reference in docs/config.md and the
+GUI's
 form are derived from these fields, so a field added here is settable in a project file
 without further edits. ``__post_init__`` validation stays here and is what every caller gets.
 

@@ -18,8 +18,8 @@ from kinematics.model import Body, Chain
 from kinematics.model.histograms import Histogram
 from tests.fixtures.cameras import stick_cameras
 from tests.fixtures.planted import moving_roots, planted_detections
-from videotrack.motion import smooth_random_motion
-from videotrack.paper_setup import locust_cameras
+from videotrack.synth.motion import smooth_random_motion
+from videotrack.synth.paper_setup import locust_cameras
 
 
 def angle_errors(body, results, truth):
@@ -353,7 +353,7 @@ def test_nan_detections_are_dropped_and_counted(locust):
 
 
 def test_accepts_a_detections_record(locust):
-    from videotrack.detections import build_detections
+    from videotrack.detect.detections import build_detections
 
     cams = locust_cameras()
     truth = smooth_random_motion(locust, 3, 1, seed=14)

@@ -21,8 +21,8 @@ from tests.fixtures.assertions import assert_same
 from tests.fixtures.bodies import mouse_like
 from tests.fixtures.cameras import three_pinholes
 from tests.fixtures.planted import labelled_keypoints, planted_detections, planted_frames
-from videotrack.motion import smooth_random_motion
-from videotrack.paper_setup import locust_cameras
+from videotrack.synth.motion import smooth_random_motion
+from videotrack.synth.paper_setup import locust_cameras
 
 GPU = _ck.available()
 

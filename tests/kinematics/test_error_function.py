@@ -18,7 +18,7 @@ from kinematics.fit.problem import fold_body
 from kinematics.model import Axis, Body, Chain, Joint, Marker, Segment
 from kinematics.model.fk import forward_kinematics_reference
 from tests.fixtures.settings import ERROR_VARIANT_IDS, ERROR_VARIANTS
-from videotrack.paper_setup import locust_cameras
+from videotrack.synth.paper_setup import locust_cameras
 
 
 def kernel_error(proj, detections, opts: ErrorOptions):

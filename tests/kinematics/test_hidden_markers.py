@@ -18,8 +18,8 @@ from kinematics.observe.observations import Observations
 from tests.fixtures.cameras import stick_cameras
 from tests.fixtures.planted import moving_roots, planted_detections
 from tests.fixtures.settings import ERROR_VARIANT_IDS, ERROR_VARIANTS
-from videotrack.motion import smooth_random_motion
-from videotrack.paper_setup import locust_cameras
+from videotrack.synth.motion import smooth_random_motion
+from videotrack.synth.paper_setup import locust_cameras
 
 
 def packed(dets):

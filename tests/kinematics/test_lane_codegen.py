@@ -18,8 +18,8 @@ from kinematics.model.rotations import euler_yxz
 from tests.fixtures.bodies import mouse_like
 from tests.fixtures.cameras import three_pinholes
 from tests.fixtures.planted import planted_detections
-from videotrack.motion import smooth_random_motion
-from videotrack.paper_setup import bundled_chain, locust_cameras
+from videotrack.synth.motion import smooth_random_motion
+from videotrack.synth.paper_setup import bundled_chain, locust_cameras
 
 
 def _problem(kind):

@@ -12,8 +12,8 @@ import pytest
 from kinematics._kernels import anneal as ak
 from kinematics.fit import AnnealParams, Fitter
 from tests.fixtures.planted import planted_detections
-from videotrack.motion import smooth_random_motion
-from videotrack.paper_setup import locust_cameras
+from videotrack.synth.motion import smooth_random_motion
+from videotrack.synth.paper_setup import locust_cameras
 
 
 def longest_stall(work) -> tuple[float, float]:

@@ -18,7 +18,7 @@ from tests.fixtures.bodies import three_legs
 from tests.fixtures.cameras import top_and_side
 from tests.fixtures.paths import CHAINS
 from tests.fixtures.planted import marker_errors, planted_postures
-from videotrack.paper_setup import locust_cameras
+from videotrack.synth.paper_setup import locust_cameras
 
 
 def test_partitions_trunk_first_then_each_limb():

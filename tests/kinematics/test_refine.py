@@ -19,8 +19,8 @@ from kinematics.model.fk import forward_kinematics
 from tests.fixtures.bodies import three_legs
 from tests.fixtures.cameras import top_and_side
 from tests.fixtures.planted import planted_postures
-from videotrack.motion import smooth_random_motion
-from videotrack.paper_setup import locust_cameras
+from videotrack.synth.motion import smooth_random_motion
+from videotrack.synth.paper_setup import locust_cameras
 
 
 def detections(body, cams, angles, rng, noise=0.2):

@@ -17,8 +17,8 @@ from kinematics.model.fk import forward_kinematics, forward_kinematics_reference
 from tests.fixtures.bodies import three_legs
 from tests.fixtures.cameras import ring
 from tests.fixtures.planted import marker_errors, planted_postures
-from videotrack.motion import smooth_random_motion
-from videotrack.paper_setup import locust_cameras
+from videotrack.synth.motion import smooth_random_motion
+from videotrack.synth.paper_setup import locust_cameras
 
 RED, GREEN = ("M0", "M1", "M2"), ("M3",)
 

@@ -12,7 +12,7 @@ from kinematics.model import validate_body
 from kinematics.model.fk import forward_kinematics
 from kinematics.model.histograms import Histogram
 from ui import adapters
-from videotrack.paper_setup import locust_cameras
+from videotrack.synth.paper_setup import locust_cameras
 
 
 @pytest.fixture
@@ -213,10 +213,10 @@ def test_relative_path(tmp_path):
 
 
 def test_detection_preview_matches_the_detections_file(synth_project):
-    from videotrack.config import load_config
-    from videotrack.detect import FrameDetector, settings_from_config, video_paths
-    from videotrack.detections import load_detections
-    from videotrack.video import open_videos
+    from videotrack.detect.detections import load_detections
+    from videotrack.detect.run import FrameDetector, settings_from_config, video_paths
+    from videotrack.detect.video import open_videos
+    from videotrack.project.config import load_config
 
     config = load_config(synth_project / "project.toml")
     settings = settings_from_config(config)

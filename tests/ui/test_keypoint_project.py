@@ -18,9 +18,9 @@ from ui import adapters
 from ui.state import Session, backend
 from ui.state.fitting import FIT_CONTEXT
 from videotrack.cli import main
-from videotrack.config import load_config
-from videotrack.results import read_results, read_sidecar
-from videotrack.synth_keypoints import write_session
+from videotrack.project.config import load_config
+from videotrack.results.files import read_results, read_sidecar
+from videotrack.synth.keypoints import write_session
 from videotrack.workflow import plan_project
 
 N_FRAMES = 8
@@ -323,7 +323,7 @@ def test_blank_canvas_from_the_keypoints_without_a_calibrated_size(made, tmp_pat
 
 
 def test_with_a_video_per_camera_the_views_are_its_frames(made, tmp_path, qtbot):
-    from videotrack.synth import VideoSink
+    from videotrack.synth.project import VideoSink
 
     project, truth = copy_of(made, tmp_path)
     for c, cam in enumerate(truth.camera_list):  # grey level 20 * camera + video frame

@@ -13,7 +13,7 @@ from PySide6.QtWidgets import QMessageBox
 from kinematics.model.fk import forward_kinematics
 from ui import adapters
 from ui.views import style
-from videotrack.detections import load_detections
+from videotrack.detect.detections import load_detections
 
 
 def expected_markers(session, body=None, angles=None):

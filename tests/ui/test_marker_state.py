@@ -8,7 +8,7 @@ import pytest
 from PySide6.QtCore import Qt
 
 from kinematics.model.fk import forward_kinematics
-from videotrack.detection_edits import edits_path, load_edits
+from videotrack.detect.edits import edits_path, load_edits
 
 
 def _click(qtbot, view, x, y, modifier):

@@ -14,9 +14,9 @@ from kinematics.fit import AnnealParams, Fitter
 from kinematics.model.fk import forward_kinematics
 from kinematics.model.histogram_xml import archive_from_body, load_archive
 from ui.state import Session
-from videotrack.detections import load_detections
-from videotrack.results import read_results
-from videotrack.video import open_videos
+from videotrack.detect.detections import load_detections
+from videotrack.detect.video import open_videos
+from videotrack.results.files import read_results
 
 
 def test_open_project_loads_everything(session, project):

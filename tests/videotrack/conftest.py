@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
-from videotrack.render import render_markers
+from videotrack.synth.render import render_markers
 
 #: Frame size of the planted-marker videos: two 80 x 60 views side by side.
 WIDTH, HEIGHT = 160, 60

@@ -16,8 +16,8 @@ import pytest
 from videotrack.batch import TrialReport, plan_trial, project_lock, run_trial
 from videotrack.cli import main
 from videotrack.errors import VideoTrackError
-from videotrack.paper_setup import write_example_project
-from videotrack.project import open_project
+from videotrack.project.folders import open_project
+from videotrack.synth.paper_setup import write_example_project
 
 #: A short schedule in the paper's proportions (N_end / N_l = 10, N_end / N_tau = 23).
 # the paper's settings: these tests are about the orchestration, not the fit

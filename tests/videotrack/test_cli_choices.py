@@ -7,16 +7,16 @@ import pytest
 
 from kinematics.fit.settings import PROFILES, START_MODES
 from videotrack.cli import build_parser, main
-from videotrack.config import (
+from videotrack.errors import VideoTrackError
+from videotrack.io.keypoints import FORMATS, KEYPOINT_FORMATS, detect_format, read_keypoints
+from videotrack.project.config import (
     ANNEAL,
     KEYPOINTS,
     TRIANGULATION_INITS,
     TRIANGULATION_METHODS,
     parse_layer,
 )
-from videotrack.errors import VideoTrackError
-from videotrack.io.keypoints import FORMATS, KEYPOINT_FORMATS, detect_format, read_keypoints
-from videotrack.results import read_sidecar
+from videotrack.results.files import read_sidecar
 
 
 def option(command: str, flag: str) -> argparse.Action:

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from videotrack.cli import main
-from videotrack.detections import load_detections
-from videotrack.views import View
+from videotrack.detect.detections import load_detections
+from videotrack.detect.views import View
 
 
 def run(capsys, *args):
@@ -116,7 +116,7 @@ def test_view_without_markers_is_a_warning(project, capsys):
 
 
 def test_interrupted_run_leaves_no_file(project, capsys, monkeypatch):
-    import videotrack.detect as detect
+    import videotrack.detect.run as detect
 
     calls = []
 

@@ -9,7 +9,7 @@ import pytest
 from videotrack.cli import main
 from videotrack.io.mot import read_mot
 from videotrack.io.trc import read_trc
-from videotrack.results import read_results
+from videotrack.results.files import read_results
 
 
 @pytest.fixture(scope="module")

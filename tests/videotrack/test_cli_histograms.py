@@ -7,7 +7,7 @@ from kinematics.model.chain_xml import load_body
 from kinematics.model.histogram_xml import load_archive
 from kinematics.model.histograms import bin_index
 from videotrack.cli import main
-from videotrack.results import results_from_fit, write_results
+from videotrack.results.files import results_from_fit, write_results
 
 
 @pytest.fixture

@@ -4,7 +4,7 @@ import cv2
 import numpy as np
 
 from videotrack.cli import main
-from videotrack.tables import read_table
+from videotrack.results.tables import read_table
 
 
 def test_synth_writes_a_detect_ready_project(tmp_path, capsys):

@@ -7,7 +7,9 @@ import pytest
 
 from kinematics.errors import KinematicsError, LocatedError
 from kinematics.fit.settings import AnnealParams, ErrorOptions, setting
-from videotrack.config import (
+from videotrack.detect.run import default_output, settings_from_config, video_paths
+from videotrack.errors import VideoTrackError
+from videotrack.project.config import (
     ANNEAL,
     FILTER_STEPS,
     MARKERS,
@@ -21,8 +23,6 @@ from videotrack.config import (
     record_section,
     register_section,
 )
-from videotrack.detect import default_output, settings_from_config, video_paths
-from videotrack.errors import VideoTrackError
 from videotrack.workflow import anneal_params, load_model
 
 MINIMAL = """\
@@ -246,7 +246,7 @@ seed = 1
 
 
 def test_old_style_project_loads_unchanged(tmp_path):
-    from videotrack.paper_setup import write_paper_project
+    from videotrack.synth.paper_setup import write_paper_project
 
     project = write_paper_project(tmp_path / "demo", frames=2, sequences=1)
     assert load_model(load_config(project.config)).params == AnnealParams.paper()  # the demo's
@@ -297,7 +297,7 @@ def test_a_section_follows_its_record(tmp_path):
 def test_updated_toml_text_keeps_comments_and_drops_removed_keys():
     import tomllib
 
-    from videotrack.config import updated_toml_text
+    from videotrack.project.config import updated_toml_text
 
     text = ('# project\n[video]\npath = "a.avi"  # camera A\n\n[anneal]\nseed = 3  # lucky\n'
             'n_end = 1000\n')

@@ -4,10 +4,10 @@ import cv2
 import numpy as np
 import pytest
 
-from videotrack.deinterlace import NO_DEINTERLACE, Deinterlace
+from videotrack.detect.deinterlace import NO_DEINTERLACE, Deinterlace
+from videotrack.detect.markers import find_regions
 from videotrack.errors import VideoTrackError
-from videotrack.markers import find_regions
-from videotrack.render import render_markers
+from videotrack.synth.render import render_markers
 
 
 def test_parities_rate_and_field_rows():

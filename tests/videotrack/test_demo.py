@@ -3,8 +3,8 @@
 import re
 
 from videotrack.cli import main
-from videotrack.paper_setup import TABLE2_BOTH_VIEWS
-from videotrack.results import read_results
+from videotrack.results.files import read_results
+from videotrack.synth.paper_setup import TABLE2_BOTH_VIEWS
 
 
 def table_row(out: str, label: str) -> list[float]:

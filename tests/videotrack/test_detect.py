@@ -5,15 +5,15 @@ import warnings
 import numpy as np
 import pytest
 
-from videotrack.deinterlace import Deinterlace
-from videotrack.detect import detect_video, format_summary, iter_detect, summarize
-from videotrack.detections import DetectSettings
+from videotrack.detect.deinterlace import Deinterlace
+from videotrack.detect.detections import DetectSettings
+from videotrack.detect.filters import FilterChain
+from videotrack.detect.markers import MarkerSettings
+from videotrack.detect.run import detect_video, format_summary, iter_detect, summarize
+from videotrack.detect.video import VideoSource, open_videos
+from videotrack.detect.views import View
 from videotrack.errors import VideoTrackError, VideoTrackWarning
-from videotrack.filters import FilterChain
-from videotrack.markers import MarkerSettings
-from videotrack.render import render_markers
-from videotrack.video import VideoSource, open_videos
-from videotrack.views import View
+from videotrack.synth.render import render_markers
 
 THRESHOLD = FilterChain([{"type": "threshold", "value": 90}])
 LEFT = View("left", (0, 0, 80, 60))

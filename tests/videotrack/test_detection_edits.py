@@ -7,7 +7,8 @@ import json
 import numpy as np
 import pytest
 
-from videotrack.detection_edits import (
+from videotrack.detect.detections import build_detections
+from videotrack.detect.edits import (
     ViewEdit,
     add_point,
     apply_edit,
@@ -22,7 +23,6 @@ from videotrack.detection_edits import (
     snap_to_centroid,
     toggle_hidden,
 )
-from videotrack.detections import build_detections
 from videotrack.errors import VideoTrackError
 
 VIEWS = ["side", "top"]

@@ -5,20 +5,20 @@ import json
 import numpy as np
 import pytest
 
-from videotrack.deinterlace import Deinterlace
-from videotrack.detect import detect_video
-from videotrack.detections import (
+from videotrack.detect.deinterlace import Deinterlace
+from videotrack.detect.detections import (
     Detections,
     DetectSettings,
     check_fresh,
     load_detections,
     save_detections,
 )
+from videotrack.detect.filters import FilterChain
+from videotrack.detect.markers import MarkerSettings
+from videotrack.detect.run import detect_video
+from videotrack.detect.video import VideoSource
+from videotrack.detect.views import View
 from videotrack.errors import VideoTrackError
-from videotrack.filters import FilterChain
-from videotrack.markers import MarkerSettings
-from videotrack.video import VideoSource
-from videotrack.views import View
 
 SETTINGS = DetectSettings((View("left", (0, 0, 80, 60)), View("right", (80, 0, 80, 60), True)),
                           FilterChain([{"type": "threshold", "value": 90}]))

@@ -28,8 +28,8 @@ from pathlib import Path
 
 import pytest
 
-import videotrack.project  # noqa: F401  (registers [batch])
-from videotrack.config import SECTIONS, parse_layer
+import videotrack.project.folders  # noqa: F401  (registers [batch])
+from videotrack.project.config import SECTIONS, parse_layer
 
 REPO = Path(__file__).resolve().parents[2]
 DOCS = REPO / "docs"

@@ -6,10 +6,10 @@ from pathlib import Path
 import numpy as np
 
 from videotrack.cli import main
-from videotrack.config import FILTER_STEPS, MARKERS, OUTPUT, VIDEO, VIEWS, describe_section
-from videotrack.detections import load_detections
-from videotrack.render import render_markers
-from videotrack.views import View
+from videotrack.detect.detections import load_detections
+from videotrack.detect.views import View
+from videotrack.project.config import FILTER_STEPS, MARKERS, OUTPUT, VIDEO, VIEWS, describe_section
+from videotrack.synth.render import render_markers
 
 DOC = Path(__file__).resolve().parents[2] / "docs" / "detection.md"
 

@@ -9,9 +9,9 @@ from hypothesis import strategies as st
 
 from videotrack.cli import main
 from videotrack.errors import VideoTrackError
-from videotrack.evaluate import evaluate, evaluation_csv, parse_sum, wrap_deg
-from videotrack.results import Results, write_results
-from videotrack.tables import write_table
+from videotrack.results.evaluate import evaluate, evaluation_csv, parse_sum, wrap_deg
+from videotrack.results.files import Results, write_results
+from videotrack.results.tables import write_table
 
 AXES = ("J0.phi", "J0.psi", "J1.rx", "J1.beta")  # J1.rx: a locked axis
 

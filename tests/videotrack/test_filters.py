@@ -4,12 +4,12 @@ import cv2
 import numpy as np
 import pytest
 
-from videotrack.deinterlace import NO_DEINTERLACE, Deinterlace
+from videotrack.detect.deinterlace import NO_DEINTERLACE, Deinterlace
+from videotrack.detect.filters import FilterChain
+from videotrack.detect.markers import find_regions
+from videotrack.detect.views import Plane, View
 from videotrack.errors import VideoTrackError
-from videotrack.filters import FilterChain
-from videotrack.markers import find_regions
-from videotrack.render import render_markers
-from videotrack.views import Plane, View
+from videotrack.synth.render import render_markers
 
 
 def plane_for(image, view=None, deint=NO_DEINTERLACE, parity=None):

@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 
 from videotrack.cli import main
-from videotrack.config import load_config
 from videotrack.errors import VideoTrackError
-from videotrack.results import read_results, read_sidecar, results_from_fit, write_results
-from videotrack.tables import read_table
+from videotrack.project.config import load_config
+from videotrack.results.files import read_results, read_sidecar, results_from_fit, write_results
+from videotrack.results.tables import read_table
 
 
 @pytest.fixture(scope="module")
@@ -48,7 +48,7 @@ def test_candidates_file_round_trip_and_stale_removal(project, tmp_path):
     from dataclasses import replace
 
     from kinematics.model.chain_xml import load_body
-    from videotrack.results import attach_candidates, frame_results, write_candidates
+    from videotrack.results.files import attach_candidates, frame_results, write_candidates
 
     fitted = project / "detections.results.csv"
     results = attach_candidates(frame_results(read_results(fitted), 0), fitted)
@@ -86,7 +86,7 @@ def test_results_round_trip(project, tmp_path):
 
 def test_resume_after_interruption_gives_identical_file(project, tmp_path, monkeypatch):
     from videotrack import workflow as pipeline
-    from videotrack.detections import load_detections
+    from videotrack.detect.detections import load_detections
     from videotrack.workflow import checkpoint
 
     config = load_config(project / "project.toml")

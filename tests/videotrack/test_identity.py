@@ -13,12 +13,12 @@ from pathlib import Path
 import cv2
 import pytest
 
-from videotrack import identity
 from videotrack.batch import plan_trial
 from videotrack.cli import main
-from videotrack.paper_setup import write_example_project
-from videotrack.project import open_project
-from videotrack.video import VideoSource
+from videotrack.detect.video import VideoSource
+from videotrack.project import identity
+from videotrack.project.folders import open_project
+from videotrack.synth.paper_setup import write_example_project
 
 ANNEAL = {"n_end": 2000, "n_l": 200, "n_tau": 86}
 # a trial's state, with or without warnings (the short schedule misfits a frame or two,

@@ -164,7 +164,7 @@ def test_movement_loads_our_dlc_files(tmp_path):
 
 def fitted_results(n=6):
     """A Results table as a fit leaves it: 2 markers, 1 joint, 2 axes, one failed row."""
-    from videotrack.results import Results
+    from videotrack.results.files import Results
 
     rng = np.random.default_rng(4)
     return Results(

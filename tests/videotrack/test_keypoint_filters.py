@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from videotrack import keypoint_filters as kf
 from videotrack.errors import VideoTrackError
 from videotrack.io.keypoints import make_tracks
+from videotrack.markerless import filters as kf
 
 
 def smooth_truth(n=120, k=4):

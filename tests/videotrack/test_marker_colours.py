@@ -10,18 +10,18 @@ import numpy as np
 import pytest
 
 from videotrack.cli import main
-from videotrack.config import load_config
-from videotrack.detect import detect_video, settings_from_config
-from videotrack.detections import DetectSettings, load_detections
+from videotrack.detect.detections import DetectSettings, load_detections
+from videotrack.detect.filters import FilterChain
+from videotrack.detect.marker_colours import bgr, colour_of_markers, hsv_range, parse_colour
+from videotrack.detect.markers import MarkerSettings
+from videotrack.detect.run import detect_video, settings_from_config
+from videotrack.detect.video import VideoSource
+from videotrack.detect.views import View
 from videotrack.errors import VideoTrackError, VideoTrackWarning
-from videotrack.evaluate import evaluate_files
-from videotrack.filters import FilterChain
-from videotrack.marker_colours import bgr, colour_of_markers, hsv_range, parse_colour
-from videotrack.markers import MarkerSettings
-from videotrack.render import render_markers
-from videotrack.results import read_results, read_sidecar
-from videotrack.video import VideoSource
-from videotrack.views import View
+from videotrack.project.config import load_config
+from videotrack.results.evaluate import evaluate_files
+from videotrack.results.files import read_results, read_sidecar
+from videotrack.synth.render import render_markers
 from videotrack.workflow import load_model, plan_project, run_project
 
 COLOURS = ["--colour", "red=M0,M1,M2", "--colour", "green=M3"]
@@ -217,7 +217,7 @@ def test_each_view_keeps_only_its_colour(tmp_path, video_writer):
 
 
 def test_a_views_colour_survives_its_dict():
-    from videotrack.views import View
+    from videotrack.detect.views import View
 
     view = View("a", (0, 0, 10, 10), camera="cam", hsv=((1, 2, 3), (4, 5, 6)))
     assert View.from_dict(view.to_dict()) == view

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from videotrack.cli import main
-from videotrack.config import load_config
-from videotrack.results import read_results, read_sidecar, sidecar_path
-from videotrack.synth_keypoints import write_session
+from videotrack.project.config import load_config
+from videotrack.results.files import read_results, read_sidecar, sidecar_path
+from videotrack.synth.keypoints import write_session
 
 N_FRAMES = 16
 ANNEAL = "[anneal]\nseed = 1\nn_end = 8000\nn_l = 800\nn_tau = 350\n"
@@ -115,7 +115,7 @@ def test_resume_after_interruption_gives_identical_file(tmp_path, monkeypatch):
 
     from kinematics.fit import tuning
     from videotrack import workflow as pipeline
-    from videotrack.markerless import load_keypoints
+    from videotrack.markerless.route import load_keypoints
     from videotrack.workflow import checkpoint
 
     monkeypatch.setattr(tuning, "TUNING", replace(tuning.TUNING, path_lag=4))
@@ -163,7 +163,7 @@ def test_resume_after_interruption_gives_identical_file(tmp_path, monkeypatch):
 
 
 def test_the_2d_route_defaults_to_a_keypoint_sized_cap(session, tmp_path):
-    from videotrack.config import load_config
+    from videotrack.project.config import load_config
     from videotrack.workflow import KEYPOINT_CAP_PX, anneal_params
 
     assert anneal_params(load_config(session.project)).error.cap_px == KEYPOINT_CAP_PX
@@ -200,7 +200,7 @@ def test_batch_finds_markerless_trials_by_their_keypoint_files(tmp_path, capsys)
 
 
 def test_the_optimised_triangulation_holds_the_chains_rigid_pairs(tmp_path):
-    from videotrack.markerless import rigid_pairs
+    from videotrack.markerless.route import rigid_pairs
 
     tri = write_session(tmp_path, N_FRAMES, noise_px=1.0, bad_share=0.1,
                         project_text=TRIANGULATED.replace('"ransac"', '"optim"'))

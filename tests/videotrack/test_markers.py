@@ -7,14 +7,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from videotrack.errors import VideoTrackError
-from videotrack.markers import (
+from videotrack.detect.markers import (
     MarkerSettings,
     RegionFinder,
     find_regions,
     find_regions_reference,
 )
-from videotrack.render import render_markers
+from videotrack.errors import VideoTrackError
+from videotrack.synth.render import render_markers
 
 SETTINGS = [
     MarkerSettings(),

@@ -9,11 +9,11 @@ from tests.fixtures.bodies import LEG_XML
 from tests.fixtures.cameras import four_cameras
 from tests.fixtures.projects import cluttered_leg_project
 from videotrack.cli import main
-from videotrack.config import load_config
-from videotrack.detections import load_detections
-from videotrack.results import read_results, read_sidecar
-from videotrack.synth import SynthOptions, write_synthetic_project
-from videotrack.tables import read_table
+from videotrack.detect.detections import load_detections
+from videotrack.project.config import load_config
+from videotrack.results.files import read_results, read_sidecar
+from videotrack.results.tables import read_table
+from videotrack.synth.project import SynthOptions, write_synthetic_project
 from videotrack.workflow import load_model, not_streamable
 
 CHAIN = ('<body name="two-legs" units="mm" format="1">' + "".join(
@@ -91,8 +91,8 @@ def test_frames_with_detections_but_no_3d_point_are_named():
     instead of reporting a frame without detections and nothing else."""
     from kinematics.fit import AnnealParams, Fitter
     from kinematics.model.fk import forward_kinematics
-    from videotrack.detections import build_detections
-    from videotrack.results import results_from_fit
+    from videotrack.detect.detections import build_detections
+    from videotrack.results.files import results_from_fit
     from videotrack.workflow import fit_warnings
 
     body = loads_body(CHAIN)

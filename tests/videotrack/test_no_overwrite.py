@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from videotrack.cli import main
-from videotrack.paper_setup import write_example_project
+from videotrack.synth.paper_setup import write_example_project
 
 ANNEAL = ["--n-end", "2000"]
 

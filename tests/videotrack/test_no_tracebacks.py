@@ -358,8 +358,8 @@ def test_histograms_show_lists_locked_axes_apart(root, capfd, monkeypatch):
 
 def test_views_that_do_not_fit_the_video_say_so():
     from kinematics.cameras import OrthographicCamera
+    from videotrack.detect.views import View, check_camera_sizes, check_views, scaled_video_problem
     from videotrack.errors import VideoTrackError
-    from videotrack.views import View, check_camera_sizes, check_views, scaled_video_problem
 
     views = [View("side", (0, 0, 360, 288)), View("top", (360, 0, 360, 288))]
     with pytest.warns(VideoTrackWarning, match=r"1440x576 pixels, but its views' ROIs reach "

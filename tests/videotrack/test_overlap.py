@@ -11,7 +11,7 @@ import pytest
 
 import videotrack.workflow as pipeline
 from videotrack.cli import main
-from videotrack.config import load_config
+from videotrack.project.config import load_config
 from videotrack.workflow import Cancelled, checkpoint, not_streamable, run_project, streaming
 
 N_FRAMES = 40

@@ -11,9 +11,9 @@ import pytest
 
 from kinematics.errors import LocatedError
 from videotrack.cli import main
-from videotrack.config import load_config
 from videotrack.errors import VideoTrackError, VideoTrackWarning
-from videotrack.results import read_sidecar
+from videotrack.project.config import load_config
+from videotrack.results.files import read_sidecar
 from videotrack.workflow import Cancelled, plan_project, run_project
 
 #: A short schedule in the paper's proportions, so a fit takes a fraction of a second.
@@ -165,8 +165,8 @@ def test_fit_and_run_write_what_run_project_writes(project, capsys):
 
 
 def test_batch_writes_what_run_project_writes(tmp_path, capsys):
-    from videotrack.paper_setup import write_example_project
-    from videotrack.project import open_project
+    from videotrack.project.folders import open_project
+    from videotrack.synth.paper_setup import write_example_project
 
     root = tmp_path / "batch"
     write_example_project(root, ["s1/t1"], frames=12, anneal=SHORT)
@@ -220,7 +220,7 @@ def test_fit_says_when_it_resumed(project, capsys, monkeypatch):
 
 def test_sidecar_records_the_threshold_that_decided_the_statuses(tmp_path):
     from videotrack.cli import main
-    from videotrack.results import read_results, read_sidecar
+    from videotrack.results.files import read_results, read_sidecar
 
     assert main(["synth", str(tmp_path), "--frames", "10", "--sequences", "1", "--ghosts",
                  "1"]) == 0

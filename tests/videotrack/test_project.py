@@ -4,9 +4,9 @@ from pathlib import Path
 
 import pytest
 
-from videotrack.config import load_config, merge_layers, parse_layer
 from videotrack.errors import VideoTrackError
-from videotrack.project import load_trial_config, open_project
+from videotrack.project.config import load_config, merge_layers, parse_layer
+from videotrack.project.folders import load_trial_config, open_project
 
 ROOT_CONFIG = """\
 [[views]]

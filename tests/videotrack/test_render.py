@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from videotrack.render import render_markers
+from videotrack.synth.render import render_markers
 
 
 def weighted_centroid(img, background):

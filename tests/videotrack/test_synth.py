@@ -6,9 +6,10 @@ import pytest
 
 from kinematics.model.fk import forward_kinematics
 from videotrack.errors import VideoTrackError
-from videotrack.motion import smooth_random_motion
-from videotrack.paper_setup import VIEW_SIZE, locust_cameras
-from videotrack.synth import (
+from videotrack.results.tables import read_table, write_table
+from videotrack.synth.motion import smooth_random_motion
+from videotrack.synth.paper_setup import VIEW_SIZE, locust_cameras
+from videotrack.synth.project import (
     SynthOptions,
     VideoSink,
     iter_frames,
@@ -17,7 +18,6 @@ from videotrack.synth import (
     truth_table,
     view_rois,
 )
-from videotrack.tables import read_table, write_table
 
 
 @pytest.fixture

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from videotrack.cli import main
-from videotrack.detections import load_detections
-from videotrack.tables import read_table
+from videotrack.detect.detections import load_detections
+from videotrack.results.tables import read_table
 
 
 @pytest.mark.parametrize("options", [[], ["--interlaced", "--bottom-field-first"]])

@@ -7,10 +7,10 @@ import pytest
 from kinematics.cameras import PinholeCamera
 from kinematics.cameras.files import save_cameras
 from videotrack.cli import main
-from videotrack.detections import load_detections
+from videotrack.detect.detections import load_detections
 from videotrack.errors import VideoTrackError
-from videotrack.synth import SynthOptions, read_points, simulate_points
-from videotrack.tables import read_table, write_table
+from videotrack.results.tables import read_table, write_table
+from videotrack.synth.project import SynthOptions, read_points, simulate_points
 
 NAMES = ["hip", "knee", "ankle"]
 

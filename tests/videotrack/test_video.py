@@ -9,8 +9,7 @@ import cv2
 import numpy as np
 import pytest
 
-from videotrack.errors import VideoTrackError, VideoTrackWarning
-from videotrack.video import (
+from videotrack.detect.video import (
     VideoSet,
     VideoSource,
     natural_key,
@@ -18,7 +17,8 @@ from videotrack.video import (
     parse_frame_range,
     resolve_frames,
 )
-from videotrack.video_backends import _Packets
+from videotrack.detect.video_backends import _Packets
+from videotrack.errors import VideoTrackError, VideoTrackWarning
 
 
 def noise_frames(n, shape=(48, 64), seed=0):
@@ -101,7 +101,8 @@ def ffmpeg_grey(path):
 
 def test_mjpeg_is_decoded_from_its_packets_with_exact_seeking(tmp_path, video_writer,
                                                              monkeypatch):
-    monkeypatch.setattr("videotrack.video_backends.DECODE_THREADS", 4)  # decoded ahead, any runner
+    # decoded ahead, any runner
+    monkeypatch.setattr("videotrack.detect.video_backends.DECODE_THREADS", 4)
     frames = smooth_colour_frames(24)
     path = video_writer(tmp_path / "m.avi", frames, fourcc="MJPG")
     truth = [cv2.cvtColor(f, cv2.COLOR_BGR2GRAY).astype(float) for f in frames]
@@ -131,7 +132,7 @@ def test_mjpeg_is_decoded_from_its_packets_with_exact_seeking(tmp_path, video_wr
 
 def test_reads_between_frames_of_a_paused_sequential_read(tmp_path, video_writer,
                                                           monkeypatch):
-    monkeypatch.setattr("videotrack.video_backends.DECODE_THREADS", 4)
+    monkeypatch.setattr("videotrack.detect.video_backends.DECODE_THREADS", 4)
     path = video_writer(tmp_path / "m.avi", smooth_colour_frames(40), fourcc="MJPG")
     with VideoSource(path) as v:
         whole = [f.copy() for _, f in v.frames()]
@@ -149,7 +150,8 @@ def test_reads_between_frames_of_a_paused_sequential_read(tmp_path, video_writer
 
 def test_mjpeg_packets_refused_fall_back_to_ffmpeg(tmp_path, video_writer, monkeypatch):
     path = video_writer(tmp_path / "m.avi", smooth_colour_frames(6), fourcc="MJPG")
-    monkeypatch.setattr("videotrack.video_backends._PACKET_TOLERANCE", -1.0)  # no packet matches
+    # no packet matches
+    monkeypatch.setattr("videotrack.detect.video_backends._PACKET_TOLERANCE", -1.0)
     with VideoSource(path) as v:
         assert not isinstance(v._backend, _Packets)
         got = [f.copy() for _, f in v.frames()]
@@ -158,7 +160,7 @@ def test_mjpeg_packets_refused_fall_back_to_ffmpeg(tmp_path, video_writer, monke
 
 
 def test_damaged_mjpeg_frames_are_decoded_by_ffmpeg(tmp_path, video_writer, monkeypatch):
-    monkeypatch.setattr("videotrack.video_backends.DECODE_THREADS", 4)
+    monkeypatch.setattr("videotrack.detect.video_backends.DECODE_THREADS", 4)
     path = video_writer(tmp_path / "d.avi", smooth_colour_frames(30), fourcc="MJPG")
     whole = [f.copy() for _, f in VideoSource(path).frames()]
     data = bytearray(path.read_bytes())
@@ -287,7 +289,7 @@ def test_frame_ranges():
 def test_decode_threads_follow_the_cpu_affinity_not_the_machine():
     # a container or taskset may allow one core of many: the decoder must not start four
     code = ("import os; os.sched_setaffinity(0, {min(os.sched_getaffinity(0))}); "
-            "import videotrack.video as v; from videotrack.batch import available_cores; "
+            "import videotrack.detect.video as v; from videotrack.batch import available_cores; "
             "print(v.DECODE_THREADS, available_cores())")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout.split()

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from videotrack.deinterlace import Deinterlace
+from videotrack.detect.deinterlace import Deinterlace
+from videotrack.detect.views import Plane, View, check_views
 from videotrack.errors import VideoTrackError
-from videotrack.views import Plane, View, check_views
 
 
 def test_cut_and_mirror():

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from videotrack.cli import main
-from videotrack.paper_setup import write_example_project
-from videotrack.video import VideoSource
+from videotrack.detect.video import VideoSource
+from videotrack.synth.paper_setup import write_example_project
 
 # the paper's settings: these tests are about the orchestration, not the fit
 ANNEAL = {"profile": "paper", "n_end": 2000, "n_l": 200, "n_tau": 86}

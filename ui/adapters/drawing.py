@@ -143,7 +143,7 @@ def frame_keypoints(mapped, record: int, marker_names: Sequence[str]) -> list[np
     score per view, rows in the order of ``marker_names`` (the chain's markers); NaN where
     missing, filtered out, below the score threshold or without a keypoint.
 
-    ``mapped`` is a :class:`videotrack.markerless.MappedKeypoints`.
+    ``mapped`` is a :class:`videotrack.markerless.route.MappedKeypoints`.
     """
     where = {name: k for k, name in enumerate(marker_names)}
     rows = [where.get(m, -1) for m in mapped.markers]

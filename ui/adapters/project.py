@@ -30,9 +30,9 @@ def detection_preview(detector, frame_set) -> list[ViewPreview]:
 
     Parameters
     ----------
-    detector : videotrack.detect.FrameDetector
+    detector : videotrack.detect.run.FrameDetector
     frame_set : tuple of ndarray
-        One frame per video (:meth:`videotrack.video.VideoSet.read`).
+        One frame per video (:meth:`videotrack.detect.video.VideoSet.read`).
 
     Returns
     -------

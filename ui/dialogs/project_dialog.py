@@ -2,10 +2,10 @@
 the mask and the detections of the current frame, the chain and camera files and the
 annealing parameters.
 
-The forms are generated from the declarative config schema (:mod:`videotrack.config`), so
+The forms are generated from the declarative config schema (:mod:`videotrack.project.config`), so
 every key, bound and choice is the one the project file accepts. The dialog edits a copy of
 the project file's table; OK validates it and hands it to the session (saved with File ▸
-Save). The preview runs :class:`videotrack.detect.FrameDetector` in a worker thread.
+Save). The preview runs :class:`videotrack.detect.run.FrameDetector` in a worker thread.
 """
 
 from __future__ import annotations
@@ -52,7 +52,7 @@ class ProjectDialog(QDialog):
     """Edits a copy of the project file; OK applies it to the session."""
 
     def __init__(self, session, parent=None) -> None:
-        from videotrack.config import ANNEAL, CAMERAS, CHAIN, FILTER_STEPS, MARKERS
+        from videotrack.project.config import ANNEAL, CAMERAS, CHAIN, FILTER_STEPS, MARKERS
 
         super().__init__(parent)
         self.setWindowTitle("Project settings")
@@ -389,7 +389,7 @@ class ProjectDialog(QDialog):
 
     def update_preview(self) -> None:
         """Detect in the current frame with the edited settings (in a worker thread)."""
-        from videotrack.detect import settings_from_config
+        from videotrack.detect.run import settings_from_config
 
         if self._worker is not None:
             self._pending = True
@@ -407,8 +407,8 @@ class ProjectDialog(QDialog):
         paths_fps = (config["video"]["path"], config["video"]["fps"] or None)
 
         def work(_worker):
-            from videotrack.detect import FrameDetector
-            from videotrack.video import open_videos
+            from videotrack.detect.run import FrameDetector
+            from videotrack.detect.video import open_videos
 
             if self._videos is None:
                 self._videos = open_videos(paths_fps[0], colour=True, fps=paths_fps[1])

@@ -1,4 +1,4 @@
-"""A form generated from a config :class:`~videotrack.config.Section`: one widget per key
+"""A form generated from a config :class:`~videotrack.project.config.Section`: one widget per key
 (the project dialog's chain, cameras, annealing, markers and filter-step forms)."""
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ from ui import adapters
 
 
 class SchemaForm(QWidget):
-    """One widget per :class:`videotrack.config.Key` of a section; ``changed`` on edits.
+    """One widget per :class:`videotrack.project.config.Key` of a section; ``changed`` on edits.
 
     Numbers get spin boxes with the key's bounds, choices a combo box, booleans a check box,
     paths a line with a browse button, lists a line of JSON. Tool tips are the keys' docs.

@@ -1,7 +1,7 @@
 """The GUI's one door to the fitter, the results files and the project model (no Qt).
 
 Everything the GUI uses from :mod:`kinematics.fit`, :mod:`videotrack.pipeline` and
-:mod:`videotrack.results` goes through this module, so a rename there is a one-line change
+:mod:`videotrack.results.files` goes through this module, so a rename there is a one-line change
 here. Nothing in it computes anything itself: it forwards and converts. Detecting markers is
 the project workflow :func:`videotrack.pipeline.run_project` without its fit; fitting is
 interactive (frames chosen, results shown as they arrive, undoable) and saved by
@@ -28,7 +28,7 @@ from kinematics.fit import unseen_markers as _unseen_markers
 from kinematics.model import Body
 from kinematics.observe.observations import Observations
 from ui.adapters import frame_detections
-from videotrack.markerless import (
+from videotrack.markerless.route import (
     KeypointInput,
     MappedKeypoints,
     fitting_model,
@@ -36,8 +36,8 @@ from videotrack.markerless import (
     keypoint_input,
     read_mapped_keypoints,
 )
-from videotrack.project import command_config, trial_outputs
-from videotrack.results import (
+from videotrack.project.folders import command_config, trial_outputs
+from videotrack.results.files import (
     STATUSES,
     attach_candidates,
     frame_results,
@@ -46,7 +46,7 @@ from videotrack.results import (
     results_from_fit,
     write_candidates,
 )
-from videotrack.results import write_results as _write_results
+from videotrack.results.files import write_results as _write_results
 from videotrack.workflow import (
     Cancelled,
     ProjectModel,
@@ -154,7 +154,7 @@ def output_paths(config) -> tuple[Path | None, Path]:
     """Where the project's (or trial's) detections and results files live (no detections
     for a project of keypoint files)."""
     if is_markerless(config):
-        from videotrack.markerless import default_results_path
+        from videotrack.markerless.route import default_results_path
 
         return None, default_results_path(config)
     outputs = trial_outputs(config)

@@ -14,7 +14,7 @@ from ui import adapters
 from ui.state import backend
 from ui.state.history import Edit
 from ui.state.workers import TaskWorker
-from videotrack import detection_edits
+from videotrack.detect import edits as detection_edits
 
 
 class DetectionsMixin:

@@ -29,7 +29,7 @@ class FittingMixin:
     # -- fitting ------------------------------------------------------------------------
     def _fit_model(self):
         """The project model the fit uses: a keypoint project of route "3d" is fitted to
-        its triangulated points without cameras (:func:`videotrack.markerless.fitting_model`);
+        its triangulated points without cameras (:func:`videotrack.markerless.route.fitting_model`);
         the views keep the cameras to draw."""
         if self.keypoints is None:
             return self.model

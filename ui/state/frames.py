@@ -10,7 +10,7 @@ import numpy as np
 from kinematics.model import Body
 from ui import adapters
 from videotrack.errors import VideoTrackError
-from videotrack.markerless import DEFAULT_FPS
+from videotrack.markerless.route import DEFAULT_FPS
 
 #: Video frames kept decoded for scrubbing back and forth.
 FRAME_CACHE = 48

@@ -13,9 +13,9 @@ import numpy as np
 from kinematics.errors import LocatedError
 from ui import adapters
 from ui.state import backend
-from videotrack import detection_edits
-from videotrack.config import read_toml
+from videotrack.detect import edits as detection_edits
 from videotrack.errors import VideoTrackError, VideoTrackWarning
+from videotrack.project.config import read_toml
 
 
 class ProjectMixin:
@@ -89,7 +89,7 @@ class ProjectMixin:
         if backend.is_markerless(config):  # the views are the cameras: model first
             problems = self._install_model(config, keep_body)
             return problems + self._install_keypoints(config)
-        from videotrack.detect import settings_from_config
+        from videotrack.detect.run import settings_from_config
 
         problems = []
         try:
@@ -101,9 +101,9 @@ class ProjectMixin:
 
     def _open_video(self, config, views) -> None:
         """Open the project's video(s) (kept when open) and resolve ``views`` on them."""
-        from videotrack.detect import video_paths
-        from videotrack.video import open_videos
-        from videotrack.views import check_views
+        from videotrack.detect.run import video_paths
+        from videotrack.detect.video import open_videos
+        from videotrack.detect.views import check_views
 
         if self.videos is None:
             self.videos = open_videos(video_paths(config), colour=True,
@@ -114,8 +114,8 @@ class ProjectMixin:
         """A keypoint project's keypoints, and its views: one per camera (or its
         ``[[views]]``), cut from ``[video] path`` when given, else drawn on a blank canvas
         sized from the calibration (or the keypoints' extent)."""
-        from videotrack.detect import settings_from_config
-        from videotrack.views import View
+        from videotrack.detect.run import settings_from_config
+        from videotrack.detect.views import View
 
         self.settings = self.mapped = self.keypoints = self.canvas = None
         self.notice = ""
@@ -166,7 +166,7 @@ class ProjectMixin:
 
     def _load_data(self) -> None:
         """Detections and results named by the project (when they exist)."""
-        from videotrack.detections import load_detections
+        from videotrack.detect.detections import load_detections
 
         self.detections_path, self.results_path = backend.output_paths(self.config)
         if self.detections_path is not None and self.detections_path.exists():
@@ -194,10 +194,10 @@ class ProjectMixin:
 
     def parse_raw(self, raw: dict):
         """Validate an edited project table as if it were the project file; returns the
-        :class:`~videotrack.config.Config` or raises :class:`VideoTrackError`."""
+        :class:`~videotrack.project.config.Config` or raises :class:`VideoTrackError`."""
         import tomli_w
 
-        from videotrack.config import parse_config
+        from videotrack.project.config import parse_config
 
         return parse_config(tomli_w.dumps(raw), self.config.path)
 
@@ -207,8 +207,8 @@ class ProjectMixin:
         The chain is reloaded when its file changed, kept with its edits otherwise; results
         whose axes do not fit the new chain are dropped. Marks the config unsaved.
         """
-        from videotrack.detect import settings_from_config
-        from videotrack.views import check_views
+        from videotrack.detect.run import settings_from_config
+        from videotrack.detect.views import check_views
 
         if not self.editable:
             self.error.emit("this trial's settings come from several config.toml files; "
@@ -255,7 +255,7 @@ class ProjectMixin:
         return not problems
 
     def _check_detections(self) -> None:
-        from videotrack.detections import check_fresh
+        from videotrack.detect.detections import check_fresh
 
         if self.detections is None or self.settings is None:
             return

@@ -8,7 +8,7 @@ from dataclasses import replace
 from kinematics.errors import LocatedError
 from kinematics.model import Body
 from ui.state import backend
-from videotrack import detection_edits
+from videotrack.detect import edits as detection_edits
 
 
 class SavingMixin:
@@ -36,7 +36,7 @@ class SavingMixin:
 
         try:
             if "config" in self._dirty:
-                from videotrack.config import updated_toml_text
+                from videotrack.project.config import updated_toml_text
 
                 # edit the file in place: the user's comments and layout survive
                 text = self.config.path.read_text(encoding="utf-8")

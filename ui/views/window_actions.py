@@ -83,7 +83,7 @@ class ActionsMixin:
 
     def _snapped(self, view: int, x: float, y: float) -> tuple[float, float]:
         """A click moved to the intensity centroid of the marker under it."""
-        from videotrack.detection_edits import snap_to_centroid
+        from videotrack.detect.edits import snap_to_centroid
 
         images = self.session.view_images()
         return snap_to_centroid(images[view], (x, y)) if view < len(images) else (x, y)
@@ -116,7 +116,7 @@ class ActionsMixin:
             self.table.source.reset()
 
     def fit_range(self) -> None:
-        from videotrack.video import parse_frame_range, resolve_frames
+        from videotrack.detect.video import parse_frame_range, resolve_frames
 
         s = self.session
         text, ok = QInputDialog.getText(self, "Fit range", "Frames A:B (B excluded):",

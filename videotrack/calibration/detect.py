@@ -23,7 +23,7 @@ import numpy as np
 from kinematics.fileio import atomic_write
 from videotrack.calibration.boards import Board
 from videotrack.errors import VideoTrackError, VideoTrackWarning
-from videotrack.identity import content_hash, video_hash
+from videotrack.project.identity import content_hash, video_hash
 
 __all__ = ["CACHE_MARK", "Source", "detect_all"]
 
@@ -38,7 +38,7 @@ class Source:
     def __init__(self, name: str, path: str) -> None:
         self.name, self.spec = name, str(path)
         if any(ch in self.spec for ch in "*?["):
-            from videotrack.video import natural_key  # img2 before img10
+            from videotrack.detect.video import natural_key  # img2 before img10
 
             self.files = sorted((Path(p) for p in glob.glob(self.spec) if Path(p).is_file()),
                                 key=lambda p: natural_key(p.name))
@@ -48,7 +48,7 @@ class Source:
             self.video = None
             self.n_frames = len(self.files)
         else:
-            from videotrack.video import VideoSource
+            from videotrack.detect.video import VideoSource
 
             self.files = None
             self.video = VideoSource(self.spec)

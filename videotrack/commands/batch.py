@@ -95,9 +95,9 @@ def run(args) -> int:
     )
     from videotrack.commands._common import EXIT_INCOMPLETE
     from videotrack.errors import VideoTrackError
-    from videotrack.outputs import guard_outputs
-    from videotrack.project import open_project
-    from videotrack.tables import text_table
+    from videotrack.project.folders import open_project
+    from videotrack.project.outputs import guard_outputs
+    from videotrack.results.tables import text_table
 
     if args.jobs is not None and args.jobs < 0:
         raise VideoTrackError("must be at least 0 (0: one per core)", field="--jobs")

@@ -187,7 +187,7 @@ def _write(args, cameras: dict, error: float | None, units: str | None = "mm") -
 
 def run(args) -> int:
     from videotrack.errors import VideoTrackError
-    from videotrack.outputs import guard_outputs
+    from videotrack.project.outputs import guard_outputs
 
     if args.import_file is not None:
         return _convert(args)
@@ -315,7 +315,7 @@ def _refine(args, cameras: list, reference: int) -> list:
 def _convert(args) -> int:
     from videotrack.calibration.formats import read_cameras
     from videotrack.errors import VideoTrackError
-    from videotrack.outputs import guard_outputs
+    from videotrack.project.outputs import guard_outputs
 
     if args.board is not None or args.camera:
         raise VideoTrackError("--import converts a camera file: give no board or --camera",

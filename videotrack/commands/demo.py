@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from videotrack.paper_setup import PAPER_FRAMES
+from videotrack.synth.paper_setup import PAPER_FRAMES
 
 EXAMPLES = f"""\
 examples:
@@ -68,10 +68,11 @@ def run(args) -> int:
     from tqdm import tqdm
 
     from videotrack.commands._common import print_warnings, step_bars
-    from videotrack.config import load_config
     from videotrack.errors import VideoTrackError
-    from videotrack.evaluate import evaluate, truth_angles
-    from videotrack.paper_setup import (
+    from videotrack.project.config import load_config
+    from videotrack.results.evaluate import evaluate, truth_angles
+    from videotrack.results.tables import read_table, text_table
+    from videotrack.synth.paper_setup import (
         PAPER_DETECTION_FPS,
         PAPER_FIT_FPS,
         PAPER_VIEW_ERROR_PX,
@@ -79,7 +80,6 @@ def run(args) -> int:
         TABLE2_SYMBOLS,
         write_paper_project,
     )
-    from videotrack.tables import read_table, text_table
     from videotrack.workflow import run_project
 
     if args.frames < 1:
@@ -133,7 +133,7 @@ def run(args) -> int:
               f"{1 / (1 / PAPER_DETECTION_FPS + 1 / PAPER_FIT_FPS):.2f} frames/s)")
 
         if args.plot is not None:
-            from videotrack.plots import plot_angles
+            from videotrack.results.plots import plot_angles
 
             png = Path(args.plot) if args.plot else (
                 Path("demo_angles.png") if args.temp else out / "angles.png")

@@ -85,11 +85,11 @@ def run(args) -> int:
     from tqdm import tqdm
 
     from videotrack.commands._common import note
-    from videotrack.detect import detect_project, incomplete_reason
+    from videotrack.detect.run import detect_project, incomplete_reason
+    from videotrack.detect.video import parse_frame_range
     from videotrack.errors import VideoTrackError, VideoTrackWarning
-    from videotrack.identity import relative_message
-    from videotrack.project import command_config
-    from videotrack.video import parse_frame_range
+    from videotrack.project.folders import command_config
+    from videotrack.project.identity import relative_message
 
     config = command_config(args.config, args.trial)
     if args.frames is not None:
@@ -129,7 +129,7 @@ def run(args) -> int:
 
 def print_detected(detections, output) -> None:
     """What ``detect`` prints after detecting: markers per view per frame, the file written."""
-    from videotrack.detect import format_summary, summarize
+    from videotrack.detect.run import format_summary, summarize
 
     unit = "half-frame" if detections.parities.max(initial=-1) >= 0 else "frame"
     start, stop = detections.metadata["frames"]

@@ -47,13 +47,13 @@ def add_parser(subparsers) -> None:
 
 def run(args) -> int:
     from videotrack.errors import VideoTrackError
-    from videotrack.evaluate import evaluate_files, format_evaluation, write_evaluation
+    from videotrack.results.evaluate import evaluate_files, format_evaluation, write_evaluation
 
     if not args.threshold >= 0:
         raise VideoTrackError(f"must be a number >= 0, got {args.threshold}",
                               field="--threshold")
     if args.csv is not None:  # never over an input; over another kind of file with --force
-        from videotrack.outputs import guard_outputs
+        from videotrack.project.outputs import guard_outputs
 
         guard_outputs({args.csv: "csv"}, {args.results: "the results", args.truth: "the truth"},
                       force=args.force, field="--csv")

@@ -19,7 +19,7 @@ output never replaces an input, nor without --force an existing file of another 
 docs/markerless.md, "Exporting results".
 """
 
-#: Output suffix -> the kind :func:`videotrack.outputs.guard_outputs` checks it against.
+#: Output suffix -> the kind :func:`videotrack.project.outputs.guard_outputs` checks it against.
 KIND = {".trc": "trc", ".mot": "mot", ".c3d": "c3d", ".nwb": "h5"}
 
 
@@ -45,8 +45,8 @@ def add_parser(subparsers) -> None:
 def run(args) -> int:
     from videotrack.errors import VideoTrackError
     from videotrack.io.export import EXPORTS, export_results
-    from videotrack.outputs import guard_outputs
-    from videotrack.results import read_results, sidecar_path
+    from videotrack.project.outputs import guard_outputs
+    from videotrack.results.files import read_results, sidecar_path
 
     for out in args.outputs:
         if out.suffix.lower() not in EXPORTS:

@@ -107,9 +107,9 @@ def run_fit(args, detect: bool = False) -> int:
         print_warnings,
         step_bars,
     )
+    from videotrack.detect.video import parse_frame_range
     from videotrack.errors import VideoTrackError
-    from videotrack.project import command_config
-    from videotrack.video import parse_frame_range
+    from videotrack.project.folders import command_config
     from videotrack.workflow import run_project
 
     config = command_config(args.config, args.trial)

@@ -74,8 +74,8 @@ FORCE_HELP = "replace an existing output file of another kind (never one of the 
 
 def guard_output(output: Path, inputs, kind: str, force: bool, field: str) -> None:
     """Refuse ``output`` when it is one of ``inputs``, or (unless ``force``) an existing file
-    of another kind (:func:`videotrack.outputs.guard_outputs`)."""
-    from videotrack.outputs import guard_outputs
+    of another kind (:func:`videotrack.project.outputs.guard_outputs`)."""
+    from videotrack.project.outputs import guard_outputs
 
     guard_outputs({output: kind}, inputs, force=force, field=field)
 
@@ -113,7 +113,7 @@ def _angles_for(body, results_paths, all_frames: bool):
     import numpy as np
 
     from videotrack.errors import VideoTrackError
-    from videotrack.results import read_results
+    from videotrack.results.files import read_results
 
     rows = []
     for path in results_paths:
@@ -199,7 +199,7 @@ def run_show(args) -> int:
         if not items:
             raise VideoTrackError("no histogram to plot (every axis is locked)",
                                   field="--plot")
-        from videotrack.plots import plot_histograms
+        from videotrack.results.plots import plot_histograms
 
         print(f"wrote {plot_histograms(items, args.plot)}")
     return 0

@@ -135,8 +135,8 @@ def run(args) -> int:
     from videotrack.errors import VideoTrackError
     from videotrack.io import dlc
     from videotrack.io.keypoints import read_keypoints, write_npz
-    from videotrack.keypoint_filters import KeypointFilterSettings, apply_filters
-    from videotrack.outputs import guard_outputs
+    from videotrack.markerless.filters import KeypointFilterSettings, apply_filters
+    from videotrack.project.outputs import guard_outputs
 
     files = args.files
     cams = camera_names(files, args.names)

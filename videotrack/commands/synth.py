@@ -8,7 +8,7 @@ from pathlib import Path
 from tqdm import tqdm
 
 from videotrack.errors import VideoTrackError
-from videotrack.synth import LAYOUTS
+from videotrack.synth.project import LAYOUTS
 
 EXAMPLES = """\
 examples:
@@ -110,9 +110,9 @@ def add_parser(subparsers) -> None:
 def run(args) -> int:
     from kinematics.cameras.files import load_cameras
     from kinematics.model.chain_xml import loads_body
-    from videotrack.motion import read_angles_csv, smooth_random_motion
-    from videotrack.paper_setup import bundled_chain, locust_cameras
-    from videotrack.synth import write_synthetic_project
+    from videotrack.synth.motion import read_angles_csv, smooth_random_motion
+    from videotrack.synth.paper_setup import bundled_chain, locust_cameras
+    from videotrack.synth.project import write_synthetic_project
 
     if args.points is not None:
         return _write_points(args)
@@ -161,7 +161,7 @@ def run(args) -> int:
 
 
 def _write_batch_project(args, body, chain_text, cameras, trajectory, options) -> int:
-    from videotrack.synth import trial_names, write_synthetic_batch_project
+    from videotrack.synth.project import trial_names, write_synthetic_batch_project
 
     if args.trials < 1:
         raise VideoTrackError(f"must be at least 1, got {args.trials}", field="--trials")
@@ -178,8 +178,8 @@ def _write_batch_project(args, body, chain_text, cameras, trajectory, options) -
 
 
 def _options(args):
-    from videotrack.marker_colours import parse_colour
-    from videotrack.synth import SynthOptions
+    from videotrack.detect.marker_colours import parse_colour
+    from videotrack.synth.project import SynthOptions
 
     return SynthOptions(
         marker_diameter=args.diameter, intensity=args.intensity, background=args.background,
@@ -194,7 +194,7 @@ def _options(args):
 def _write_points(args) -> int:
     """``--points``: render given 3D marker trajectories through the cameras."""
     from kinematics.cameras.files import load_camera_file
-    from videotrack.synth import read_points, write_points_project
+    from videotrack.synth.project import read_points, write_points_project
 
     given = [name for name, value in (("--chain", args.chain), ("--angles", args.angles),
                                       ("--trials", args.trials)) if value is not None]
@@ -223,9 +223,9 @@ def _write_points(args) -> int:
 
 def _guard(args, camera_names: list[str], chain: bool) -> None:
     """Refuse to write over an input, or over an existing file of another kind unless
-    --force (:func:`videotrack.outputs.guard_outputs`), before rendering anything."""
-    from videotrack.outputs import guard_outputs
-    from videotrack.synth import CODECS, trial_names
+    --force (:func:`videotrack.project.outputs.guard_outputs`), before rendering anything."""
+    from videotrack.project.outputs import guard_outputs
+    from videotrack.synth.project import CODECS, trial_names
 
     ext = CODECS[args.codec][1]
     videos = ([f"video_{name}{ext}" for name in camera_names] if args.layout == "separate"

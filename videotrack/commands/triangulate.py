@@ -7,8 +7,8 @@ import sys
 from pathlib import Path
 
 from kinematics.observe.triangulation import LOSSES
-from videotrack.config import TRIANGULATION_INITS, TRIANGULATION_METHODS
 from videotrack.io.keypoints import FORMATS
+from videotrack.project.config import TRIANGULATION_INITS, TRIANGULATION_METHODS
 
 EXAMPLES = """\
 examples:
@@ -185,7 +185,7 @@ def run(args) -> int:
     from videotrack.errors import VideoTrackError
     from videotrack.io.keypoints import align_cameras, read_keypoints
     from videotrack.io.pose3d import write_pose3d
-    from videotrack.outputs import guard_outputs
+    from videotrack.project.outputs import guard_outputs
 
     if args.method != "optim" and (args.limbs or args.limb_lengths):
         raise VideoTrackError("limbs constrain only the optimisation (--method optim)",

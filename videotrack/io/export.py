@@ -19,7 +19,7 @@ EXPORTS = {".trc": "3D points (OpenSim)", ".mot": "joint angles (OpenSim)",
 def export_results(results, path: str | os.PathLike, *, units: str = "mm",
                    only_ok: bool = True, subject: str = "animal") -> Path:
     """Write the markers and joints (3D points) and the joint angles (degrees) of a
-    :class:`~videotrack.results.Results` to ``path`` (``.trc``, ``.mot``, ``.c3d`` or
+    :class:`~videotrack.results.files.Results` to ``path`` (``.trc``, ``.mot``, ``.c3d`` or
     ``.nwb``). Rows whose fit failed are missing (NaN) unless ``only_ok`` is False; the frame
     rate comes from the rows' times."""
     path = Path(path)

@@ -18,7 +18,7 @@ import numpy as np
 
 from kinematics.fileio import atomic_write_text
 from videotrack.errors import VideoTrackError
-from videotrack.tables import read_table
+from videotrack.results.tables import read_table
 
 __all__ = ["FIELDS", "Pose3D", "is_pose3d", "read_pose3d", "write_pose3d"]
 

@@ -23,7 +23,7 @@ import numpy as np
 
 from kinematics.fit import AnnealParams, FrameResult, tuning
 from videotrack.errors import VideoTrackError
-from videotrack.results import (
+from videotrack.results.files import (
     attach_candidates,
     candidates_path,
     frame_results,

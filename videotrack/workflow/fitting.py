@@ -18,9 +18,9 @@ from pathlib import Path
 import numpy as np
 
 from kinematics.fit import FrameResult
-from videotrack.identity import relative_message
-from videotrack.markerless import KeypointInput
-from videotrack.results import Results, results_from_fit, write_candidates, write_results
+from videotrack.markerless.route import KeypointInput
+from videotrack.project.identity import relative_message
+from videotrack.results.files import Results, results_from_fit, write_candidates, write_results
 from videotrack.workflow import checkpoint
 from videotrack.workflow.model import ProjectModel
 from videotrack.workflow.staleness import _source, results_sidecar, threshold_entry

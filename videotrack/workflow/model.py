@@ -18,12 +18,12 @@ import numpy as np
 
 from kinematics.fit import AnnealParams, Fitter
 from kinematics.model import Body
-from videotrack.config import anneal_from_table
+from videotrack.detect.marker_colours import markers_matching
 from videotrack.errors import VideoTrackError, VideoTrackWarning
-from videotrack.identity import relative_path
-from videotrack.marker_colours import markers_matching
-from videotrack.markerless import is_markerless
-from videotrack.results import file_sha256
+from videotrack.markerless.route import is_markerless
+from videotrack.project.config import anneal_from_table
+from videotrack.project.identity import relative_path
+from videotrack.results.files import file_sha256
 
 
 @dataclass(frozen=True)
@@ -172,7 +172,7 @@ def check_detection_views(model: ProjectModel, detections, detections_path: Path
                               f"has {model.view_names}: detect again", file=detections_path)
     meta = getattr(detections, "metadata", None) or {}
     if "settings" in meta and "videos" in meta:  # each view against its camera's image size
-        from videotrack.views import View, check_camera_sizes
+        from videotrack.detect.views import View, check_camera_sizes
 
         check_camera_sizes([View.from_dict(v) for v in meta["settings"]["views"]],
                            [(v["width"], v["height"]) for v in meta["videos"]], model.cameras)

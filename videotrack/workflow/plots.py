@@ -1,5 +1,5 @@
 """The angle plot of a run's results: ``<results>.png``, drawn when wanted and missing or
-older than the results (:func:`videotrack.plots.plot_angles` draws it)."""
+older than the results (:func:`videotrack.results.plots.plot_angles` draws it)."""
 
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ def _plot(run: ProjectRun, wanted: bool) -> ProjectRun:
     png = default_plot_path(run.results_path)
     if not wanted or not (run.fitted or _older(png, run.results_path)):
         return run
-    from videotrack.plots import plot_angles
+    from videotrack.results.plots import plot_angles
 
     png = plot_angles(run.results, png, run.model.body.locked_mask())
     return replace(run, steps=(*run.steps, PLOT), plot_path=Path(png))

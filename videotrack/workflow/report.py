@@ -18,8 +18,8 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from videotrack.errors import VideoTrackError, VideoTrackWarning
-from videotrack.identity import relative_message
-from videotrack.results import Results, read_sidecar
+from videotrack.project.identity import relative_message
+from videotrack.results.files import Results, read_sidecar
 from videotrack.workflow.model import ProjectModel
 
 #: The steps of :func:`run_project`, as :attr:`ProjectRun.steps` and
@@ -150,7 +150,7 @@ def _recorded_warnings(pass_on: bool = False):
 def _reported(run: ProjectRun, caught: Sequence[str]) -> ProjectRun:
     """The run with its warnings (this run's, and those stored with its detections and
     results) and why it is incomplete."""
-    from videotrack.detect import incomplete_reason
+    from videotrack.detect.run import incomplete_reason
 
     base = run.results_path.absolute().parent
     stored = list(run.detections.metadata.get("warnings", [])) if run.detections else []

@@ -11,12 +11,12 @@ histograms + cameras per view + annealing parameters) once;
 and resumable, atomic writing (:mod:`videotrack.workflow.checkpoint`); when the settings allow
 it the records are fitted while the next are detected (:mod:`videotrack.workflow.streaming`).
 
-Outputs never replace inputs (:func:`videotrack.outputs.guard_outputs`), checked before any
+Outputs never replace inputs (:func:`videotrack.project.outputs.guard_outputs`), checked before any
 work is done.
 
 The markerless route: a project whose ``[keypoints] files`` are set has no detections; its
-keypoints are loaded by :func:`videotrack.markerless.load_keypoints` into a
-:class:`~videotrack.markerless.KeypointInput`, which stands where the detections do (records,
+keypoints are loaded by :func:`videotrack.markerless.route.load_keypoints` into a
+:class:`~videotrack.markerless.route.KeypointInput`, which stands where the detections do (records,
 video frames, times; the fitter gets its Observations), and the sidecar records the keypoint
 files by content hash and the ``[keypoints]`` settings instead of the detections file.
 """
@@ -33,8 +33,8 @@ from pathlib import Path
 
 from kinematics.fit import FrameResult
 from videotrack.errors import VideoTrackError, VideoTrackWarning
-from videotrack.markerless import KeypointInput, fitting_model, is_markerless, load_keypoints
-from videotrack.results import candidates_path, read_results
+from videotrack.markerless.route import KeypointInput, fitting_model, is_markerless, load_keypoints
+from videotrack.results.files import candidates_path, read_results
 from videotrack.workflow.checkpoint import checkpoint_paths, discard_checkpoint
 from videotrack.workflow.fitting import fit_project
 from videotrack.workflow.model import ProjectModel, check_detection_views, load_model
@@ -130,7 +130,7 @@ def run_project(
         that is one of the inputs or an existing file of another kind (unless ``force``).
     Cancelled
     """
-    from videotrack.detect import default_output, detection_inputs
+    from videotrack.detect.run import default_output, detection_inputs
 
     report = _reporter(progress, cancel)
     plot = config["fit"]["plot"] if plot is None else plot
@@ -182,8 +182,8 @@ def _markerless_run(config, model: ProjectModel, *, force: bool, results, plot: 
                     ) -> ProjectRun:
     """The start of a markerless project's run: its results path, outputs checked against
     its inputs (the keypoint files among them) before any work."""
-    from videotrack.markerless import default_results_path as keypoints_results_path
-    from videotrack.markerless import keypoint_inputs
+    from videotrack.markerless.route import default_results_path as keypoints_results_path
+    from videotrack.markerless.route import keypoint_inputs
 
     results_path = (Path(results) if results is not None else
                     keypoints_results_path(config))
@@ -196,9 +196,9 @@ def _guard(config, model, det_out: Path | None, results_path: Path, *, detect: b
            fit: bool,
            plot: bool, force: bool, results_given: bool, inputs: dict) -> None:
     """Refuse outputs that are inputs, or existing files of another kind (unless force),
-    before any work is done (:func:`videotrack.outputs.guard_outputs`)."""
-    from videotrack.outputs import guard_outputs
-    from videotrack.results import sidecar_path
+    before any work is done (:func:`videotrack.project.outputs.guard_outputs`)."""
+    from videotrack.project.outputs import guard_outputs
+    from videotrack.results.files import sidecar_path
 
     if model is not None:
         inputs = {**inputs, **model.inputs()}
@@ -230,7 +230,7 @@ def plan_project(config, *, force: bool = False, plot: bool | None = None) -> tu
     LocatedError
         What would make the run fail (config, video, chain, cameras, views).
     """
-    from videotrack.detect import default_output, detection_inputs, detections_status
+    from videotrack.detect.run import default_output, detection_inputs, detections_status
 
     wanted = config["fit"]["plot"] if plot is None else plot
     with warnings.catch_warnings():
@@ -269,8 +269,8 @@ def plan_project(config, *, force: bool = False, plot: bool | None = None) -> tu
 
 def _detections(config, detect: bool, force: bool, report, log, each=None):
     """``(detections, path, made now)``: detected when stale (or forced), else as on disk;
-    ``each`` gets every record detected (:func:`~videotrack.detect.detect_project`)."""
-    from videotrack.detect import default_output, detect_project
+    ``each`` gets every record detected (:func:`~videotrack.detect.run.detect_project`)."""
+    from videotrack.detect.run import default_output, detect_project
 
     if not detect:
         path = default_output(config)

@@ -2,12 +2,12 @@
 project's inputs and parameters.
 
 Identity: the results sidecar names its inputs by paths relative to the results file's
-folder and identifies them by content hash (:mod:`videotrack.identity`); only the hashes and
+folder and identifies them by content hash (:mod:`videotrack.project.identity`); only the hashes and
 the parameters decide whether results are up to date (:data:`IDENTITY_KEYS`), so a project
 copied or moved elsewhere stays up to date and a changed input of the same size does not.
 
 The markerless route: a project whose ``[keypoints] files`` are set has no detections; the
-sidecar records its keypoint files (a :class:`~videotrack.markerless.KeypointInput`) by
+sidecar records its keypoint files (a :class:`~videotrack.markerless.route.KeypointInput`) by
 content hash and the ``[keypoints]`` settings instead of the detections file.
 """
 
@@ -21,9 +21,9 @@ from pathlib import Path
 import numpy as np
 
 from videotrack.errors import VideoTrackError, VideoTrackWarning
-from videotrack.identity import relative_path
-from videotrack.markerless import KeypointInput
-from videotrack.results import file_sha256, read_sidecar
+from videotrack.markerless.route import KeypointInput
+from videotrack.project.identity import relative_path
+from videotrack.results.files import file_sha256, read_sidecar
 from videotrack.workflow.model import ProjectModel, _jsonable
 
 #: Sidecar keys that decide whether results are up to date (inputs by content hash, and
@@ -39,7 +39,7 @@ def results_sidecar(model: ProjectModel, detections_path: Path | KeypointInput,
                     results_path: str | os.PathLike | None = None) -> dict:
     """What a results file records about its inputs and parameters (its sidecar, less the
     rows, the warnings and the CSV's own hash): chain, cameras and detections (or, given a
-    :class:`~videotrack.markerless.KeypointInput`, the keypoint files and settings) with
+    :class:`~videotrack.markerless.route.KeypointInput`, the keypoint files and settings) with
     their hashes, views and their cameras, axes, seed and every annealing parameter. Paths
     are relative to the folder of ``results_path`` when given (so the project can move)."""
     base = None if results_path is None else Path(results_path).absolute().parent
@@ -102,9 +102,9 @@ def _source(detections, detections_path: Path | None) -> Path | KeypointInput:
 def load_fresh_detections(config, path: str | os.PathLike):
     """The detections file ``path`` of a project, refused when missing or made from other
     video(s) or with other detection settings (a missing video is only a warning)."""
-    from videotrack.detect import settings_from_config, video_paths
-    from videotrack.detections import check_fresh, load_detections
-    from videotrack.video import open_videos
+    from videotrack.detect.detections import check_fresh, load_detections
+    from videotrack.detect.run import settings_from_config, video_paths
+    from videotrack.detect.video import open_videos
 
     path = Path(path)
     if not path.exists():

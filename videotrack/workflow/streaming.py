@@ -84,7 +84,7 @@ class FitAlongside:
         self._thread.start()
 
     def add(self, record) -> None:
-        """A detected record (:class:`videotrack.detect.FrameDetections`), the next in order."""
+        """A detected record (:class:`videotrack.detect.run.FrameDetections`), the next in order."""
         self._gathered.append(record.points)
         if len(self._gathered) >= self.chunk:
             self._hand_on()

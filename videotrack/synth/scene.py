@@ -3,8 +3,8 @@ or given 3D marker trajectories (:func:`read_points`), projected through the cam
 occlusions and ghost markers decided for every image (:func:`simulate`,
 :func:`simulate_points`), and the ground-truth table of it all (:func:`truth_table`).
 
-The functions here are pure (arrays in, arrays out); :mod:`videotrack.synth_video` draws the
-frames and :mod:`videotrack.synth` writes the project.
+The functions here are pure (arrays in, arrays out); :mod:`videotrack.synth.video` draws the
+frames and :mod:`videotrack.synth.project` writes the project.
 """
 
 from __future__ import annotations
@@ -19,8 +19,8 @@ import numpy as np
 from kinematics.model import Body
 from kinematics.model.fk import forward_kinematics
 from kinematics.model.packing import pack_body
+from videotrack.detect.marker_colours import check_colours, colour_of_markers
 from videotrack.errors import VideoTrackError
-from videotrack.marker_colours import check_colours, colour_of_markers
 
 LAYOUTS = ("side-by-side", "stacked", "separate")
 
@@ -41,8 +41,8 @@ class SynthOptions:
     layout : views side by side or stacked in one video, or one video per camera.
     seed : seeds noise, ghosts and occlusions (the trajectory has its own seed).
     colours : ((colour, marker patterns), ...): draw a colour video, each marker in its
-        colour (:data:`videotrack.marker_colours.PALETTE`), ghosts in the colours in turn,
-        and write one view per camera and colour (:mod:`videotrack.marker_colours`); empty:
+        colour (:data:`videotrack.detect.marker_colours.PALETTE`), ghosts in the colours in turn,
+        and write one view per camera and colour (:mod:`videotrack.detect.marker_colours`); empty:
         grey markers.
     """
 
@@ -198,7 +198,7 @@ def read_points(path: str | os.PathLike) -> tuple[list[str], np.ndarray]:
         Marker names, in column order.
     points : ndarray, shape (n_images, n_markers, 3)
     """
-    from videotrack.tables import read_table
+    from videotrack.results.tables import read_table
 
     path = Path(path)
     if path.suffix.lower() == ".npz":

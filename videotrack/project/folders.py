@@ -17,7 +17,8 @@ Layout (documented in docs/batch.md)::
 
 Trial folders are found by the ``[batch] trials`` glob patterns (default ``*/*``). A trial's
 config is every ``config.toml`` from the project folder down to the trial folder, merged by
-:func:`videotrack.config.merge_layers` (deeper files override keys; lists and arrays of tables
+:func:`videotrack.project.config.merge_layers` (deeper files override keys; lists and arrays of
+tables
 replace); each file is checked on its own first, so an error names the file that has the bad
 key, and relative paths resolve against the file that set them. ``[video] path`` is the
 trial's videos (or set in the trial's own config.toml).
@@ -32,7 +33,8 @@ from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 
 from kinematics.errors import LocatedError
-from videotrack.config import (
+from videotrack.errors import VideoTrackError
+from videotrack.project.config import (
     Config,
     Key,
     Section,
@@ -42,7 +44,6 @@ from videotrack.config import (
     read_toml,
     register_section,
 )
-from videotrack.errors import VideoTrackError
 
 #: The name of every config file of a project tree.
 CONFIG_NAME = "config.toml"
@@ -90,7 +91,7 @@ class TrialOutputs:
 
     def files(self) -> tuple[Path, ...]:
         """Every file a finished trial has, checkpoints of an interrupted fit included."""
-        from videotrack.results import sidecar_path
+        from videotrack.results.files import sidecar_path
         from videotrack.workflow import checkpoint_paths
 
         return (self.detections, self.results, sidecar_path(self.results), self.plot,
@@ -99,7 +100,7 @@ class TrialOutputs:
 
 def trial_outputs(config: Config) -> TrialOutputs:
     """The detections, results and plot paths of a (trial) config."""
-    from videotrack.detect import default_output
+    from videotrack.detect.run import default_output
     from videotrack.workflow import default_plot_path, default_results_path
 
     detections = default_output(config)
@@ -169,7 +170,7 @@ def open_project(path: str | os.PathLike) -> Project:
     VideoTrackError
         No project config, an error in it, or trial patterns that match nothing.
     """
-    from videotrack.video import natural_key
+    from videotrack.detect.video import natural_key
 
     path = Path(path).absolute()
     root = path.parent if path.is_file() else path
@@ -296,7 +297,7 @@ def _trial_keypoints(folder: Path, files: list[Path], stack: list, merged: Mappi
 
 
 def _find_videos(folder: Path, patterns: Sequence[str]) -> list[Path]:
-    from videotrack.video import natural_key
+    from videotrack.detect.video import natural_key
 
     found = {p for pattern in patterns for p in folder.glob(pattern)
              if not p.name.startswith(".")}  # hidden: temporary files of unfinished writes
@@ -374,6 +375,6 @@ def load_trial_config(project: str | os.PathLike, name: str) -> Config:
 def command_config(path: str | os.PathLike, trial: str | None) -> Config:
     """The config a command works on: a project file, or with ``trial`` that trial of the
     project folder ``path``."""
-    from videotrack.config import load_config
+    from videotrack.project.config import load_config
 
     return load_config(path) if trial is None else load_trial_config(path, trial)

@@ -1,13 +1,13 @@
 """The filter chain: view image → mask of marker pixels (+ the grey image for centroids).
 
-The steps and their keys are declared in :data:`videotrack.config.FILTER_STEPS` (the single
+The steps and their keys are declared in :data:`videotrack.project.config.FILTER_STEPS` (the single
 source of truth, documented in ``docs/detection.md``). Each step takes and gives one *kind* of
 image: ``colour`` (BGR), ``grey`` or ``mask`` (0/255); the chain must end with a mask. The grey
 image entering the first masking step (threshold, otsu, adaptive, hsv_range) is kept as the
 weight image of the intensity-weighted centroids, so background subtraction, channel choice,
 masks and inversion before the threshold also shape the centroids.
 
-A chain is compiled once per :class:`~videotrack.views.Plane` (view × field): masks are
+A chain is compiled once per :class:`~videotrack.detect.views.Plane` (view × field): masks are
 rasterised into the plane's orientation and the background median is computed from frames
 sampled evenly over the whole video, so the same settings always give the same result whatever
 frame range is processed. Every operation is an OpenCV call on uint8 images.
@@ -22,8 +22,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from videotrack.config import FILTER_STEPS
 from videotrack.errors import VideoTrackError
+from videotrack.project.config import FILTER_STEPS
 
 _MASKING = ("threshold", "otsu", "adaptive", "hsv_range")
 _CHANNELS = {"blue": 0, "green": 1, "red": 2}
@@ -98,7 +98,7 @@ class FilterChain:
 
     @classmethod
     def from_config(cls, config) -> FilterChain:
-        """The chain of a loaded :class:`~videotrack.config.Config`."""
+        """The chain of a loaded :class:`~videotrack.project.config.Config`."""
         return cls(config["filters"]["steps"], file=config.path, base=config.folder)
 
     def __repr__(self) -> str:
@@ -132,7 +132,7 @@ class FilterChain:
 
         Parameters
         ----------
-        plane : videotrack.views.Plane
+        plane : videotrack.detect.views.Plane
             Where the images come from; masks are mapped into its orientation.
         sample_frames : callable, optional
             ``sample_frames(n)`` returns ``n`` full frames of the plane's video, sampled evenly

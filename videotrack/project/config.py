@@ -1,10 +1,10 @@
 """Project configuration: a TOML file checked against small declarative schemas.
 
-Every section of the project file is declared once, in :mod:`videotrack.config_sections` or by
+Every section of the project file is declared once, in :mod:`videotrack.project.sections` or by
 the module that owns it, as a :class:`Section` of :class:`Key` entries (name, type, default,
-bounds, doc) — the schema mechanism of :mod:`videotrack.config_schema`. The declarations are the
+bounds, doc) — the schema mechanism of :mod:`videotrack.project.schema`. The declarations are the
 single source of truth: :func:`load_config` validates against them, the records built from a
-config (e.g. :class:`~videotrack.markers.MarkerSettings`) validate through them, and
+config (e.g. :class:`~videotrack.detect.markers.MarkerSettings`) validate through them, and
 :func:`describe_section` turns them into a Markdown reference.
 
 A later module adds its section with ``register_section(Section("name", [...]))`` at import
@@ -14,7 +14,7 @@ settings record whose fields carry their metadata (:func:`record_section`, used 
 ``[anneal]`` from :class:`kinematics.fit.settings.AnnealParams`); :func:`record_from_table` builds
 the record back from the checked section.
 
-Inheritance (projects, :mod:`videotrack.project`): each file is first checked on its own by
+Inheritance (projects, :mod:`videotrack.project.folders`): each file is first checked on its own by
 :func:`parse_layer` (unknown keys, types and values are reported against the file that has
 them; relative paths resolve against it), the layers are merged by :func:`merge_layers` (a
 deeper file overrides keys of the one above; lists and arrays of tables replace), and
@@ -38,7 +38,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from videotrack.config_schema import (  # noqa: F401  (the public names of the schema)
+from videotrack.errors import VideoTrackError
+from videotrack.project.schema import (  # noqa: F401  (the public names of the schema)
     REQUIRED,
     SECTIONS,
     Key,
@@ -52,7 +53,7 @@ from videotrack.config_schema import (  # noqa: F401  (the public names of the s
     record_section,
     register_section,
 )
-from videotrack.config_sections import (  # noqa: F401  (registers the sections)
+from videotrack.project.sections import (  # noqa: F401  (registers the sections)
     ANNEAL,
     CAMERAS,
     CHAIN,
@@ -69,7 +70,6 @@ from videotrack.config_sections import (  # noqa: F401  (registers the sections)
     VIEWS,
     anneal_from_table,
 )
-from videotrack.errors import VideoTrackError
 
 
 @dataclass(frozen=True)

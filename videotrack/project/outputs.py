@@ -142,7 +142,7 @@ def guard_outputs(outputs: Mapping[str | os.PathLike, str],
     VideoTrackError
         Naming the output file and why it is not written.
     """
-    from videotrack.video import IMAGE_EXTENSIONS
+    from videotrack.detect.video import IMAGE_EXTENSIONS
 
     roles = dict(inputs) if isinstance(inputs, Mapping) else {p: "an input" for p in inputs}
     roles = {Path(p): role for p, role in roles.items() if p}

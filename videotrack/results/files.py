@@ -49,7 +49,7 @@ from kinematics.model import Body
 from kinematics.model.fk import forward_kinematics
 from kinematics.model.packing import pack_body
 from videotrack.errors import VideoTrackError
-from videotrack.tables import format_cell
+from videotrack.results.tables import format_cell
 
 #: Every status a results file may hold (a fit's, and ``corrected`` by hand).
 STATUSES = tuple(Status)
@@ -115,7 +115,7 @@ def results_from_fit(body: Body, fit_results: Sequence, view_names: Sequence[str
                      detections=None) -> Results:
     """Build :class:`Results` from the fitter's per-frame results (3D points by FK).
 
-    ``detections`` (a :class:`videotrack.detections.Detections`) supplies video frame, field
+    ``detections`` (a :class:`videotrack.detect.detections.Detections`) supplies video frame, field
     and time of each record; without it the record index stands for all three.
     """
     n = len(fit_results)
@@ -398,7 +398,8 @@ def frame_results(table: Results, seed: int) -> dict:
 
 def file_sha256(path: str | os.PathLike) -> str:
     """Content hash recorded in sidecars (which inputs produced a result): the SHA-256 of
-    the file, cached while the file is unchanged (:func:`videotrack.identity.content_hash`)."""
-    from videotrack.identity import content_hash
+    the file, cached while the file is unchanged (:func:`videotrack.project.identity.content_hash`).
+    """
+    from videotrack.project.identity import content_hash
 
     return content_hash(path)

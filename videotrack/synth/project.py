@@ -1,14 +1,14 @@
 """Artificial marker videos with known ground truth (paper Sect. 3.2).
 
 A chain is moved through an angle trajectory, its markers are projected through one or more
-cameras and drawn as anti-aliased discs (:func:`videotrack.render.render_markers`), optionally
+cameras and drawn as anti-aliased discs (:func:`videotrack.synth.render.render_markers`), optionally
 with noise, static and flickering ghost markers, occlusions and interlaced fields. Every
 image drawn is recorded in a ground-truth table, so detection and fitting can be scored.
 Given 3D marker trajectories (e.g. real motion capture, :func:`read_points`) are rendered
 the same way without a chain (:func:`simulate_points`, :func:`write_points_project`).
 
-:mod:`videotrack.synth_scene` poses and projects the markers (pure: arrays in, arrays out),
-:mod:`videotrack.synth_video` draws the frames and writes lossless video atomically; the
+:mod:`videotrack.synth.scene` poses and projects the markers (pure: arrays in, arrays out),
+:mod:`videotrack.synth.video` draws the frames and writes lossless video atomically; the
 functions here write a whole synthetic project (videos, ground truth, cameras, chain and a
 config), which the ``videotrack synth`` command asks for.
 """
@@ -24,9 +24,9 @@ from pathlib import Path
 import numpy as np
 
 from kinematics.model import Body
+from videotrack.detect.marker_colours import hsv_range
 from videotrack.errors import VideoTrackError
-from videotrack.marker_colours import hsv_range
-from videotrack.synth_scene import (
+from videotrack.synth.scene import (
     LAYOUTS,  # noqa: F401  (public: the layouts of SynthOptions)
     SynthOptions,
     SynthScene,
@@ -38,7 +38,7 @@ from videotrack.synth_scene import (
     truth_columns,
     truth_table,
 )
-from videotrack.synth_video import CODECS, VideoSink, iter_frames, view_rois
+from videotrack.synth.video import CODECS, VideoSink, iter_frames, view_rois
 
 
 @dataclass(frozen=True)
@@ -170,7 +170,7 @@ def _write_scene(out: Path, scene: SynthScene, columns, cameras, options, fps, c
     """Videos, truth.csv, cameras.toml and project.toml of a scene, each atomically."""
     from kinematics.cameras.files import save_cameras
     from kinematics.fileio import atomic_write_text
-    from videotrack.tables import write_table
+    from videotrack.results.tables import write_table
 
     sizes = camera_sizes(cameras)
     ext = CODECS[codec][1]

@@ -1,7 +1,7 @@
 """numba kernels of marker detection: run-length connected components and centroids.
 
-Private: use :func:`videotrack.markers.find_regions`. The readable twin, which is the
-specification and the test oracle, is :func:`videotrack.markers.find_regions_reference`
+Private: use :func:`videotrack.detect.markers.find_regions`. The readable twin, which is the
+specification and the test oracle, is :func:`videotrack.detect.markers.find_regions_reference`
 (OpenCV's ``connectedComponentsWithStats`` plus NumPy). Why a kernel at all: OpenCV's labelling
 with statistics costs about 1 ms per half PAL frame, while marker masks are nearly empty; scanning
 for runs of foreground pixels and labelling the runs costs a few microseconds.

@@ -10,7 +10,7 @@ File format (``.npz``, written atomically; load with ``numpy.load(path, allow_pi
 key           dtype, shape          meaning
 ============  ====================  ==========================================================
 points        float64 (n, 2)        centroids (x, y) in view image coordinates, see
-                                    :mod:`videotrack.views`
+                                    :mod:`videotrack.detect.views`
 areas         int64 (n,)            region areas in pixels of the filtered image
 offsets       int64 (R * V + 1,)    start of each (record, view) in ``points``
 video_frames  int64 (R,)            video frame index of each record
@@ -23,8 +23,8 @@ metadata      str (0-d)             JSON: format, version, settings and their ha
 The metadata records what is needed to tell stale detections (:func:`check_fresh`): the
 detection settings (views, filters, markers, de-interlacing) with their SHA-256, and the
 identity of each source video (name, path relative to the detections file when saved by
-:func:`videotrack.detect.detect_project`, bytes, frame size, frame count, fps and the SHA-256
-of its content, :func:`videotrack.identity.video_hash`). It also keeps what went wrong while
+:func:`videotrack.detect.run.detect_project`, bytes, frame size, frame count, fps and the SHA-256
+of its content, :func:`videotrack.project.identity.video_hash`). It also keeps what went wrong while
 detecting, so later runs still report it: ``warnings`` (messages, paths relative to the
 file's folder) and ``broken`` (videos that could not be read to their end: name, the frame
 where decoding stopped, the frames announced, and for an image folder the image).
@@ -42,11 +42,11 @@ from pathlib import Path
 import numpy as np
 
 from kinematics.fileio import atomic_write
-from videotrack.deinterlace import NO_DEINTERLACE, Deinterlace
+from videotrack.detect.deinterlace import NO_DEINTERLACE, Deinterlace
+from videotrack.detect.filters import FilterChain
+from videotrack.detect.markers import MarkerSettings
+from videotrack.detect.views import View
 from videotrack.errors import VideoTrackError
-from videotrack.filters import FilterChain
-from videotrack.markers import MarkerSettings
-from videotrack.views import View
 
 FORMAT = "videotrack-detections"
 VERSION = 1
@@ -256,8 +256,8 @@ def check_fresh(detections: Detections, videos, settings: DetectSettings,
     VideoTrackError
         Stale detections, saying what differs; field ``settings``, ``video`` or ``frames``.
     """
-    from videotrack.identity import video_hash
-    from videotrack.video import as_video_set
+    from videotrack.detect.video import as_video_set
+    from videotrack.project.identity import video_hash
 
     meta = detections.metadata
     where = detections.path

@@ -1,5 +1,5 @@
 """A synthetic markerless session with known truth: a chain moved through smooth random
-postures (:func:`videotrack.motion.smooth_random_motion`), its markers projected through
+postures (:func:`videotrack.synth.motion.smooth_random_motion`), its markers projected through
 calibrated pinhole cameras around it, with pixel noise and a share of keypoints missing or
 swapped with another keypoint, written as one DeepLabCut CSV per camera
 (:func:`videotrack.io.dlc.write`), a camera file and a project file.
@@ -86,7 +86,7 @@ def write_session(folder, n_frames: int = 40, n_cameras: int = 4, noise_px: floa
     from kinematics.model.fk import forward_kinematics
     from videotrack.io import dlc
     from videotrack.io.keypoints import make_tracks
-    from videotrack.motion import smooth_random_motion
+    from videotrack.synth.motion import smooth_random_motion
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)

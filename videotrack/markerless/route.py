@@ -3,7 +3,7 @@
 A project whose ``[keypoints] files`` are set detects no markers: :func:`load_keypoints`
 reads each camera's 2D keypoints (:func:`videotrack.io.keypoints.read_keypoints`, with the
 crop and frame offsets), filters them (``[keypoints.filter]``,
-:func:`videotrack.keypoint_filters.apply_filters`), puts the cameras on common frames, maps
+:func:`videotrack.markerless.filters.apply_filters`), puts the cameras on common frames, maps
 the keypoints to the chain's markers (``[keypoints.markers]``) and builds the
 :class:`~kinematics.observe.observations.Observations`: the labelled 2D keypoints (route
 ``"2d"``), or
@@ -93,8 +93,8 @@ class KeypointInput:
     def sidecar(self, base: Path | None = None) -> dict:
         """What a results sidecar records about the keypoints: the files (relative to
         ``base`` when given), their content hashes and the settings."""
-        from videotrack.identity import relative_path
-        from videotrack.results import file_sha256
+        from videotrack.project.identity import relative_path
+        from videotrack.results.files import file_sha256
 
         return {"keypoints": [str(p) if base is None else relative_path(p, base)
                               for p in self.files],
@@ -107,7 +107,7 @@ def _folder_sha256(folder: Path) -> str:
     """Content hash of a folder of OpenPose JSON files (names and hashes of its files)."""
     import hashlib
 
-    from videotrack.results import file_sha256
+    from videotrack.results.files import file_sha256
 
     h = hashlib.sha256()
     for p in sorted(folder.glob("*.json")):
@@ -230,15 +230,15 @@ def _per_file(values: list, n: int, none, config, key: str) -> list:
 
 
 def _filter_settings(config):
-    from videotrack.config import record_from_table
-    from videotrack.keypoint_filters import KeypointFilterSettings
+    from videotrack.markerless.filters import KeypointFilterSettings
+    from videotrack.project.config import record_from_table
 
     return record_from_table(KeypointFilterSettings, config["keypoints"]["filter"],
                              file=config.path, where="keypoints.filter")
 
 
 def _filtered(tracks, settings):
-    from videotrack.keypoint_filters import apply_filters
+    from videotrack.markerless.filters import apply_filters
 
     return apply_filters(tracks, settings) if settings.active else tracks
 

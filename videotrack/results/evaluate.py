@@ -24,8 +24,8 @@ import numpy as np
 
 from kinematics.fileio import atomic_write_text
 from videotrack.errors import VideoTrackError
-from videotrack.results import Results, read_results
-from videotrack.tables import format_cell, read_table, text_table
+from videotrack.results.files import Results, read_results
+from videotrack.results.tables import format_cell, read_table, text_table
 
 #: Default threshold of the "% frames off" column, degrees.
 DEFAULT_THRESHOLD_DEG = 5.0

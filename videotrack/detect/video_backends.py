@@ -1,4 +1,4 @@
-"""The decoding backends of :class:`videotrack.video.VideoSource`: one video file through
+"""The decoding backends of :class:`videotrack.detect.video.VideoSource`: one video file through
 OpenCV's FFmpeg backend (:class:`_Capture`), MJPEG decoded from its packets by libjpeg-turbo
 (:class:`_Packets`), and a folder of images (:class:`_Sequence`).
 

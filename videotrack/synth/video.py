@@ -1,5 +1,5 @@
-"""A synthetic scene (:mod:`videotrack.synth_scene`) drawn as video frames: each view's
-markers and ghosts as anti-aliased discs (:func:`videotrack.render.render_markers`), views
+"""A synthetic scene (:mod:`videotrack.synth.scene`) drawn as video frames: each view's
+markers and ghosts as anti-aliased discs (:func:`videotrack.synth.render.render_markers`), views
 side by side, stacked or separate, fields interlaced (:func:`iter_frames`); and the lossless
 video (FFV1, MJPEG or a PNG folder) they are written to atomically (:class:`VideoSink`).
 """
@@ -16,10 +16,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from videotrack.detect.marker_colours import bgr
 from videotrack.errors import VideoTrackError
-from videotrack.marker_colours import bgr
-from videotrack.render import render_markers
-from videotrack.synth_scene import SynthOptions, SynthScene
+from videotrack.synth.render import render_markers
+from videotrack.synth.scene import SynthOptions, SynthScene
 
 CODECS = {"ffv1": ("FFV1", ".avi"), "mjpg": ("MJPG", ".avi"), "png": (None, "")}
 

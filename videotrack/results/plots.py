@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from kinematics.fileio import atomic_write_bytes
-from videotrack.results import Results
+from videotrack.results.files import Results
 
 
 def plot_angles(results: Results, path: str | os.PathLike, locked=None, truth=None) -> Path:

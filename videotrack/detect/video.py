@@ -18,7 +18,7 @@ decodes sequentially from the start for every backward seek (slow, but exact) an
 Frames are ``uint8`` arrays, shape (height, width) in grey mode or (height, width, 3) BGR in
 colour mode; pixel ``frame[i, j]`` has centre (x, y) = (j, i).
 
-The decoders (FFmpeg, MJPEG packets, image files) are :mod:`videotrack.video_backends`.
+The decoders (FFmpeg, MJPEG packets, image files) are :mod:`videotrack.detect.video_backends`.
 """
 
 from __future__ import annotations
@@ -32,14 +32,14 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from videotrack.errors import VideoTrackError, VideoTrackWarning
-from videotrack.video_backends import (
+from videotrack.detect.video_backends import (
     DECODE_THREADS,  # noqa: F401  (public: the threads decoding MJPEG packets)
     IMAGE_EXTENSIONS,  # noqa: F401  (public: the files an image sequence holds)
     _Sequence,
     _video_backend,
     natural_key,  # noqa: F401  (public: the order of an image sequence)
 )
+from videotrack.errors import VideoTrackError, VideoTrackWarning
 
 #: Highest frame index used to check that seeking is exact on codecs with inter frames.
 _SEEK_PROBE_MAX = 50

@@ -89,7 +89,7 @@ def apply_edit(points, edit: ViewEdit | None) -> np.ndarray:
 
 
 def edited_detections(detections, edits: Edits):
-    """A :class:`~videotrack.detections.Detections` with the edits applied (added points
+    """A :class:`~videotrack.detect.detections.Detections` with the edits applied (added points
     have area 0); the detections themselves when there are none."""
     edits = {k: e for k, e in edits.items() if e.moves_points and
              0 <= k[0] < detections.n_records and 0 <= k[1] < detections.n_views}

@@ -54,13 +54,13 @@ def write_paper_project(out_dir, frames: int = PAPER_FRAMES, sequences: int = PA
     movement) with ground truth and a ready project config into ``out_dir``.
 
     ``sequences`` is capped at ``frames``; ``options`` is a
-    :class:`~videotrack.synth.SynthOptions` (default: the paper's clean 4-px markers).
-    Returns the :class:`~videotrack.synth.SynthProject`.
+    :class:`~videotrack.synth.project.SynthOptions` (default: the paper's clean 4-px markers).
+    Returns the :class:`~videotrack.synth.project.SynthProject`.
     """
     from kinematics.fileio import atomic_write_text
     from kinematics.model.chain_xml import loads_body
-    from videotrack.motion import smooth_random_motion
-    from videotrack.synth import SynthOptions, write_synthetic_project
+    from videotrack.synth.motion import smooth_random_motion
+    from videotrack.synth.project import SynthOptions, write_synthetic_project
 
     with bundled_chain("locust_hindleg.xml") as path:
         chain_text = path.read_text(encoding="utf-8")
@@ -82,8 +82,8 @@ def write_example_project(root, trials=3, frames: int = 40, anneal=None):
     names; trial k moves with motion seed k. Returns the trial folders.
     """
     from kinematics.model.chain_xml import loads_body
-    from videotrack.motion import smooth_random_motion
-    from videotrack.synth import SynthOptions, trial_names, write_synthetic_batch_project
+    from videotrack.synth.motion import smooth_random_motion
+    from videotrack.synth.project import SynthOptions, trial_names, write_synthetic_batch_project
 
     with bundled_chain("locust_hindleg.xml") as path:
         chain_text = path.read_text(encoding="utf-8")

@@ -12,8 +12,8 @@ A section can be derived from a frozen settings record whose fields carry their 
 table, re-raising the record's own validation errors against the file and key.
 
 The sections a project file may hold are registered in :data:`SECTIONS` with
-:func:`register_section` (:mod:`videotrack.config_sections` and the modules that own one);
-:mod:`videotrack.config` reads, merges and checks files against them.
+:func:`register_section` (:mod:`videotrack.project.sections` and the modules that own one);
+:mod:`videotrack.project.config` reads, merges and checks files against them.
 
 Type strings
     ``str``, ``int``, ``float`` (an integer is accepted), ``bool``, ``path`` (a string, resolved

@@ -2,13 +2,13 @@
 steps), ``[markers]``, ``[output]``, ``[chain]``, ``[cameras]``, ``[anneal]``, ``[fit]`` and
 ``[keypoints]``, registered in this order (the order of the reference in docs/config.md).
 
-Each is declared once with the schema mechanism of :mod:`videotrack.config_schema`: by hand as
-:class:`~videotrack.config_schema.Key` entries, or derived from a settings record
+Each is declared once with the schema mechanism of :mod:`videotrack.project.schema`: by hand as
+:class:`~videotrack.project.schema.Key` entries, or derived from a settings record
 (``[anneal]`` from :class:`kinematics.fit.settings.AnnealParams`, ``[keypoints.filter]`` from
-:class:`videotrack.keypoint_filters.KeypointFilterSettings`). Allowed values that a command's
+:class:`videotrack.markerless.filters.KeypointFilterSettings`). Allowed values that a command's
 options share come from one definition: the start modes and profiles of
 :mod:`kinematics.fit.settings`, the keypoint formats of :data:`videotrack.io.keypoints.FORMATS`,
-and :data:`TRIANGULATION_METHODS` here. Import them from :mod:`videotrack.config`.
+and :data:`TRIANGULATION_METHODS` here. Import them from :mod:`videotrack.project.config`.
 """
 
 from __future__ import annotations
@@ -16,7 +16,8 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 from kinematics.fit.settings import PROFILES, AnnealParams
-from videotrack.config_schema import (
+from videotrack.io.keypoints import FORMATS as KEYPOINT_FORMATS
+from videotrack.project.schema import (
     Key,
     Section,
     Variants,
@@ -25,7 +26,6 @@ from videotrack.config_schema import (
     record_section,
     register_section,
 )
-from videotrack.io.keypoints import FORMATS as KEYPOINT_FORMATS
 
 #: Backends of the 3D keypoint route and of ``videotrack triangulate --method``: the
 #: functions ``triangulate_<method>`` of :mod:`kinematics.observe.triangulation`.
@@ -39,7 +39,7 @@ KEYPOINT_ROUTES = ("2d", "3d")
 
 
 def _frames_rule(text: str) -> str | None:
-    from videotrack.video import parse_frame_range
+    from videotrack.detect.video import parse_frame_range
 
     try:
         parse_frame_range(text)
@@ -268,7 +268,7 @@ def _names_rule(table: Mapping) -> str | None:
 
 
 def _keypoint_filter_section() -> Section:
-    from videotrack.keypoint_filters import KeypointFilterSettings
+    from videotrack.markerless.filters import KeypointFilterSettings
 
     return record_section("keypoints.filter", KeypointFilterSettings,
                           "Anipose's 2D filters, each off by default (docs/markerless.md).")

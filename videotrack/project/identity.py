@@ -114,7 +114,7 @@ def content_hash(path: str | os.PathLike) -> str:
 
 def image_files(folder: str | os.PathLike) -> list[Path]:
     """The images of an image-sequence folder, in the order they are read as frames."""
-    from videotrack.video import IMAGE_EXTENSIONS, natural_key
+    from videotrack.detect.video import IMAGE_EXTENSIONS, natural_key
 
     folder = Path(folder)
     return sorted((p for p in folder.iterdir()

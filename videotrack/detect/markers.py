@@ -13,7 +13,7 @@ second moments) and circularity ``area / (2π (λ1 + λ2))``, with λ the second
 eigenvalues including each pixel's own 1/12 (1 for a disc, less for elongated or ragged shapes).
 
 Coordinates are those of the image given (pixel centres at integers). :func:`find_regions`
-runs the numba kernels of :mod:`videotrack._detect_kernels`; :func:`find_regions_reference`
+runs the numba kernels of :mod:`videotrack.detect._kernels`; :func:`find_regions_reference`
 is the readable OpenCV/NumPy twin they are tested against.
 """
 
@@ -24,9 +24,9 @@ from dataclasses import asdict, dataclass
 import cv2
 import numpy as np
 
-from videotrack import _detect_kernels as K
-from videotrack.config import MARKERS
+from videotrack.detect import _kernels as K
 from videotrack.errors import VideoTrackError
+from videotrack.project.config import MARKERS
 
 
 @dataclass(frozen=True)

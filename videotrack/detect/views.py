@@ -5,7 +5,7 @@ interest (ROI) cut from the frame, mirrored left-right if ``flip_x`` and top-bot
 ``flip_y``, so that a view seen in a mirror looks like an ordinary camera image. Detections are
 reported in this view image's pixel coordinates: origin at the centre of the view image's
 top-left pixel, x to the right, y down, always at full-frame resolution (de-interlaced
-half-frames are mapped back, see :mod:`videotrack.deinterlace`). The camera of a view is
+half-frames are mapped back, see :mod:`videotrack.detect.deinterlace`). The camera of a view is
 calibrated in exactly these coordinates: it projects world points to (u, v) = view (x, y).
 
 Mapping to the video frame (for drawing), with ROI ``(x0, y0, w, h)``::
@@ -24,7 +24,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from videotrack.deinterlace import Deinterlace
+from videotrack.detect.deinterlace import Deinterlace
 from videotrack.errors import VideoTrackError, VideoTrackWarning
 
 
@@ -44,7 +44,7 @@ class View:
     camera : str, optional
         Camera name in the camera file; defaults to ``name``.
     video : int
-        Index of the video (in a :class:`~videotrack.video.VideoSet`) the view is cut from.
+        Index of the video (in a :class:`~videotrack.detect.video.VideoSet`) the view is cut from.
     hsv : ((h, s, v), (h, s, v)), optional
         The colour range this view keeps, in place of the filter chain's ``hsv_range`` step
         (one view per marker colour on the same camera); None keeps the chain's.

@@ -24,8 +24,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from videotrack.config import VIDEO
 from videotrack.errors import VideoTrackError
+from videotrack.project.config import VIDEO
 
 
 @dataclass(frozen=True)

@@ -3,7 +3,7 @@
 :func:`iter_detect` is a generator yielding the detections of one record (a frame, or a
 half-frame when de-interlacing) at a time; it never prints or writes, and closing it cancels
 the run. :func:`detect_video` collects a whole run into a
-:class:`~videotrack.detections.Detections`. :func:`settings_from_config` builds the settings
+:class:`~videotrack.detect.detections.Detections`. :func:`settings_from_config` builds the settings
 from a project file, and :func:`detect_project` runs a project file's detection (skipped when
 its detections file is up to date), as ``videotrack detect``, ``run`` and ``batch`` do.
 """
@@ -21,8 +21,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from videotrack.deinterlace import Deinterlace
-from videotrack.detections import (
+from videotrack.detect.deinterlace import Deinterlace
+from videotrack.detect.detections import (
     FORMAT,
     VERSION,
     Detections,
@@ -32,12 +32,12 @@ from videotrack.detections import (
     load_detections,
     save_detections,
 )
+from videotrack.detect.filters import FilterChain
+from videotrack.detect.markers import MarkerSettings, RegionFinder
+from videotrack.detect.video import VideoSet, as_video_set, open_videos, resolve_frames
+from videotrack.detect.views import Plane, View, check_views
 from videotrack.errors import VideoTrackError, VideoTrackWarning
-from videotrack.filters import FilterChain
-from videotrack.identity import video_hash
-from videotrack.markers import MarkerSettings, RegionFinder
-from videotrack.video import VideoSet, as_video_set, open_videos, resolve_frames
-from videotrack.views import Plane, View, check_views
+from videotrack.project.identity import video_hash
 
 
 @dataclass(frozen=True, eq=False)
@@ -164,8 +164,8 @@ def detect_project(
         of the inputs (the video, a config file: never overwritten), or an existing file at
         ``output`` that is no detections file (not overwritten unless ``force``).
     """
-    from videotrack.identity import relative_message, relative_path
-    from videotrack.outputs import guard_outputs
+    from videotrack.project.identity import relative_message, relative_path
+    from videotrack.project.outputs import guard_outputs
 
     field = ("--output" if output is not None else
              "output.detections" if config["output"]["detections"] else None)
@@ -429,7 +429,7 @@ def detect_video(source, settings: DetectSettings, frames=None,
     -------
     Detections
         Not yet saved (``save_detections``). A view without any marker in the whole run is
-        reported by a :class:`~videotrack.video.VideoTrackWarning`; its records are empty.
+        reported by a :class:`~videotrack.detect.video.VideoTrackWarning`; its records are empty.
     """
     videos = as_video_set(source)
     frame_range = resolve_frames(frames, videos.n_frames)
@@ -476,7 +476,7 @@ def _broken_image(source) -> Path | None:
     """The image of an image folder at which decoding stopped (None for a video file)."""
     if not source.is_sequence or source.broken_at is None:
         return None
-    from videotrack.identity import image_files
+    from videotrack.project.identity import image_files
 
     files = image_files(source.path)
     return files[source.broken_at] if source.broken_at < len(files) else None
@@ -563,7 +563,7 @@ def summarize(detections: Detections) -> list[ViewSummary]:
 
 def format_summary(rows: list[ViewSummary]) -> str:
     """A plain-text table of :func:`summarize`."""
-    from videotrack.tables import text_table
+    from videotrack.results.tables import text_table
 
     head = ("view", "records", "min", "median", "max", "empty")
     body = [(r.view, str(r.records), str(r.min), f"{r.median:g}", str(r.max), str(r.empty))
