@@ -27,16 +27,23 @@ sys.path.insert(0, str(REPO / "bench"))
 
 from _report import machine, print_table  # noqa: E402
 
-# Runs inside each tree with only the public API both versions share.
+# Runs inside each tree with only the public API both versions share (under either layout).
 SNIPPET = r"""
 import json, sys, time
 import numba, numpy as np
-from kinematics.fit import AnnealParams, Fitter
 from kinematics.cameras import PinholeCamera
-from kinematics.model.chain_xml import load_body
-from kinematics.model.fk import forward_kinematics
-from videotrack.synth.motion import smooth_random_motion
-from videotrack.synth.paper_setup import bundled_chain, locust_cameras
+try:  # the tree's layout since the fitting layer moved into packages
+    from kinematics.fit import AnnealParams, Fitter
+    from kinematics.model.chain_xml import load_body
+    from kinematics.model.fk import forward_kinematics
+    from videotrack.synth.motion import smooth_random_motion
+    from videotrack.synth.paper_setup import bundled_chain, locust_cameras
+except ImportError:  # ... and before
+    from kinematics.anneal import AnnealParams, Fitter
+    from kinematics.chain_xml import load_body
+    from kinematics.fk import forward_kinematics
+    from videotrack.motion import smooth_random_motion
+    from videotrack.paper_setup import bundled_chain, locust_cameras
 
 numba.set_num_threads(1)
 n_frames = int(sys.argv[1])

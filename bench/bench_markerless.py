@@ -4,7 +4,7 @@ triangulate-then-fit with each triangulation backend.
 A free-root rat hind leg (videotrack.synth.keypoints: pelvis with both hips and the tail
 base, femur, tibia) moves through smooth random postures, seen by 4 calibrated pinhole
 cameras; every camera's DeepLabCut CSV has 2 px of noise and 10 % of its keypoints missing
-or swapped with another keypoint. Each project runs through ``videotrack.pipeline.run_project``
+or swapped with another keypoint. Each project runs through ``videotrack.workflow.run.run_project``
 as ``videotrack fit project.toml`` does:
 
 - route "2d": the chain fitted to the 2D keypoints directly (labelled reprojection error);

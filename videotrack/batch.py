@@ -1,7 +1,7 @@
 """Batch processing of a project: every trial detected and fitted, locally or on Dask.
 
 :func:`run_trial` does one trial from start to end with
-:func:`videotrack.pipeline.run_project` — detection (skipped when up to date), fitting
+:func:`videotrack.workflow.run.run_project` — detection (skipped when up to date), fitting
 (skipped when the results are up to date, resumed from its checkpoint when an earlier run was
 killed), the plot — and never raises for a problem of the trial: it returns a
 :class:`TrialReport` saying ``done``, ``up to date`` or ``failed``. :func:`run_batch` runs

@@ -180,7 +180,7 @@ def plan_trial(trial: Trial, force: bool = False) -> tuple[str, str]:
     """What :func:`run_trial` would do, without doing it: ``(action, why)``.
 
     Actions: ``"detect + fit"``, ``"fit"``, ``"plot"``, ``"up to date"``, ``"fails"``
-    (:func:`videotrack.pipeline.plan_project`). Reads the videos' headers, the detections
+    (:func:`videotrack.workflow.run.plan_project`). Reads the videos' headers, the detections
     and the results' sidecars; writes nothing.
     """
     from videotrack.workflow import plan_project

@@ -1,7 +1,7 @@
-"""Fitting while detecting (``videotrack.pipeline.FitAlongside``): ``run`` fits the records
-while the next are detected when the settings allow it, and then writes what detecting first
-and fitting afterwards writes; an interrupted run leaves no half-written output and resumes;
-a truncated video is reported in one line."""
+"""Fitting while detecting (``videotrack.workflow.streaming.FitAlongside``): ``run`` fits the
+records while the next are detected when the settings allow it, and then writes what
+detecting first and fitting afterwards writes; an interrupted run leaves no half-written
+output and resumes; a truncated video is reported in one line."""
 
 import shutil
 import threading

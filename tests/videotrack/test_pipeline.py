@@ -1,4 +1,4 @@
-"""``videotrack.pipeline.run_project``, the one workflow: detect when stale, fit when stale,
+"""``videotrack.workflow.run.run_project``, the one workflow: detect when stale, fit when stale,
 skip what is up to date, force, plot, cancel; and ``fit``, ``run``, ``batch`` and ``demo``
 write the same results file as calling it directly."""
 

@@ -1,9 +1,9 @@
 """The GUI's one door to the fitter, the results files and the project model (no Qt).
 
-Everything the GUI uses from :mod:`kinematics.fit`, :mod:`videotrack.pipeline` and
+Everything the GUI uses from :mod:`kinematics.fit`, :mod:`videotrack.workflow` and
 :mod:`videotrack.results.files` goes through this module, so a rename there is a one-line change
 here. Nothing in it computes anything itself: it forwards and converts. Detecting markers is
-the project workflow :func:`videotrack.pipeline.run_project` without its fit; fitting is
+the project workflow :func:`videotrack.workflow.run.run_project` without its fit; fitting is
 interactive (frames chosen, results shown as they arrive, undoable) and saved by
 :func:`save_project_results`.
 """

@@ -9,6 +9,7 @@ from dataclasses import replace
 import numpy as np
 
 from kinematics.errors import LocatedError
+from kinematics.fit.result import WITHIN
 from kinematics.model import Body
 from ui import adapters
 from ui.state import backend
@@ -360,7 +361,7 @@ class CorrectionsMixin:
                 if k == 0 or not dist[k] < CARRY_RATIO * to_new:
                     # still on the branch given up, and nothing to swap to: a look is
                     # needed (it may be fitted right from its neighbour, F9)
-                    if r.status in ("ok", "reanalysed"):
+                    if r.status in WITHIN:
                         out.append(backend.with_status(r, "ambiguous"))
                     break
                 out.append(self._chosen_result(fitter, g, r, k))

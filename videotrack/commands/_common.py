@@ -1,4 +1,4 @@
-"""Shared by the commands that run :func:`videotrack.pipeline.run_project`: its progress as
+"""Shared by the commands that run :func:`videotrack.workflow.run.run_project`: its progress as
 bars and its notes and warnings as lines on stderr (the library never prints)."""
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ BAR_NAMES = {"detect": "detecting", "fit": "fitting"}
 
 @contextlib.contextmanager
 def step_bars() -> Iterator:
-    """A ``progress`` callback for :func:`~videotrack.pipeline.run_project`: one bar per
+    """A ``progress`` callback for :func:`~videotrack.workflow.run.run_project`: one bar per
     step on stderr (the fitting bar shows the share of bad frames), closed with the block."""
     from tqdm import tqdm
 

@@ -8,7 +8,7 @@ for runs of foreground pixels and labelling the runs costs a few microseconds.
 
 Pixel (row i, column j) has centre (x, y) = (j, i). Regions are numbered in raster order of their
 first pixel, as OpenCV numbers its labels. The kernels release the GIL (``nogil``): a run fits
-earlier records in another thread while it detects (``videotrack.pipeline.FitAlongside``).
+earlier records in another thread while it detects (``videotrack.workflow.streaming.FitAlongside``).
 """
 
 from __future__ import annotations

@@ -138,7 +138,7 @@ class MappedKeypoints:
 
 def load_keypoints(config, model) -> KeypointInput:
     """The :class:`KeypointInput` of a project's ``[keypoints]`` for ``model``
-    (a :class:`videotrack.pipeline.ProjectModel`: its views and body).
+    (a :class:`videotrack.workflow.model.ProjectModel`: its views and body).
 
     Raises
     ------
