@@ -112,132 +112,41 @@ def add_parser(subparsers) -> None:
     p.set_defaults(func=run)
 
 
-def load_any_cameras(path: Path) -> dict:
-    """Cameras of a VideoTrack camera file, of a project file (its ``[cameras] path``), or of
-    an Anipose/Pose2Sim calibration.toml."""
-    import tomllib
-
-    from kinematics.cameras.files import import_anipose_toml, load_cameras
-
-    try:
-        doc = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
-        doc = None  # load_cameras says what is wrong, with the line
-    if isinstance(doc, dict) and "cameras" not in doc:
-        return import_anipose_toml(path)
-    if isinstance(doc, dict) and isinstance(doc["cameras"].get("path"), str):
-        return load_any_cameras(path.parent / doc["cameras"]["path"])  # a project file
-    return load_cameras(path)
-
-
-def _assign(cameras: dict, specs: list[str]) -> dict[str, Path]:
-    """Camera name -> keypoint path from CAMERA=PATH or PATH arguments."""
-    from videotrack.errors import VideoTrackError
-
-    names = list(cameras)
-    out: dict[str, Path] = {}
-    plain = []
-    for spec in specs:
-        name, sep, rest = spec.partition("=")
-        if sep and name in cameras:
-            if name in out:
-                raise VideoTrackError(f"camera {name!r} is given two keypoint files",
-                                      field="KEYPOINTS")
-            out[name] = Path(rest)
-        elif sep and not Path(spec).exists():
-            raise VideoTrackError(f"no camera {name!r} in the camera file (it has "
-                                  f"{', '.join(names)})", field="KEYPOINTS")
-        else:
-            plain.append(Path(spec))
-    if plain and out:
-        raise VideoTrackError("name the camera of every keypoint file (CAMERA=PATH) or of "
-                              "none", field="KEYPOINTS")
-    if plain:
-        if len(plain) > len(names):
-            raise VideoTrackError(f"{len(plain)} keypoint files for {len(names)} cameras",
-                                  field="KEYPOINTS")
-        out = dict(zip(names, plain, strict=False))
-    if len(out) < 2:
-        raise VideoTrackError("triangulation needs the keypoints of at least two cameras",
-                              field="KEYPOINTS")
-    return {n: out[n] for n in names if n in out}
-
-
-def _limbs(specs, names: tuple[str, ...]):
-    from videotrack.errors import VideoTrackError
-
-    pairs = []
-    for spec in specs:
-        parts = spec.split(",")
-        if len(parts) != 2 or any(p not in names for p in parts):
-            raise VideoTrackError(f"expected two body parts A,B of {', '.join(names)}; got "
-                                  f"{spec!r}", field="--limbs")
-        pairs.append((names.index(parts[0]), names.index(parts[1])))
-    return pairs
-
-
 def run(args) -> int:
-    import numpy as np
     from tqdm import tqdm
 
-    from kinematics.observe import triangulation as tri
     from videotrack.commands._common import note
-    from videotrack.errors import VideoTrackError
-    from videotrack.io.keypoints import align_cameras, read_keypoints
-    from videotrack.io.pose3d import write_pose3d
-    from videotrack.project.outputs import guard_outputs
+    from videotrack.workflow.triangulate import triangulate_keypoints
 
-    if args.method != "optim" and (args.limbs or args.limb_lengths):
-        raise VideoTrackError("limbs constrain only the optimisation (--method optim)",
-                              field="--limbs")
-    cameras = load_any_cameras(args.cameras)
-    files = _assign(cameras, args.keypoints)
-    inputs = {args.cameras: "the camera file", **{p: f"the keypoints of {n}"
-                                                 for n, p in files.items()}}
-    guard_outputs({args.output: "pose3d"}, inputs, force=args.force, field="--output")
     individual = args.individual
     if individual is not None and individual.lstrip("-").isdigit():
         individual = int(individual)
-    tracks = {n: read_keypoints(p, args.format, individual=individual, model=args.model)
-              for n, p in files.items()}
-    names, frames, xy, score = align_cameras(tracks)
-    cams = [cameras[n] for n in files]
-    common = dict(min_score=args.min_score, weighted=not args.unweighted)
-    ransac = dict(min_cams=args.min_cams, good_px=args.good_px, max_px=args.max_px,
-                  inlier_px=args.inlier_px)
-    with tqdm(total=len(frames), unit="frame", desc="triangulating", file=sys.stderr,
-              leave=False, disable=None) as bar:
-        if args.method == "optim":
-            result = tri.triangulate_optim(
-                cams, xy, score, **common, init=args.init, limbs=_limbs(args.limbs, names),
-                limb_lengths=args.limb_lengths, smooth=args.smooth, n_deriv=args.n_deriv,
-                limb_weight=args.limb_weight, loss=args.loss, loss_px=args.loss_px,
-                chunk=args.chunk, overlap=args.overlap,
-                progress=lambda done, total: bar.update(done - bar.n),
-                **(ransac if args.init == "ransac" else {}))
-        else:
-            parts = []
-            for s in range(0, max(len(frames), 1), 500):  # blocks, for the bar
-                block = slice(s, s + 500)
-                if args.method == "ransac":
-                    parts.append(tri.triangulate_ransac(cams, xy[:, block], score[:, block],
-                                                        **common, **ransac))
-                else:
-                    parts.append(tri.triangulate_linear(cams, xy[:, block], score[:, block],
-                                                        **common))
-                bar.update(len(parts[-1].xyz))
-            result = tri.Triangulation(*(np.concatenate([getattr(p, f) for p in parts],
-                                                        axis=1 if f == "used" else 0)
-                                         for f in ("xyz", "error", "ncams", "score", "used")))
-    write_pose3d(args.output, names, result.xyz, result.error, result.ncams, result.score,
-                 frames)
-    placed = np.isfinite(result.xyz).all(axis=-1)
-    if not placed.any():
+    bars: list = []
+
+    def progress(done: int, total: int) -> None:
+        if not bars:
+            bars.append(tqdm(total=total, unit="frame", desc="triangulating",
+                             file=sys.stderr, leave=False, disable=None))
+        bars[0].update(done - bars[0].n)
+
+    try:
+        done = triangulate_keypoints(
+            args.cameras, args.keypoints, args.output, method=args.method,
+            keypoint_format=args.format, model=args.model, individual=individual,
+            min_score=args.min_score, weighted=not args.unweighted, min_cams=args.min_cams,
+            good_px=args.good_px, max_px=args.max_px, inlier_px=args.inlier_px,
+            init=args.init, limbs=args.limbs, limb_lengths=args.limb_lengths,
+            smooth=args.smooth, n_deriv=args.n_deriv, limb_weight=args.limb_weight,
+            loss=args.loss, loss_px=args.loss_px, chunk=args.chunk, overlap=args.overlap,
+            force=args.force, progress=progress)
+    finally:
+        for bar in bars:
+            bar.close()
+    if not done.placed:
         note("warning: no point was seen by two cameras; the output holds only NaN")
-    err = result.error[placed & np.isfinite(result.error)]
-    med = f"{np.median(err):.2f}" if err.size else "n/a"
-    print(f"triangulated {placed.sum()} of {placed.size} points ({len(names)} body parts x "
-          f"{len(frames)} frames, {len(cams)} cameras, {args.method}); reprojection error "
-          f"median {med} px")
-    print(f"wrote {args.output}")
+    med = f"{done.median_px:.2f}" if done.median_px is not None else "n/a"
+    print(f"triangulated {done.placed} of {done.points} points ({done.body_parts} body parts "
+          f"x {done.frames} frames, {done.cameras} cameras, {done.method}); reprojection "
+          f"error median {med} px")
+    print(f"wrote {done.output}")
     return 0
