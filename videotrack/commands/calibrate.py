@@ -161,33 +161,28 @@ def _size(text: str | None):
     return int(m[1]), int(m[2])
 
 
-def _outputs(args) -> dict:
-    outs = {args.out: "toml"}
-    for path, kind in ((args.anipose_out, "toml"), (args.dlt_out, "csv"),
-                       (args.report_png, "png"), (args.opencv_out, "folder")):
-        if path is not None:
-            outs[path] = kind
-    return outs
+def _outputs(args):
+    from videotrack.workflow.calibrate import Outputs
+
+    return Outputs(out=args.out, anipose_out=args.anipose_out, dlt_out=args.dlt_out,
+                   report_png=args.report_png, opencv_out=args.opencv_out,
+                   dlt_origin=args.dlt_origin)
 
 
-def _write(args, cameras: dict, error: float | None, units: str | None = "mm") -> None:
-    from kinematics.cameras.files import save_cameras
-    from videotrack.io.camera_formats import save_anipose_toml, save_dlt_csv, save_opencv_yaml
-
-    save_cameras(args.out, cameras, units=units)
-    if args.anipose_out:
-        save_anipose_toml(args.anipose_out, cameras, error=error)
-    if args.dlt_out:
-        save_dlt_csv(args.dlt_out, cameras, origin=args.dlt_origin)
-    if args.opencv_out:
-        args.opencv_out.mkdir(parents=True, exist_ok=True)
-        for name, cam in cameras.items():
-            save_opencv_yaml(args.opencv_out / f"{name}.yml", cam)
+def _print_refinement(refinement) -> None:
+    if refinement is not None:
+        print(f"refined from {refinement.points} points: reprojection median "
+              f"{refinement.before_px:.3f} px before, {refinement.after_px:.3f} px after "
+              f"(triangulated)")
 
 
 def run(args) -> int:
+    import sys
+
+    from tqdm import tqdm
+
     from videotrack.errors import VideoTrackError
-    from videotrack.project.outputs import guard_outputs
+    from videotrack.workflow.calibrate import calibrate_cameras
 
     if args.import_file is not None:
         return _convert(args)
@@ -195,143 +190,49 @@ def run(args) -> int:
         raise VideoTrackError("give a board config (or --import FILE to convert)",
                               field="board")
     cams = _cameras(args.camera)
-    if not cams:
-        raise VideoTrackError("no cameras: give --camera NAME=PATH for each camera",
-                              field="--camera")
-    if len(cams) < 2 and not args.intrinsics_only:
-        raise VideoTrackError("one camera has no extrinsics to calibrate: give two or more, "
-                              "or --intrinsics-only", field="--camera")
-    if args.restarts < 1 or args.max_frames < 0:
-        raise VideoTrackError("--restarts must be >= 1 and --max-frames >= 0",
-                              field="--restarts")
-    names = list(cams)
-    reference = args.reference or names[0]
-    if reference not in cams:
-        raise VideoTrackError(f"no camera named {reference!r} (cameras: {', '.join(names)})",
-                              field="--reference")
-    cache = args.out.with_name(args.out.name + ".corners.npz")
-    outputs = _outputs(args)
-    if not args.no_cache:
-        outputs[cache] = "corners"
-    inputs = {args.board: "the board config"}
-    inputs.update({Path(p): f"a source of camera {n}" for n, p in cams.items()
-                   if not any(ch in p for ch in "*?[")})
-    if args.intrinsics:
-        inputs[args.intrinsics] = "the intrinsics"
-    if args.refine_points:
-        inputs[args.refine_points] = "the points"
-    guard_outputs(outputs, inputs, force=args.force)
-    return _calibrate(args, cams, reference, cache)
+    bars: list = []
 
+    def progress(n: int, total: int) -> None:
+        if not bars:
+            bars.append(tqdm(total=args.restarts, desc="bundle adjustment", unit="start",
+                             leave=False, file=sys.stderr, disable=None))
+        bars[0].update(n - bars[0].n)
+        if n >= total:
+            bars[0].close()
 
-def _calibrate(args, cams: dict, reference: str, cache: Path) -> int:
-    import sys
-
-    from tqdm import tqdm
-
-    from kinematics.cameras.files import load_cameras
-    from videotrack.calibration.boards import load_board
-    from videotrack.calibration.bundle import Options, calibrate
-    from videotrack.calibration.detect import Source, detect_all
-    from videotrack.calibration.report import make_report, save_png
-    from videotrack.errors import VideoTrackError
-
-    board = load_board(args.board)
-    sources = [Source(name, path) for name, path in cams.items()]
-    corners = detect_all(board, sources, max_frames=args.max_frames or None,
-                         synchronised=not args.intrinsics_only,
-                         cache=None if args.no_cache else cache)
-    known = {}
-    if args.intrinsics:
-        given = load_cameras(args.intrinsics)
-        for i, name in enumerate(cams):
-            if name not in given:
-                raise VideoTrackError(f"no camera {name!r} in the file", file=args.intrinsics)
-            known[i] = given[name]
-    elif args.fix_intrinsics and args.intrinsics_only:
-        raise VideoTrackError("--fix-intrinsics without --intrinsics has nothing to keep in "
-                              "--intrinsics-only mode", field="--fix-intrinsics")
-    opts = Options(reference=list(cams).index(reference), n_dist=args.distortion,
-                   fix_intrinsics=args.fix_intrinsics, restarts=args.restarts,
-                   intrinsics_only=args.intrinsics_only, seed=args.seed, known=known,
-                   symmetric=board.type == "checkerboard")
-    with tqdm(total=args.restarts, desc="bundle adjustment", unit="start", leave=False,
-              file=sys.stderr, disable=None) as bar:
-        cal = calibrate(corners, board.object_points, opts,
-                        progress=lambda done, total: bar.update(done - bar.n))
-    report = make_report(cal, corners, board)
-    if args.world_view is not None:
-        from videotrack.calibration.bundle import reframe
-
-        cal.cameras = reframe(cal, args.world_view)
-        label = corners[0].labels[args.world_view]
-        reference = f"the board in view {args.world_view} ({label})"
-    print(f"board: {board.describe()}")
-    if cal.tree:
-        names = list(cams)
-        print("spanning tree: " + ", ".join(f"{names[a]}-{names[b]} ({n} shared views)"
-                                            for a, b, n in cal.tree))
-    for line in report.lines():
+    try:
+        done = calibrate_cameras(
+            args.board, cams, _outputs(args), reference=args.reference,
+            world_view=args.world_view, distortion=args.distortion,
+            intrinsics=args.intrinsics, fix_intrinsics=args.fix_intrinsics,
+            intrinsics_only=args.intrinsics_only, refine_points=args.refine_points,
+            restarts=args.restarts, max_frames=args.max_frames, seed=args.seed,
+            cache=not args.no_cache, force=args.force, progress=progress)
+    finally:
+        for bar in bars:
+            bar.close()
+    print(f"board: {done.board}")
+    if done.tree:
+        print("spanning tree: " + ", ".join(f"{a}-{b} ({n} shared views)"
+                                            for a, b, n in done.tree))
+    for line in done.report:
         print(line)
-    if args.refine_points:
-        cal.cameras = _refine(args, cal.cameras, list(cams).index(reference))
-    _write(args, {c.name: c for c in cal.cameras}, report.overall["median"])
-    if args.report_png:
-        save_png(args.report_png, cal, corners)
-    print(f"wrote {args.out} ({len(cal.cameras)} cameras, world frame: {reference}, mm) in "
-          f"{cal.seconds:.1f} s")
+    _print_refinement(done.refinement)
+    print(f"wrote {done.out} ({done.cameras} cameras, world frame: {done.world_frame}, mm) in "
+          f"{done.seconds:.1f} s")
     return 0
 
 
-def _refine(args, cameras: list, reference: int) -> list:
-    """Camera poses refined from the points of --refine-points; prints before and after."""
-    import numpy as np
-
-    from kinematics.cameras import PinholeCamera
-    from videotrack.calibration.refine import refine_extrinsics, triangulated_errors
-    from videotrack.errors import VideoTrackError
-
-    path = args.refine_points
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            if "p2d" not in z.files:
-                raise VideoTrackError(f"no array 'p2d' (found: {', '.join(z.files)})",
-                                      file=path)
-            p2d = np.asarray(z["p2d"], dtype=np.float64)
-    except (OSError, ValueError) as err:
-        raise VideoTrackError(f"cannot read the points: {err}", file=path) from None
-    if not all(isinstance(c, PinholeCamera) for c in cameras):
-        raise VideoTrackError("refinement needs pinhole cameras", field="--refine-points")
-    try:
-        before = np.nanmedian(triangulated_errors(cameras, p2d))
-        refined, _ = refine_extrinsics(cameras, p2d, reference=reference)
-    except VideoTrackError as err:
-        raise err.located(file=path) from None
-    print(f"refined from {p2d.shape[1]} points: reprojection median {before:.3f} px before, "
-          f"{np.nanmedian(triangulated_errors(refined, p2d)):.3f} px after (triangulated)")
-    return refined
-
-
 def _convert(args) -> int:
-    from videotrack.calibration.formats import read_cameras
     from videotrack.errors import VideoTrackError
-    from videotrack.project.outputs import guard_outputs
+    from videotrack.workflow.calibrate import convert_cameras
 
     if args.board is not None or args.camera:
         raise VideoTrackError("--import converts a camera file: give no board or --camera",
                               field="--import")
-    inputs = {args.import_file: "the imported camera file"}
-    if args.refine_points:
-        inputs[args.refine_points] = "the points"
-    guard_outputs(_outputs(args), inputs, force=args.force)
-    from videotrack.calibration.formats import guess_format
-
-    fmt = args.format or guess_format(args.import_file)
-    cameras = read_cameras(args.import_file, fmt, dlt_size=_size(args.dlt_size),
-                           dlt_origin=args.dlt_origin)
-    if args.refine_points:
-        refined = _refine(args, list(cameras.values()), 0)
-        cameras = {c.name: c for c in refined}
-    _write(args, cameras, None, units="mm" if fmt == "qca" else None)  # others: unknown
-    print(f"wrote {args.out} ({len(cameras)} cameras from {args.import_file})")
+    done = convert_cameras(args.import_file, _outputs(args), fmt=args.format,
+                           dlt_size=_size(args.dlt_size), refine_points=args.refine_points,
+                           force=args.force)
+    _print_refinement(done.refinement)
+    print(f"wrote {done.out} ({done.cameras} cameras from {done.source})")
     return 0

@@ -7,7 +7,6 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from videotrack.errors import VideoTrackError
 from videotrack.synth.project import LAYOUTS
 
 EXAMPLES = """\
@@ -108,148 +107,46 @@ def add_parser(subparsers) -> None:
 
 
 def run(args) -> int:
-    from kinematics.cameras.files import load_cameras
-    from kinematics.model.chain_xml import loads_body
-    from videotrack.synth.motion import read_angles_csv, smooth_random_motion
-    from videotrack.synth.paper_setup import bundled_chain, locust_cameras
-    from videotrack.synth.project import write_synthetic_project
-
-    if args.points is not None:
-        return _write_points(args)
-    if args.chain is None:
-        with bundled_chain("locust_hindleg.xml") as path:
-            chain_path, chain_text = path, Path(path).read_text(encoding="utf-8")
-    else:
-        chain_path = args.chain
-        try:
-            chain_text = args.chain.read_text(encoding="utf-8")
-        except (OSError, UnicodeDecodeError) as err:
-            raise VideoTrackError(f"cannot read chain: {err}", file=args.chain) from None
-    body = loads_body(chain_text, source=str(chain_path))
-    if args.cameras is None:
-        if args.chain is not None:
-            raise VideoTrackError("give --cameras for your own chain", field="--cameras")
-        cameras = locust_cameras()
-    else:
-        cameras = load_cameras(args.cameras)
-    options = _options(args)
-    if args.angles is None and args.frames < 1:
-        raise VideoTrackError(f"must be at least 1, got {args.frames}", field="--frames")
-    _guard(args, list(cameras), chain=True)
-
-    def trajectory(k: int = 0):
-        if args.angles is not None:
-            return read_angles_csv(args.angles, body)
-        return smooth_random_motion(body, args.frames, args.sequences, args.keys,
-                                    seed=args.motion_seed + k)
-
-    if args.trials is not None:
-        return _write_batch_project(args, body, chain_text, cameras, trajectory, options)
-    angles = trajectory()
-    n_frames = angles.shape[0] // (2 if args.interlaced else 1)
-    with tqdm(total=n_frames, unit="frame", desc="rendering", leave=False) as bar:
-        project = write_synthetic_project(args.out_dir, body, chain_text, cameras, angles,
-                                          options, args.fps, args.codec,
-                                          progress=lambda k: bar.update(k - bar.n))
-    print(f"wrote {n_frames} frames ({project.n_images} images) of '{body.name}' through "
-          f"{len(cameras)} views ({', '.join(cameras)}):")
-    for path in (*project.videos, project.truth, project.cameras, project.chain,
-                 project.config):
-        print(f"  {path}")
-    print(f"next: videotrack detect {project.config}")
-    return 0
-
-
-def _write_batch_project(args, body, chain_text, cameras, trajectory, options) -> int:
-    from videotrack.synth.project import trial_names, write_synthetic_batch_project
-
-    if args.trials < 1:
-        raise VideoTrackError(f"must be at least 1, got {args.trials}", field="--trials")
-    with tqdm(total=args.trials, unit="trial", desc="rendering", leave=False) as bar:
-        folders = write_synthetic_batch_project(
-            args.out_dir, trial_names(args.trials), body, chain_text, cameras, trajectory,
-            options, args.fps, args.codec, progress=lambda k: bar.update(k - bar.n))
-    print(f"wrote a project of {len(folders)} trials of '{body.name}' through {len(cameras)} "
-          f"views ({', '.join(cameras)}): {args.out_dir / 'config.toml'}, chain.xml, "
-          f"cameras.toml and {folders[0].relative_to(args.out_dir).as_posix()} ... "
-          f"{folders[-1].relative_to(args.out_dir).as_posix()} (video and truth.csv each)")
-    print(f"next: videotrack batch {args.out_dir}")
-    return 0
-
-
-def _options(args):
-    from videotrack.detect.marker_colours import parse_colour
     from videotrack.synth.project import SynthOptions
+    from videotrack.workflow.synthesize import synthesize
 
-    return SynthOptions(
+    options = SynthOptions(
         marker_diameter=args.diameter, intensity=args.intensity, background=args.background,
         noise_sigma=args.noise, static_ghosts=args.ghosts, flicker_ghosts=args.flicker_ghosts,
         occlusion_fraction=args.occlusions, occlusion_length=args.occlusion_length,
         interlaced=args.interlaced, top_field_first=not args.bottom_field_first,
         layout=args.layout, seed=args.seed,
-        colours=tuple(parse_colour(text) for text in args.colour),
     )
+    bars: list = []
 
+    def progress(done: int, total: int) -> None:
+        if not bars:
+            bars.append(tqdm(total=total, unit="frame" if args.trials is None else "trial",
+                             desc="rendering", leave=False))
+        bars[0].update(done - bars[0].n)
 
-def _write_points(args) -> int:
-    """``--points``: render given 3D marker trajectories through the cameras."""
-    from kinematics.cameras.files import load_camera_file
-    from videotrack.synth.project import read_points, write_points_project
-
-    given = [name for name, value in (("--chain", args.chain), ("--angles", args.angles),
-                                      ("--trials", args.trials)) if value is not None]
-    if given:
-        raise VideoTrackError(f"--points draws given 3D points; it takes no {given[0]}",
-                              field="--points")
-    if args.cameras is None:
-        raise VideoTrackError("give --cameras to draw --points through", field="--cameras")
-    camera_file = load_camera_file(args.cameras)
-    names, points = read_points(args.points)
-    options = _options(args)
-    _guard(args, list(camera_file.cameras), chain=False)
-    n_frames = points.shape[0] // (2 if args.interlaced else 1)
-    with tqdm(total=n_frames, unit="frame", desc="rendering", leave=False) as bar:
-        project = write_points_project(args.out_dir, names, points, camera_file.cameras,
-                                       options, args.fps, args.codec,
-                                       progress=lambda k: bar.update(k - bar.n),
-                                       units=camera_file.units)
-    print(f"wrote {n_frames} frames ({project.n_images} images) of {len(names)} points "
-          f"through {len(camera_file.cameras)} views ({', '.join(camera_file.cameras)}):")
-    for path in (*project.videos, project.truth, project.cameras, project.config):
+    try:
+        done = synthesize(
+            args.out_dir, options, chain=args.chain, cameras=args.cameras, angles=args.angles,
+            points=args.points, trials=args.trials, frames=args.frames,
+            sequences=args.sequences, keys=args.keys, motion_seed=args.motion_seed,
+            colours=args.colour, fps=args.fps, codec=args.codec, force=args.force,
+            progress=progress)
+    finally:
+        for bar in bars:
+            bar.close()
+    views = f"{len(done.cameras)} views ({', '.join(done.cameras)})"
+    if done.trials:
+        first, last = (folder.relative_to(done.out_dir).as_posix()
+                       for folder in (done.trials[0], done.trials[-1]))
+        print(f"wrote a project of {len(done.trials)} trials of '{done.body}' through {views}: "
+              f"{done.config}, chain.xml, cameras.toml and {first} ... {last} (video and "
+              f"truth.csv each)")
+        print(f"next: videotrack batch {done.out_dir}")
+        return 0
+    what = f"'{done.body}'" if done.points is None else f"{done.points} points"
+    print(f"wrote {done.frames} frames ({done.images} images) of {what} through {views}:")
+    for path in done.files:
         print(f"  {path}")
-    print(f"next: videotrack detect {project.config}")
+    print(f"next: videotrack detect {done.config}")
     return 0
-
-
-def _guard(args, camera_names: list[str], chain: bool) -> None:
-    """Refuse to write over an input, or over an existing file of another kind unless
-    --force (:func:`videotrack.project.outputs.guard_outputs`), before rendering anything."""
-    from videotrack.project.outputs import guard_outputs
-    from videotrack.synth.project import CODECS, trial_names
-
-    ext = CODECS[args.codec][1]
-    videos = ([f"video_{name}{ext}" for name in camera_names] if args.layout == "separate"
-              else [f"video{ext}"])
-    if args.codec == "png":
-        videos = [n if n.endswith("_png") else f"{n}_png" for n in videos]
-    video_kind = "folder" if args.codec == "png" else "video"
-
-    def scene(folder: Path) -> dict:
-        found = {folder / n: video_kind for n in videos}
-        found.update({folder / "truth.csv": "csv", folder / "cameras.toml": "toml",
-                      folder / "project.toml": "toml"})
-        if chain:
-            found[folder / "chain.xml"] = "xml"
-        return found
-
-    out = args.out_dir
-    if args.trials is not None and args.trials >= 1:
-        outputs = {out / "config.toml": "toml", out / "chain.xml": "xml",
-                   out / "cameras.toml": "toml"}
-        for name in trial_names(args.trials):
-            outputs.update({**scene(out / name), out / name / "config.toml": "toml"})
-    else:
-        outputs = scene(out)
-    inputs = {getattr(args, key): f"the --{key} file"
-              for key in ("chain", "cameras", "angles", "points") if getattr(args, key)}
-    guard_outputs(outputs, inputs, force=args.force)

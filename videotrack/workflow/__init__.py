@@ -16,13 +16,25 @@ package has one module per job:
 - :mod:`~videotrack.workflow.streaming` — fitting while detecting (:class:`FitAlongside`);
 - :mod:`~videotrack.workflow.report` — a run's steps, progress, :class:`Cancelled` and the
   :class:`ProjectRun` it returns;
-- :mod:`~videotrack.workflow.plots` — the angle plot of a run's results.
+- :mod:`~videotrack.workflow.plots` — the angle plot of a run's results;
+- :mod:`~videotrack.workflow.calibrate` — :func:`calibrate_cameras` and
+  :func:`convert_cameras` (``calibrate``);
+- :mod:`~videotrack.workflow.triangulate` — :func:`triangulate_keypoints` (``triangulate``);
+- :mod:`~videotrack.workflow.synthesize` — :func:`synthesize` (``synth``).
 
 The settings :data:`~videotrack.workflow.checkpoint.CHECKPOINT_SECONDS` and
 :data:`~videotrack.workflow.streaming.STREAM_CHUNK` are read from their own modules when used:
 to change them, set them there (the names exported here are copies).
 """
 
+from videotrack.workflow.calibrate import (
+    Calibrated,
+    Converted,
+    Outputs,
+    Refinement,
+    calibrate_cameras,
+    convert_cameras,
+)
 from videotrack.workflow.checkpoint import CHECKPOINT_SECONDS, checkpoint_paths, discard_checkpoint
 from videotrack.workflow.fitting import BAD_SHARE_WARNING, fit_project, fit_warnings
 from videotrack.workflow.model import (
@@ -44,6 +56,13 @@ from videotrack.workflow.staleness import (
     threshold_entry,
 )
 from videotrack.workflow.streaming import STREAM_CHUNK, FitAlongside, not_streamable
+from videotrack.workflow.synthesize import Synthesized, synthesize
+from videotrack.workflow.triangulate import (
+    Triangulated,
+    assign_keypoints,
+    load_any_cameras,
+    triangulate_keypoints,
+)
 
 __all__ = [
     "BAD_SHARE_WARNING",
@@ -54,20 +73,30 @@ __all__ = [
     "KEYPOINT_CAP_PX",
     "PLOT",
     "STREAM_CHUNK",
+    "Calibrated",
     "Cancelled",
+    "Converted",
     "FitAlongside",
+    "Outputs",
     "ProjectModel",
     "ProjectRun",
+    "Refinement",
     "StepProgress",
+    "Synthesized",
+    "Triangulated",
     "anneal_params",
+    "assign_keypoints",
+    "calibrate_cameras",
     "changed_inputs",
     "check_detection_views",
     "checkpoint_paths",
+    "convert_cameras",
     "default_plot_path",
     "default_results_path",
     "discard_checkpoint",
     "fit_project",
     "fit_warnings",
+    "load_any_cameras",
     "load_fresh_detections",
     "load_model",
     "not_streamable",
@@ -75,5 +104,7 @@ __all__ = [
     "results_sidecar",
     "results_stale_reason",
     "run_project",
+    "synthesize",
     "threshold_entry",
+    "triangulate_keypoints",
 ]
