@@ -17,7 +17,9 @@ temporary files named like :func:`kinematics.fileio.atomic_write` names them, wh
 
 A trial's warnings (stored with its detections and results, so reported again by every run)
 make it ``done-with-warnings`` or ``up-to-date-with-warnings``; a trial whose video(s) could
-not be read to the end, or of which no frame could be fitted, is ``incomplete``.
+not be read to the end, of which no frame could be fitted, or more than half of whose frames
+failed (:data:`videotrack.workflow.report.UNUSABLE_SHARE`), is ``incomplete``; one whose set-up
+the checks refuse (``[anneal] accept_setup``) is ``failed``, with the cause.
 
 One trial is :mod:`videotrack.batch_trial`; the worker processes :mod:`videotrack.batch_pool`,
 the Dask tasks :mod:`videotrack.batch_dask`; here: running many, and the summary and log.

@@ -12,6 +12,8 @@ The fitter is one class assembled from one module per job (see docs/architecture
 - :mod:`~kinematics.fit.tracking` — ``start = "track"``;
 - :mod:`~kinematics.fit.polish` — the final least-squares polish against a cloud;
 - :mod:`~kinematics.fit.flags` — flags over a sequence of results;
+- :mod:`~kinematics.fit.confidence` — set-up checks and the noise test of every frame
+  (:mod:`~kinematics.fit.noise`, :mod:`~kinematics.fit.setup_check`);
 - :mod:`~kinematics.fit.tuning` — the measured constants, in one record;
 - :mod:`~kinematics.fit.reference` — the annealing loop written plainly (the twin).
 """
@@ -32,6 +34,7 @@ from kinematics.fit.result import (
     Status,
 )
 from kinematics.fit.settings import START_MODES, AnnealParams, ErrorOptions
+from kinematics.fit.setup_check import SetupError
 from kinematics.fit.status import auto_threshold, marker_images
 from kinematics.fit.tuning import TUNING, Tuning
 
@@ -48,6 +51,7 @@ __all__ = [
     "ErrorOptions",
     "Fitter",
     "FrameResult",
+    "SetupError",
     "SplitMix64",
     "Status",
     "Tuning",

@@ -56,6 +56,7 @@ from kinematics._kernels import anneal as _ak
 from kinematics.errors import KinematicsError
 from kinematics.fit import tuning as _tuning
 from kinematics.fit.candidates import CandidatesMixin
+from kinematics.fit.confidence import ConfidenceMixin
 from kinematics.fit.dispatch import DispatchMixin
 from kinematics.fit.flags import flag_misplaced
 from kinematics.fit.inputs import Ragged, as_ragged, unseen_markers
@@ -78,7 +79,7 @@ from kinematics.observe.observations import Observations
 
 
 class Fitter(MatchMixin, RootsMixin, DispatchMixin, StatusMixin, PolishMixin, CandidatesMixin,
-             PathMixin, TrackingMixin):
+             PathMixin, TrackingMixin, ConfidenceMixin):
     """Fits a body's posture to marker detections, frame by frame.
 
     Parameters
@@ -105,6 +106,10 @@ class Fitter(MatchMixin, RootsMixin, DispatchMixin, StatusMixin, PolishMixin, Ca
     ----------
     problem : FitProblem
         The packed problem every backend uses (:mod:`kinematics.fit.problem`).
+    noise : NoiseModel or None
+        σ per view of the last :meth:`iter_fit` (:mod:`kinematics.fit.noise`), once known.
+    setup_warnings : list of str
+        The set-up problems the last :meth:`iter_fit` found and ``accept_setup`` accepted.
 
     Raises
     ------
@@ -133,6 +138,12 @@ class Fitter(MatchMixin, RootsMixin, DispatchMixin, StatusMixin, PolishMixin, Ca
         names = body.marker_names
         self._root_marker = {k: names.index(body.chains[k].root.marker) for k in self._tracked}
         self._per_problem: dict = {}  # what depends only on the problem (_once)
+        self.noise = None
+        #: a noise model to judge by instead of measuring one (a resumed fit: the one that
+        #: judged the frames kept)
+        self.fixed_noise = None
+        self._noise_measured = False
+        self.setup_warnings: list[str] = []
 
     def with_pins(self, pins) -> Fitter:
         """A fitter that holds the given axes (``joint.axis`` labels or posture indices ->
@@ -398,7 +409,8 @@ class Fitter(MatchMixin, RootsMixin, DispatchMixin, StatusMixin, PolishMixin, Ca
     def iter_fit(self, detections, frames=None, *, chunk_size: int | None = None,
                  sequence_starts: Iterable[int] = (),
                  previous: FrameResult | Sequence[FrameResult] | None = None,
-                 cancel: Callable[[], bool] | None = None) -> Iterator[FrameResult]:
+                 cancel: Callable[[], bool] | None = None,
+                 check_setup: bool = True) -> Iterator[FrameResult]:
         """Fit frames of a video; yields one :class:`FrameResult` per frame, in order.
 
         Parameters
@@ -434,14 +446,24 @@ class Fitter(MatchMixin, RootsMixin, DispatchMixin, StatusMixin, PolishMixin, Ca
             the frames fitted so far are yielded (the path through time holds back up to 64
             of them and the misplaced-marker flag 32 more, so closing the generator alone
             can wait that long).
+        check_setup : bool
+            Check the detections before fitting (:meth:`check_setup`); False where the
+            caller does, on detections still to come (fitting while detecting).
 
         Raises
         ------
         KinematicsError
             Detections whose views do not match the cameras, bad frame numbers.
+        SetupError
+            A set-up the checks find wrong (unless ``accept_setup``; then
+            :attr:`setup_warnings` says it): :mod:`kinematics.fit.confidence`.
         """
         obs = self.observations(detections)
         idx = self._frame_indices(frames, obs.n_frames)
+        self.noise, self._noise_measured = self.fixed_noise, self.fixed_noise is not None
+        if check_setup:  # (else the caller checks and keeps what it accepts)
+            self.setup_warnings = []
+            self._check_detections(obs)
         starts = np.asarray(list(sequence_starts), np.int64)
         before = ([] if previous is None else [previous] if isinstance(previous, FrameResult)
                   else list(previous))
@@ -451,7 +473,7 @@ class Fitter(MatchMixin, RootsMixin, DispatchMixin, StatusMixin, PolishMixin, Ca
         if p.candidates > 1 and p.start != "track":  # the frames to look at, after the polish
             out = flag_misplaced(out, p.claim_gate_px, before=before, starts=starts,
                                  tuning=self.tuning)
-        return out
+        return self._noise_judged(obs, idx, out)
 
     def _iter(self, obs: Observations, idx: np.ndarray, chunk_size: int | None,
               starts: np.ndarray | None = None, before: Sequence[FrameResult] = (),
@@ -462,9 +484,14 @@ class Fitter(MatchMixin, RootsMixin, DispatchMixin, StatusMixin, PolishMixin, Ca
         if params.start == "track":  # measures its threshold on its first tracked frames
             yield from self._track(obs, idx, roots, rots, params, cancel)
             return
-        if params.threshold_mode == "auto" and len(idx):
-            params = replace(params, reanalysis_threshold=self._video_threshold(
-                obs, idx, roots, rots))
+        noise_wanted = (params.noise_floor_px is not None and params.noise_px is None
+                        and self.fixed_noise is None)
+        if (params.threshold_mode == "auto" or noise_wanted) and len(idx):
+            positions, sample = self._video_sample(obs, idx, roots, rots)
+            if params.threshold_mode == "auto":
+                params = replace(params, reanalysis_threshold=self._threshold_of(
+                    obs, positions, [r.error for r in sample]))
+            self._measure_video(obs, list(zip(positions.tolist(), sample, strict=True)))
         threads = numba.get_num_threads()
         seg = self.params.segment_length if self.params.start == "previous" else 1
         if chunk_size is None:  # enough frames (or segments) to keep every thread busy

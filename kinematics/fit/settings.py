@@ -219,6 +219,23 @@ class AnnealParams:
         "in a project file: not used (ghost markers are unexplained too; set it to the "
         "ghosts a frame shows in all its views).",
         min=-1, max=10**6, none=-1)
+    noise_floor_px: float | None = setting(
+        0.5, "The noise model: each view's detection noise σ is measured on the video's "
+        "best-fitting frames (at least this, pixels), and a frame whose marker residuals "
+        "are not what σ allows is 'failed' however low its E: a marker image more than 4 σ "
+        "from its detection that no missing detection excuses, or residuals whose sum of "
+        "squares in σ passes the χ² test (docs/concepts.md, 'What a status means'). None, "
+        "written 0 in a project file: no noise test (the paper: E against the threshold "
+        "only).", min=0.0, max=1e6, none=0.0)
+    noise_px: float | None = setting(
+        None, "σ of the detection noise in every view (pixels), where it is known; None, "
+        "written 0 in a project file: measured on the video (noise_floor_px).",
+        min=0.0, max=1e6, none=0.0)
+    accept_setup: bool = setting(
+        False, "Fit although the set-up checks find the cameras, views, chain or video "
+        "wrong (views that disagree in 3D, a chain that does not fit the detections, a "
+        "video without markers); the problems are kept as warnings of the results. False: "
+        "such a fit is refused with the cause in one line.")
     partitions: str = setting(
         "auto", "How a body is annealed: 'auto' anneals each limb in turn (every chain, and "
         "every subtree below a joint with several children, after its trunk), 'none' moves "
@@ -438,7 +455,8 @@ BEST_ERROR = {"mode": "bounded", "cap_px": 10.0}
 PROFILES = ("best", "paper")
 PAPER = {"refine": False, "threshold_mode": "absolute", "candidates": 1, "match": "views",
          "max_runs": 5, "final_polish_px": None,
-         "start_samples": 0, "confirm_runs": "off", "error": ErrorOptions()}
+         "start_samples": 0, "confirm_runs": "off", "error": ErrorOptions(),
+         "noise_floor_px": None}
 
 
 def _is_real(value) -> bool:

@@ -17,23 +17,26 @@ from kinematics.observe.observations import Observations
 class StatusMixin:
     """The :class:`~kinematics.fit.Fitter`'s scoring of a fitted posture."""
 
-    def _video_threshold(self, obs: Observations, idx, roots, rots) -> float:
-        """The re-analysis threshold on E measured on the video itself (threshold_mode
-        'auto'): a sample of frames is fitted once, and the threshold per marker image is
-        median + auto_k · 1.4826 · MAD of their E per marker image (the 10-90 % range /
-        2.563 where the MAD collapses below 1 % of the median), at least auto_floor_px;
-        times the marker images of a frame seen in every view (a cloud's or 3D points': one
-        per marker)."""
+    def _video_sample(self, obs: Observations, idx, roots, rots
+                      ) -> tuple[np.ndarray, list[FrameResult]]:
+        """Up to ``auto_sample`` frames of ``idx`` (evenly spaced) fitted once (one run, one
+        candidate): ``(positions, results)``, what the threshold of ``threshold_mode``
+        'auto' (:meth:`_threshold_of`) and the noise model are measured on."""
         p = self.params
         pick = np.unique(np.linspace(0, len(idx) - 1, min(p.auto_sample, len(idx))).astype(int))
         once = replace(p, max_runs=1, candidates=1, threshold_mode="absolute")
         res = self._fit_block(obs, idx[pick], idx[pick], np.ascontiguousarray(roots[pick]),
                               np.ascontiguousarray(rots[pick]), self.problem.start,
                               np.arange(len(pick) + 1, dtype=np.int64), once)
-        return self._threshold_of(obs, idx[pick], [r.error for r in res])
+        return np.asarray(idx[pick], np.int64), res
 
     def _threshold_of(self, obs: Observations, frames, errors) -> float:
-        """:meth:`_video_threshold`'s threshold from the E of these frames' fits."""
+        """The re-analysis threshold on E measured on the video itself (threshold_mode
+        'auto') from the E of these frames' fits (:meth:`_video_sample`): the threshold per
+        marker image is median + auto_k · 1.4826 · MAD of their E per marker image (the
+        10-90 % range / 2.563 where the MAD collapses below 1 % of the median), at least
+        auto_floor_px; times the marker images of a frame seen in every view (a cloud's or
+        3D points': one per marker)."""
         p = self.params
         images = marker_images(obs, np.asarray(frames), len(self.body.marker_names))
         score = np.asarray(errors, float) / np.maximum(images, 1)

@@ -78,6 +78,33 @@ class Tuning:
     misplaced_unexplained_k: float = 2.0
     #: ... among the results this many frames on either side
     misplaced_half: int = 32
+    # -- the noise model and the set-up checks (kinematics.fit.noise, .setup_check)
+    #: labelled keypoints off their label a frame may have: what this share of the sample
+    #: frames have at most (a DLC-like file: 10 % of keypoints swapped or missing)
+    noise_outlier_share: float = 0.9
+    #: a marker image this many σ from its detection is unmatched (Rayleigh tail 3e-4)
+    noise_gate_k: float = 4.0
+    #: a frame's matched residuals fail above the χ² quantile 1 - this
+    noise_p: float = 1e-3
+    #: two views agree where this share more of the detections lie nearer the other's
+    #: epipolar lines than chance puts them (a 70-ghost sweep: 0.07; swapped cameras: 0.00)
+    agree_excess: float = 0.05
+    #: ... or their median distance is below this (px): a right calibration's, within noise
+    agree_floor_px: float = 1.0
+    #: frames (spread over the video) the detection checks look at
+    setup_sample: int = 64
+    #: a view shows too few detections below this share of its markers (median frame)
+    setup_detection_share: float = 0.25
+    #: σ above detections' spacing / this: a nearest-detection match means nothing there
+    setup_spacing_sigmas: float = 20.0
+    #: a frame is gross where a marker lies farther than claim_gate_px from every detection,
+    #: no missing one excusing it; of labelled keypoints, more than this share (a keypoint
+    #: may be mislabelled: a DLC-like file has one in most frames)
+    setup_gross_share: float = 0.25
+    #: the chain does not fit where more than this share of the sample is gross: a right
+    #: set-up has right frames, even where a short schedule misses many (a test's: 47 of 64;
+    #: views swapped: 60 of 60)
+    setup_fail_share: float = 0.9
 
 
 #: The record every fitter takes unless it is given another.

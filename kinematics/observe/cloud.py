@@ -153,14 +153,23 @@ def _min_views(value, n_views: int) -> int:
 # --- geometry -------------------------------------------------------------------------------
 
 
-def _linear_matrix(cam: Camera) -> np.ndarray:
+def linear_matrix(cam: Camera) -> np.ndarray:
     """3x4 matrix mapping world points to undistorted pixels (homogeneous)."""
     if isinstance(cam, OrthographicCamera):
         return np.vstack([cam.P, [0.0, 0.0, 0.0, 1.0]])
     return cam.K @ np.hstack([cam.R, cam.t[:, None]])
 
 
-def _fundamental(pa: np.ndarray, pb: np.ndarray) -> np.ndarray:
+def ideal_pixels(cam: Camera, pts: np.ndarray) -> np.ndarray:
+    """(n, 2) ideal (undistorted) pixel coordinates of ``pts``, in which ``cam`` is linear
+    (:func:`linear_matrix`); an orthographic camera's are its own."""
+    if isinstance(cam, OrthographicCamera) or len(pts) == 0:
+        return np.asarray(pts, float)
+    src = np.ascontiguousarray(np.asarray(pts, float).reshape(-1, 1, 2))
+    return cv2.undistortPoints(src, cam.K, cam.dist, P=cam.K).reshape(-1, 2)
+
+
+def fundamental(pa: np.ndarray, pb: np.ndarray) -> np.ndarray:
     """F with ``x_b^T F x_a = 0`` for the linear cameras ``pa``, ``pb``: ``[P_b C]_x P_b
     P_a^+``. ``C`` spans the null space of ``P_a`` (a point at infinity for an affine
     camera), so the form holds for pinhole, orthographic and mixed pairs. Scaled to unit
@@ -203,10 +212,8 @@ class _Chunk:
         """Ideal (undistorted) pixel coordinates, in which the cameras are linear."""
         lin = self.pix.copy()
         for v, cam in enumerate(cams):
-            if isinstance(cam, OrthographicCamera) or not valid[v].any():
-                continue
-            src = np.ascontiguousarray(self.pix[v][valid[v]].reshape(-1, 1, 2))
-            lin[v][valid[v]] = cv2.undistortPoints(src, cam.K, cam.dist, P=cam.K).reshape(-1, 2)
+            if valid[v].any():
+                lin[v][valid[v]] = ideal_pixels(cam, self.pix[v][valid[v]])
         return lin
 
 
@@ -429,8 +436,8 @@ def triangulate_unlabelled(cameras, points, offsets, *, match_px: float = 2.0,
         raise KinematicsError(f"expected a callable, got {progress!r}", field="progress")
     n_frames = (off.size - 1) // n_views
     packed = pack_cameras(cams)
-    mats = [_linear_matrix(c) for c in cams]
-    fmats = {(a, b): _fundamental(mats[a], mats[b])
+    mats = [linear_matrix(c) for c in cams]
+    fmats = {(a, b): fundamental(mats[a], mats[b])
              for a, b in itertools.combinations(range(n_views), 2)}
     d = int(np.diff(off).max()) if off.size > 1 else 0
     step = max(1, _CHUNK_WORK // max(1, (d + 1) ** 2 * len(fmats)))

@@ -484,5 +484,9 @@ def test_results_carry_the_threshold_that_decided_their_status(locust):
     measured = Fitter(locust, locust_cameras(), AnnealParams().with_schedule(300)).fit(dets)
     t = {r.threshold for r in measured}
     assert len(t) == 1 and np.isfinite(next(iter(t))) and t != {10.0}
-    for r in measured:
+    for r in measured:  # E above the threshold fails; so do residuals the noise does not allow
+        assert (r.error > r.threshold) <= (r.status == "failed")
+    plain = Fitter(locust, locust_cameras(), AnnealParams(noise_floor_px=None).with_schedule(300)
+                   ).fit(dets)
+    for r in plain:  # without the noise model, E alone decides
         assert (r.status == "failed") == (r.error > r.threshold)

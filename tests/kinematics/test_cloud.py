@@ -10,7 +10,7 @@ import pytest
 from kinematics.cameras import OrthographicCamera, PinholeCamera
 from kinematics.errors import KinematicsError
 from kinematics.model.rotations import euler_yxz
-from kinematics.observe.cloud import Cloud, _fundamental, _linear_matrix, triangulate_unlabelled
+from kinematics.observe.cloud import Cloud, fundamental, linear_matrix, triangulate_unlabelled
 
 
 def ring_cameras(n=6, f=6000.0, distance=60.0, aim=0.12,
@@ -104,9 +104,9 @@ def test_fundamental_matrix_of_mixed_cameras():
     for a in range(len(cams)):
         for b in range(len(cams)):
             if a != b:
-                pa, pb = _linear_matrix(cams[a]), _linear_matrix(cams[b])
+                pa, pb = linear_matrix(cams[a]), linear_matrix(cams[b])
                 xa, xb = x @ pa.T, x @ pb.T
-                f = _fundamental(pa, pb)
+                f = fundamental(pa, pb)
                 line = xa @ f.T  # epipolar lines in b
                 d = np.abs((xb * line).sum(1)) / np.hypot(line[:, 0], line[:, 1]) / xb[:, 2]
                 assert d.max() < 1e-6

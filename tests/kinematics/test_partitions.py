@@ -245,9 +245,10 @@ def test_runs_confirm_each_other():
     body = three_legs()
     cams = top_and_side()
     _, frames = planted_postures(body, cams, 10, seed=6)
+    # (60 iterations fit few frames well: no noise model, whose set-up check would refuse)
     base = AnnealParams(candidates=1, threshold_mode="absolute", reanalysis_threshold=1e6,
-                        max_runs=6, start_samples=0, ambiguous_move=0.02, confirm_runs="off"
-                        ).with_schedule(60)
+                        max_runs=6, start_samples=0, ambiguous_move=0.02, confirm_runs="off",
+                        noise_floor_px=None).with_schedule(60)
     plain = Fitter(body, cams, base).fit(frames)
     confirmed = Fitter(body, cams, replace(base, confirm_runs="on")).fit(frames)
     assert all(r.runs == 1 for r in plain)

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from kinematics.fit import SetupError
 from videotrack.cli import main
 from videotrack.detect.detections import DetectSettings, load_detections
 from videotrack.detect.filters import FilterChain
@@ -98,7 +99,9 @@ def test_colour_decoys_are_harmless_only_when_views_know_their_markers(tmp_path)
     project.write_text(re.sub(r"model_markers = .*\n", "", project.read_text()))
     config = load_config(project)
     assert plan_project(config) == ("fit", "changed: the markers views show")
-    assert run_project(config).steps == ("fit",)  # the same detections
+    with pytest.raises(SetupError, match="the chain does not fit the detections"):
+        run_project(config)  # the set-up checks see it
+    assert run_project(config, anneal={"accept_setup": True}).steps == ("fit",)  # same detections
     assert max_angle_error(project) > 20.0
 
 

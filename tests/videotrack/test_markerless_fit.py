@@ -149,7 +149,7 @@ def test_resume_after_interruption_gives_identical_file(tmp_path, monkeypatch):
     assert meta["threshold"] > 0
     for bad in (True, "12", -1.0, float("inf"), None):
         side.write_text(json.dumps({**meta, "threshold": bad}))
-        frames, threshold = checkpoint._resume(partial, meta)
+        frames, threshold, _ = checkpoint._resume(partial, meta)
         assert threshold is None and len(frames) == 5, bad
     side.write_text(json.dumps(meta))
     kept = []

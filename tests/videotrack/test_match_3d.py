@@ -65,7 +65,7 @@ def test_a_video_whose_match_is_decided_on_its_detections_is_detected_before_the
     model = load_model(config, candidates=1, threshold_mode="absolute")
     assert "match 'auto'" in not_streamable(model)
     assert not_streamable(load_model(config, candidates=1, threshold_mode="absolute",
-                                     match="views")) is None
+                                     match="views", noise_px=0.5)) is None
 
 
 def test_a_match_decided_by_the_caller_is_not_decided_again(tmp_path):

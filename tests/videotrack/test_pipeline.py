@@ -129,16 +129,23 @@ def test_cancel_and_warnings(project):
     assert not (project.parent / "detections.results.csv").exists()
     # VideoTrack's warnings are collected into the run, not shown
     project.write_text(project.read_text().replace("min_area = 3", "min_area = 3\nmax_area = 4"))
+    with warnings.catch_warnings(), pytest.raises(  # (an error passes its warnings on)
+            LocatedError, match="set-up check: no detections in any view"):
+        warnings.simplefilter("ignore", VideoTrackWarning)
+        run_project(load_config(project), anneal=SHORT)  # a video without markers: refused
+    accepted = {**SHORT, "accept_setup": True}
     with warnings.catch_warnings(record=True) as shown:
         warnings.simplefilter("always")
-        run = run_project(load_config(project), anneal=SHORT)
+        run = run_project(load_config(project), anneal=accepted)
     assert not [w for w in shown if issubclass(w.category, VideoTrackWarning)]
-    assert len(run.warnings) == 3 and "no markers in any of the 16 records" in run.warnings[0]
-    assert run.warnings[2].startswith("16 of 16 frames (100.0 %) were not fitted")
+    assert len(run.warnings) == 4 and "no markers in any of the 16 records" in run.warnings[0]
+    assert any(w.startswith("set-up check (accepted): no detections") for w in run.warnings)
+    assert any(w.startswith("16 of 16 frames (100.0 %) have no fit to trust")
+               for w in run.warnings)
     assert run.n_ok == 0 and run.n_bad == N_FRAMES
-    assert run.incomplete == "not one of the 16 frames was fitted"
+    assert run.incomplete.startswith("not one of the 16 frames has a fit to trust")
     # the warnings are kept with the detections and results, and travel to the next run
-    again = run_project(load_config(project), anneal=SHORT)
+    again = run_project(load_config(project), anneal=accepted)
     assert again.up_to_date and again.warnings == run.warnings
     assert again.incomplete == run.incomplete
 

@@ -85,7 +85,7 @@ def test_warnings_reach_the_summary_and_survive_reruns(project, capsys):
     assert code == 0, err
     r = row(project)
     assert r["state"] == "done-with-warnings" and r["message"] == ""
-    assert "6 of 24 frames (25.0 %) were not fitted" in r["warnings"]
+    assert "6 of 24 frames (25.0 %) have no fit to trust" in r["warnings"]
     assert "video frames 0, 1, 2, 3, 4, 5" in r["warnings"]
     assert "1 done-with-warnings" in out and "warnings:\n  s1/t1: 6 of 24 frames" in out
     code, out, err = batch(capsys, project)

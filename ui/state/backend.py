@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from kinematics.errors import LocatedError
 from kinematics.fit import (
     AnnealParams,
     Fitter,
@@ -85,6 +86,7 @@ __all__ = [
     "posture_error",
     "read_mapped_keypoints",
     "read_project_results",
+    "recorded_noise",
     "save_project_results",
     "unseen_markers",
     "with_status",
@@ -216,19 +218,39 @@ def read_project_results(path: str | os.PathLike, body: Body,
 
 def save_project_results(path: str | os.PathLike, model: ProjectModel, body: Body,
                          results: Mapping[int, FrameResult], detections,
-                         detections_path: str | os.PathLike | None) -> Path:
+                         detections_path: str | os.PathLike | None,
+                         noise_px: Sequence[float] | None = None) -> Path:
     """Write the fitted frames (in frame order) and the sidecar, atomically.
 
     ``body`` is the session's chain (it may carry learned histograms or edits); the sidecar
     records the files of ``model`` as the command line does, so save the chain first.
     ``detections`` may be a :class:`KeypointInput` (with ``model`` the one it is fitted
-    with, :func:`fitting_model`); the sidecar then records the keypoint files.
+    with, :func:`fitting_model`); the sidecar then records the keypoint files. ``noise_px``:
+    σ per view of the noise model that judged the statuses (:func:`recorded_noise` reads it).
     """
     ordered = [results[k] for k in sorted(results)]
     table = results_from_fit(body, ordered, model.view_names, detections)
     source = detections if isinstance(detections, KeypointInput) else Path(detections_path)
     sidecar = {**results_sidecar(model, source), **threshold_entry(ordered),
                "source": "videotrack gui"}
+    if noise_px:
+        sidecar["noise"] = {"sigma_px": [float(s) for s in noise_px], "source": "measured"}
     written = _write_results(path, table, sidecar)
     write_candidates(path, body, ordered)
     return written
+
+
+def recorded_noise(results_path: str | os.PathLike) -> list[float] | None:
+    """σ per view of the noise model a results file's statuses were judged by (its sidecar's
+    ``noise``), or None where it records none."""
+    try:
+        entry = read_sidecar(results_path).get("noise") or {}
+    except LocatedError:
+        return None
+    sigma = entry.get("sigma_px") if isinstance(entry, dict) else None
+    if not isinstance(sigma, list) or not sigma:
+        return None
+    try:
+        return [float(s) for s in sigma]
+    except (TypeError, ValueError):
+        return None

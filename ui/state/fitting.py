@@ -47,6 +47,10 @@ class FittingMixin:
         if not whole_video and params.threshold_mode == "auto":
             params = replace(params, threshold_mode="absolute",
                              reanalysis_threshold=self.threshold)
+        if not whole_video and params.noise_floor_px is not None and params.noise_px is None:
+            # judged by the video's noise; without a fit of the whole video, by E alone
+            params = (replace(params, noise_px=max(self.measured_noise)) if self.measured_noise
+                      else replace(params, noise_floor_px=None))
         fitter = replace(self._fit_model(), params=params).fitter(body or self.body)
         observed = self.fit_detections
         if observed is None or not fitter.match_measured:
@@ -156,6 +160,9 @@ class FittingMixin:
         self.resultsChanged.emit(frames)
 
     def _fit_done(self, worker) -> None:
+        noise = getattr(getattr(worker, "fitter", None), "noise", None)
+        if self._measuring and noise is not None and noise.source == "measured":
+            self.measured_noise = [float(s) for s in noise.sigma_px]
         edit, self._edit = self._edit, None
         if edit is not None:
             self._push(edit)

@@ -189,6 +189,7 @@ class ProjectMixin:
                 self.results = backend.attach_candidates(self.results, self.results_path)
                 used = [r.threshold for r in self.results.values() if np.isfinite(r.threshold)]
                 self.measured_threshold = used[0] if used else None
+                self.measured_noise = backend.recorded_noise(self.results_path)
             except LocatedError as err:
                 self.error.emit(str(err))
 

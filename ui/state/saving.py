@@ -51,7 +51,7 @@ class SavingMixin:
                 model = replace(self._fit_model(), body=self.body, params=self.params)
                 backend.save_project_results(self.results_path, model, self.body,
                                              self.results, self._records(),
-                                             self.detections_path)
+                                             self.detections_path, self.measured_noise)
         except LocatedError as err:
             self.error.emit(str(err))
             return False

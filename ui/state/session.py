@@ -105,6 +105,9 @@ class Session(ProjectMixin, FramesMixin, DetectionsMixin, HistoryMixin, TasksMix
         #: The re-analysis threshold the last fit measured on the video (threshold_mode
         #: 'auto'), shown as the bar until the user types one (:meth:`set_bar`).
         self.measured_threshold: float | None = None
+        #: σ per view of the noise model the last fit of the whole video measured (or the
+        #: results' sidecar records): a fit of some frames is judged by it, not by its own.
+        self.measured_noise: list[float] | None = None
         self._measuring = False  # the running task is a fit of the whole video
         #: frame -> the result the latest A set there (itself or carried): A again on one of
         #: them cycles that stretch as one

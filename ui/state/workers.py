@@ -104,7 +104,7 @@ class FitWorker(QThread):
 
     def __init__(self, fitter, detections, frames, chunk_size: int, parent=None) -> None:
         super().__init__(parent)
-        self._fitter = fitter
+        self.fitter = fitter  # its noise model, once measured, is the video's
         self._detections = detections
         self._frames = list(frames)
         self._chunk = chunk_size
@@ -123,7 +123,7 @@ class FitWorker(QThread):
         batch = []
         gen = None
         try:
-            gen = backend.iter_fit(self._fitter, self._detections, self._frames, self._chunk,
+            gen = backend.iter_fit(self.fitter, self._detections, self._frames, self._chunk,
                                    cancel=lambda: self._cancel)
             for result in gen:
                 batch.append(result)

@@ -36,8 +36,10 @@ an input, nor (without --force) an existing file of another kind.
 
 exit status: 0 every trial is done or up to date (warnings are listed, not errors);
 1 a trial failed (the others still ran), or bad arguments; 3 no trial failed but one is
-incomplete (a video or image could not be read to the end, or not one frame was fitted),
-unless --allow-incomplete.
+incomplete (a video or image could not be read to the end, not one frame was fitted, or
+more than half the frames failed), unless --allow-incomplete. A trial whose set-up the checks
+refuse (views that disagree in 3D, a chain that does not fit) fails with the cause; set
+[anneal] accept_setup = true in its config to fit it anyway.
 """
 
 
@@ -72,7 +74,8 @@ def add_parser(subparsers) -> None:
                         "scheduler file (JSON)")
     p.add_argument("--allow-incomplete", action="store_true",
                    help="exit 0 although a trial is incomplete (its video could not be read "
-                        "to the end, or no frame was fitted); it is still listed")
+                        "to the end, no frame was fitted, or most frames failed); it is "
+                        "still listed")
     p.set_defaults(func=run)
 
 

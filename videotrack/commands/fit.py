@@ -33,9 +33,15 @@ every parameter and the run's warnings. An interrupted fit resumes where it stop
 again (and says so). The results never replace an input (chain, cameras, video, config,
 detections), nor without --force an existing file of another kind.
 
-exit status: 0 done (warnings are printed, not errors); 1 an error; 3 the results are
-incomplete (the video could not be read to the end, or not one frame was fitted), unless
---allow-incomplete.
+Before fitting, the set-up is checked: views whose detections disagree in 3D, a chain that
+does not fit the detections (on a sample of frames fitted first), a video without markers are
+refused with the cause in one line (--accept-setup fits anyway). Each frame's status rests on
+the noise model: a frame whose marker residuals are not what the views' noise allows is
+'failed' (docs/concepts.md, "What a status means").
+
+exit status: 0 done (warnings are printed, not errors); 1 an error, a refused set-up among
+them; 3 the results are incomplete (the video could not be read to the end, not one frame was
+fitted, or most frames failed), unless --allow-incomplete.
 """
 
 
@@ -70,7 +76,11 @@ def _add_common(p) -> None:
                         "file of another kind at an output path (never an input)")
     p.add_argument("--allow-incomplete", action="store_true",
                    help="exit 0 although the results are incomplete (the video could not be "
-                        "read to the end, or no frame was fitted)")
+                        "read to the end, or no frame was fitted, or most frames failed)")
+    p.add_argument("--accept-setup", action="store_true", default=None,
+                   help="fit although the set-up checks find the cameras, views, chain or "
+                        "video wrong; the problems stay in the results' warnings ([anneal] "
+                        "accept_setup)")
 
 
 def add_parser(subparsers) -> None:
@@ -120,7 +130,8 @@ def run_fit(args, detect: bool = False) -> int:
         except ValueError as err:
             raise VideoTrackError(str(err), field="--frames") from None
     anneal = {"n_end": args.n_end, "seed": args.seed, "refine": args.refine,
-              "start": args.start, "profile": args.profile}
+              "start": args.start, "profile": args.profile,
+              "accept_setup": args.accept_setup}
     with step_bars() as progress:
         run = run_project(config, detect=detect, force=args.force, anneal=anneal,
                           frames=frames, results=args.results, plot=args.plot,

@@ -1,16 +1,16 @@
 """Checkpoints of an unfinished fit, so that an interrupted fit resumes.
 
 Resuming: while fitting, finished frames are checkpointed every few seconds
-(:data:`CHECKPOINT_SECONDS`) to ``<results>.partial`` (with its own sidecar and the threshold
-that judged them). A run that is killed and started again with the same inputs and
-parameters keeps those frames and fits only the rest; the final file is the same as an
-uninterrupted run's because frames are fitted independently from their own random streams,
-the rest is judged by the kept threshold, and with the path through time only the leading
-whole windows (multiples of ``Tuning.path_lag``, 32 frames) are kept, so the rest is decided
-in the windows the whole run decided it in (with ``start = "previous"`` the checkpoint is not
-used). :func:`videotrack.workflow.fitting.fit_project` writes and reads them through this
-module's attributes, so a test may replace :data:`CHECKPOINT_SECONDS` or :func:`_checkpoint`
-here.
+(:data:`CHECKPOINT_SECONDS`) to ``<results>.partial`` (with its own sidecar, the threshold
+and the noise model that judged them). A run that is killed and started again with the same
+inputs and parameters keeps those frames and fits only the rest; the final file is the same
+as an uninterrupted run's because frames are fitted independently from their own random
+streams, the rest is judged by the kept threshold and noise model, and with the path through
+time only the leading whole windows (multiples of ``Tuning.path_lag``, 32 frames) are kept,
+so the rest is decided in the windows the whole run decided it in (with ``start =
+"previous"`` the checkpoint is not used). :func:`videotrack.workflow.fitting.fit_project`
+writes and reads them through this module's attributes, so a test may replace
+:data:`CHECKPOINT_SECONDS` or :func:`_checkpoint` here.
 """
 
 from __future__ import annotations
@@ -65,23 +65,25 @@ def _checkpoint(partial: Path, model: ProjectModel, results: dict, detections, s
                   {**sidecar, **threshold_entry(ordered)})
 
 
-def _resume(partial: Path, sidecar: dict) -> tuple[dict[int, FrameResult], float | None]:
-    """Frames of a checkpoint made with the same inputs and parameters ({} otherwise), and
-    the re-analysis threshold that judged them (None if it has none)."""
+def _resume(partial: Path, sidecar: dict
+            ) -> tuple[dict[int, FrameResult], float | None, dict | None]:
+    """Frames of a checkpoint made with the same inputs and parameters ({} otherwise), the
+    re-analysis threshold that judged them (None if it has none) and the noise model's
+    record (``noise``; None if it has none)."""
     if not partial.exists():
-        return {}, None
+        return {}, None, None
     try:
         meta = read_sidecar(partial)
         if changed_inputs(meta, sidecar):
-            return {}, None
+            return {}, None, None
         table = read_results(partial)
         threshold = meta.get("threshold")
         usable = (isinstance(threshold, int | float) and not isinstance(threshold, bool)
                   and 0 < threshold < float("inf"))  # else measured again
         return (attach_candidates(frame_results(table, int(meta["seed"])), partial),
-                float(threshold) if usable else None)
+                float(threshold) if usable else None, meta.get("noise"))
     except VideoTrackError:
-        return {}, None
+        return {}, None, None
 
 
 def _resumable(done: dict[int, FrameResult], idx: np.ndarray,

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from kinematics.fit import FrameResult
+from kinematics.fit.noise import NoiseModel
 from videotrack.markerless.route import KeypointInput
 from videotrack.project.identity import relative_message
 from videotrack.results.files import Results, results_from_fit, write_candidates, write_results
@@ -60,8 +61,8 @@ def fit_project(
     idx = np.arange(detections.n_records) if frames is None else np.asarray(list(frames))
     sidecar = results_sidecar(model, _source(detections, detections_path), results_path)
     partial = checkpoint._partial_path(results_path)
-    done, threshold = (checkpoint._resume(partial, sidecar) if model.params.start == "mean"
-                       else ({}, None))
+    done, threshold, noise = (checkpoint._resume(partial, sidecar)
+                              if model.params.start == "mean" else ({}, None, None))
     done = checkpoint._resumable(done, idx, model.params)
     if threshold is not None:  # the sidecar's threshold, as the whole run's, if all is kept
         done = {k: replace(r, threshold=threshold) for k, r in done.items()}
@@ -73,6 +74,8 @@ def fit_project(
     if match is not None:
         params = replace(params, match=match)
     fitter = model.fitter(params=params)
+    if done and noise is not None:  # the rest judged by the noise that judged the frames kept
+        fitter.fixed_noise = NoiseModel.from_record(noise, len(model.view_names))
     if done and resumed is not None:
         resumed(len(done), len(idx))
     for r in done.values():
@@ -87,6 +90,7 @@ def fit_project(
         int(f) in done for f in before) else None
     observed = detections.observations if isinstance(detections, KeypointInput) else detections
     if stream is not None and not done and frames is None:
+        stream.fitter.check_setup(observed)  # on every record, now they are detected
         gen = stream.results(len(todo))
     else:
         gen = fitter.iter_fit(observed, todo, previous=previous) if todo.size else iter(())
@@ -97,13 +101,17 @@ def fit_project(
                 progress(r)
             if (time.monotonic() - last > checkpoint.CHECKPOINT_SECONDS
                     and model.params.start == "mean"):
-                checkpoint._checkpoint(partial, model, results, detections, sidecar)
+                checkpoint._checkpoint(partial, model, results, detections,
+                                       {**sidecar, **noise_entry(fitter)})
                 last = time.monotonic()
     ordered = [results[int(f)] for f in idx]
     table = results_from_fit(model.body, ordered, model.view_names, detections)
     base = results_path.absolute().parent
-    found = [relative_message(w, base) for w in (*notes, *fit_warnings(table, detections))]
+    used = stream.fitter if stream is not None and not done and frames is None else fitter
+    found = [relative_message(w, base) for w in (*notes, *used.setup_warnings,
+                                                 *fit_warnings(table, detections))]
     write_results(results_path, table, {**sidecar, **threshold_entry(ordered),
+                                        **noise_entry(used),
                                         "warnings": list(dict.fromkeys(found))})
     write_candidates(results_path, model.body, ordered)
     checkpoint.discard_checkpoint(results_path)
@@ -130,8 +138,8 @@ def fit_warnings(table: Results, detections=None) -> list[str]:
             kinds = {s: table.status.count(s) for s in ("failed", "no-detections")
                      if s in table.status}
             what = ", ".join(f"{v} {k}" for k, v in kinds.items())
-            found.append(f"{failed.size} of {n} frames ({100 * failed.size / n:.1f} %) were "
-                         f"not fitted ({what}): video frames {_listing(frames)}")
+            found.append(f"{failed.size} of {n} frames ({100 * failed.size / n:.1f} %) have "
+                         f"no fit to trust ({what}): video frames {_listing(frames)}")
         empty = [i for i, s in enumerate(table.status) if s == "no-detections"]
         if empty and hasattr(detections, "counts") and detections.n_records == n:
             seen = [i for i in empty if detections.counts()[i].sum() > 0]
@@ -148,6 +156,12 @@ def fit_warnings(table: Results, detections=None) -> list[str]:
                          "file; or a limb has a marker nothing places): video frames "
                          f"{_listing(frames)}")
     return found
+
+
+def noise_entry(fitter) -> dict:
+    """The sidecar's record of the noise model a fit judged its frames by: σ per view
+    (pixels) and how it was found; nothing where there was none."""
+    return {} if fitter.noise is None else {"noise": fitter.noise.to_record()}
 
 
 def _listing(values: Sequence[int], most: int = 8) -> str:

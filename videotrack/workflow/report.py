@@ -6,7 +6,8 @@ the way.
 Warnings travel: what went wrong while detecting is kept in the detections file, and the
 results sidecar keeps every warning of the run that made the results, so a later run that
 finds them up to date reports them again. :attr:`ProjectRun.incomplete` says when the results
-do not cover the video(s) (a truncated file, an unreadable image) or no frame could be fitted.
+do not cover the video(s) (a truncated file, an unreadable image), no frame could be fitted, or
+more than :data:`UNUSABLE_SHARE` of the frames failed.
 """
 
 from __future__ import annotations
@@ -17,10 +18,18 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+from kinematics.fit import Status
 from videotrack.errors import VideoTrackError, VideoTrackWarning
 from videotrack.project.identity import relative_message
 from videotrack.results.files import Results, read_sidecar
 from videotrack.workflow.model import ProjectModel
+
+#: A run whose share of frames ``failed`` or without detections is above this is incomplete
+#: (exit status 3 of fit, run and batch, unless --allow-incomplete): its results say little
+#: of the animal and much of a set-up or video to look at.
+UNUSABLE_SHARE = 0.5
+#: The statuses counted for that share.
+UNUSABLE = frozenset({Status.FAILED, Status.NO_DETECTIONS})
 
 #: The steps of :func:`run_project`, as :attr:`ProjectRun.steps` and
 #: :attr:`StepProgress.step` name them.
@@ -160,7 +169,14 @@ def _reported(run: ProjectRun, caught: Sequence[str]) -> ProjectRun:
     found = [relative_message(w, base) for w in (*caught, *stored)]
     why = [incomplete_reason(run.detections)] if run.detections is not None else []
     if run.results is not None and run.n_frames and not run.n_ok:
-        why.append(f"not one of the {run.n_frames} frames was fitted")
+        why.append(f"not one of the {run.n_frames} frames has a fit to trust (failed or "
+                   "no detections)")
+    elif run.results is not None and run.n_frames:
+        bad = sum(s in UNUSABLE for s in run.results.status)
+        if bad > UNUSABLE_SHARE * run.n_frames:
+            why.append(f"{bad} of {run.n_frames} frames ({100 * bad / run.n_frames:.0f} %) "
+                       "failed or had no detections, more than "
+                       f"{100 * UNUSABLE_SHARE:.0f} %: the results cannot be used as they are")
     return replace(run, warnings=tuple(dict.fromkeys(found)),
                    incomplete="; ".join(w for w in why if w))
 

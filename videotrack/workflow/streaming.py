@@ -1,7 +1,7 @@
 """Fitting while detecting.
 
 When every record is fitted on its own (:func:`not_streamable`: one candidate per frame, an
-absolute re-analysis threshold, start from the means, fixed roots),
+absolute re-analysis threshold, no noise model to measure, start from the means, fixed roots),
 :func:`~videotrack.workflow.run_project` hands the records to a fitting thread as they are
 detected (:class:`FitAlongside`), so decoding, detection and fitting overlap; the results are
 those of detecting first and fitting afterwards. Checkpoints start once the detections file
@@ -47,6 +47,8 @@ def not_streamable(model: ProjectModel) -> str | None:
         return "a root that is tracked or placed from the detections"
     if model.fitter().match_measured:
         return "match 'auto': decided on the detections of the whole video"
+    if p.noise_floor_px is not None and p.noise_px is None:
+        return "the noise model: σ measured on frames of the whole video"
     return None
 
 
@@ -125,9 +127,10 @@ class FitAlongside:
         try:
             while (item := self._todo.get()) is not None and not self._stop.is_set():
                 first, records = item
+                # the set-up is checked on every record once they are detected
                 gen = self.fitter.iter_fit(_records(first, records, self.n_views),
                                            range(first, first + len(records)),
-                                           cancel=self._stop.is_set)
+                                           cancel=self._stop.is_set, check_setup=False)
                 with contextlib.closing(gen):
                     for r in gen:
                         if self._stop.is_set():

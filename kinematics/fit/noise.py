@@ -1,0 +1,155 @@
+"""The noise model: each view's detection noise σ, absolute, and the test of a frame's marker
+residuals against it.
+
+σ is measured once per video, on a sample of its frames: under a right posture and set-up a
+matched marker lies about σ from its detection (a 2D residual of Rayleigh distribution, whose
+median is σ √(2 ln 2)); the median of the sample's matched residuals is robust to the frames
+that went wrong as long as they are fewer than the right ones. It is bounded below by
+``noise_floor_px`` (a detector's centroid is never
+exact to better than that; renders are). A σ far above what the detections allow is a
+set-up fault (:mod:`kinematics.fit.setup_check`), not noise, so a wrong camera or chain cannot
+raise σ until garbage passes.
+
+A frame passes when its residuals are what σ allows:
+
+* each marker image within ``Tuning.noise_gate_k`` σ of its detection is matched; one farther
+  off (or without one) is unmatched, and is allowed only where its view shows fewer
+  detections than it has markers plus the video's usual extras (an occluded or fused
+  marker); any unmatched marker beyond those fails the frame;
+* labelled keypoints are measured to their own label, so a missing one has no residual; a
+  labeller mislabels a share of them, so a frame may have as many off their label per view as
+  ``Tuning.noise_outlier_share`` of the sample frames have at most (:func:`usual_outliers`);
+* the matched residuals' Σ (r/σ)² must lie below the χ² quantile ``1 - Tuning.noise_p`` of
+  2 · matched − free axes degrees of freedom: a posture off by a little at every marker fails
+  as surely as one off by much at one.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import NamedTuple
+
+import numpy as np
+from scipy.stats import chi2
+
+#: The median of a 2D Gaussian residual's length is σ times this (Rayleigh).
+RAYLEIGH_MEDIAN = float(np.sqrt(2.0 * np.log(2.0)))
+
+
+class NoiseModel(NamedTuple):
+    """σ per view (pixels), how it was found, and (labelled keypoints) the keypoints per view
+    a frame may have off their label."""
+
+    sigma_px: np.ndarray  # (n_views,)
+    source: str  # "measured" (on a sample of the video's frames) or "given"
+    outliers: np.ndarray | None = None  # (n_views,) int, labelled keypoints only
+
+    def to_record(self) -> dict:
+        """As plain numbers (a results sidecar keeps it)."""
+        out = {"sigma_px": [round(float(s), 6) for s in self.sigma_px], "source": self.source}
+        if self.outliers is not None:
+            out["outliers"] = [int(k) for k in self.outliers]
+        return out
+
+    @classmethod
+    def from_record(cls, record, n_views: int) -> NoiseModel | None:
+        """:meth:`to_record`'s record read back, or None where it is not one of ``n_views``
+        views (a sidecar of other views, or edited by hand)."""
+        try:
+            sigma = np.array([float(s) for s in record["sigma_px"]])
+            outliers = record.get("outliers")
+            outliers = None if outliers is None else np.array([int(k) for k in outliers])
+        except (KeyError, TypeError, ValueError, AttributeError):
+            return None
+        if (sigma.shape != (n_views,) or not (np.isfinite(sigma) & (sigma > 0)).all()
+                or (outliers is not None and outliers.shape != (n_views,))):
+            return None
+        return cls(sigma, str(record.get("source", "measured")), outliers)
+
+
+class FrameCounts(NamedTuple):
+    """What a frame's verdict needs beside its residuals, per view: detections shown, markers
+    the view is expected to show, and the extra detections the video usually has."""
+
+    detections: np.ndarray  # (n_frames, n_views) int
+    shown: np.ndarray  # (n_frames, n_views) int
+    extras: np.ndarray  # (n_views,) int
+
+
+def measure_sigma(residuals: Sequence[np.ndarray], floor: float, gate: float,
+                  least: int = 8) -> np.ndarray | None:
+    """σ per view from the residuals (each (n_views, n_markers), NaN: none) of fitted frames:
+    the Rayleigh σ of their matched residuals (within ``gate``) in that view, at least
+    ``floor`` (a view without any: the other views' median). None with fewer than ``least``
+    frames (a fit of a few frames cannot measure its video)."""
+    frames = [np.asarray(r, float) for r in residuals if r is not None and np.isfinite(r).any()]
+    if len(frames) < least:
+        return None
+    stack = np.stack(frames)  # (n, n_views, n_markers)
+    sigma = np.full(stack.shape[1], np.nan)
+    for v in range(stack.shape[1]):
+        vals = stack[:, v][np.isfinite(stack[:, v]) & (stack[:, v] <= gate)]
+        if vals.size:
+            sigma[v] = float(np.median(vals)) / RAYLEIGH_MEDIAN
+    if not np.isfinite(sigma).any():
+        return None
+    sigma = np.where(np.isfinite(sigma), sigma, np.nanmedian(sigma))
+    return np.maximum(sigma, floor)
+
+
+def usual_extras(detections: np.ndarray, shown: np.ndarray, share: float = 0.9) -> np.ndarray:
+    """Per view, the extra detections (beyond the markers shown) that ``share`` of the frames
+    have at most: static and flickering ghosts the video always has are no sign of an
+    occluded marker."""
+    if len(detections) == 0:
+        return np.zeros(detections.shape[1], np.int64)
+    extra = np.maximum(detections - shown, 0)
+    return np.ceil(np.quantile(extra, share, axis=0)).astype(np.int64)
+
+
+def usual_outliers(residuals: Sequence[np.ndarray], sigma: np.ndarray, gate_k: float,
+                   share: float = 0.9) -> np.ndarray:
+    """Per view, the labelled keypoints farther than ``gate_k`` σ from their label that
+    ``share`` of the frames (residuals of a sample, each (n_views, n_markers)) have at most:
+    the labeller's mislabels, no sign of a wrong posture."""
+    off = np.stack([(np.isfinite(r) & (r > gate_k * sigma[:, None])).sum(axis=1)
+                    for r in residuals])
+    return np.ceil(np.quantile(off, share, axis=0)).astype(np.int64)
+
+
+class Verdict(NamedTuple):
+    """A frame's test against the noise model."""
+
+    passed: bool
+    unmatched: int  # marker images beyond the gate that no absent detection excuses
+    gross: int  # ... of them beyond ``gross_px`` (a marker far from every detection)
+    measured: int  # marker images with a residual
+    chi2: float  # Σ (r/σ)² of the matched residuals
+    limit: float  # its χ² limit
+
+
+def verdict(residuals: np.ndarray, sigma: np.ndarray, detections: np.ndarray,
+            shown: np.ndarray, extras: np.ndarray, free_axes: int, gate_k: float,
+            p: float, outliers: np.ndarray | None, gross_px: float = np.inf) -> Verdict:
+    """:class:`Verdict` of one frame: ``residuals`` (n_views, n_markers) in px (NaN: no
+    detection to measure to), ``sigma`` (n_views,), and per view the ``detections`` shown,
+    the markers ``shown`` and the usual ``extras``. ``outliers`` (labelled keypoints, which
+    are measured to their own label, so a missing one is NaN): per view, the keypoints off
+    their label a frame may have; None for unlabelled detections. ``gross``
+    counts the unmatched beyond ``gross_px`` the same way (what the set-up check reads)."""
+    r = np.asarray(residuals, float)
+    gate = gate_k * sigma[:, None]
+    finite = np.isfinite(r)
+    matched = finite & (r <= gate)
+    off = (finite & ~matched).sum(axis=1)
+    excused = (np.asarray(outliers) if outliers is not None
+               else np.maximum(shown + extras - detections, 0))
+    unmatched = int(np.maximum(off - excused, 0).sum())
+    far = (finite & ~(r <= np.maximum(gate, gross_px))).sum(axis=1)
+    gross = int(np.maximum(far - excused, 0).sum())
+    n = int(matched.sum())
+    stat = float(np.sum(np.where(matched, r / sigma[:, None], 0.0) ** 2))
+    dof = max(1, 2 * n - free_axes)
+    limit = float(chi2.isf(p, dof))
+    return Verdict(unmatched == 0 and stat <= limit, unmatched, gross, int(finite.sum()), stat,
+                   limit)

@@ -1,0 +1,83 @@
+"""The noise model: σ measured on a video's best frames, and each frame's residual test."""
+
+import numpy as np
+import pytest
+
+from kinematics.cameras import OrthographicCamera
+from kinematics.fit import noise
+from kinematics.observe.agreement import view_agreement
+from kinematics.observe.observations import Observations
+
+SIGMA = np.array([0.5, 0.5])
+
+
+def _rayleigh(rng, sigma, shape):
+    return np.linalg.norm(rng.normal(0.0, sigma, (*shape, 2)), axis=-1)
+
+
+def test_sigma_is_measured_on_the_best_frames_and_floored():
+    rng = np.random.default_rng(0)
+    good = [_rayleigh(rng, 0.7, (2, 6)) for _ in range(40)]
+    bad = [_rayleigh(rng, 0.7, (2, 6)) + 30.0 for _ in range(10)]  # wrong postures
+    sigma = noise.measure_sigma(good + bad, floor=0.1, gate=10.0)
+    assert sigma == pytest.approx([0.7, 0.7], rel=0.15)
+    assert noise.measure_sigma(good, floor=2.0, gate=10.0) == pytest.approx([2.0, 2.0])
+    assert noise.measure_sigma(good[:5], floor=0.1, gate=10.0) is None  # too few frames
+
+
+def _verdict(r, detections=(6, 6), shown=(6, 6), extras=(0, 0), outliers=None):
+    return noise.verdict(np.asarray(r, float), SIGMA, np.array(detections), np.array(shown),
+                         np.array(extras), free_axes=5, gate_k=4.0, p=1e-3, outliers=outliers)
+
+
+def test_a_right_frame_passes_and_a_marker_off_its_detection_fails():
+    rng = np.random.default_rng(1)
+    right = _rayleigh(rng, 0.5, (2, 6))
+    assert _verdict(right).passed
+    off = right.copy()
+    off[1, 3] = 6.0  # 12 σ, and every marker of that view has its detection
+    v = _verdict(off)
+    assert not v.passed and v.unmatched == 1
+    # ... unless the view shows a detection fewer than its markers (occluded or fused)
+    assert _verdict(off, detections=(6, 5)).passed
+    # ... where the video's usual ghost does not count as the missing detection's stand-in
+    assert not _verdict(off, detections=(7, 7), extras=(1, 1)).passed
+    assert _verdict(off, detections=(7, 6), extras=(1, 1)).passed
+    # labelled keypoints are measured to their own label: a count says nothing of them; the
+    # labeller's usual mislabels (measured on the video) excuse one
+    assert not _verdict(off, detections=(6, 5), outliers=np.array([0, 0])).passed
+    assert _verdict(off, outliers=np.array([0, 1])).passed
+    assert noise.usual_outliers([off] * 9 + [right], SIGMA, 4.0).tolist() == [0, 1]
+
+
+def test_every_marker_a_little_off_fails_the_chi_square_test():
+    rng = np.random.default_rng(2)
+    drifted = _rayleigh(rng, 0.5, (2, 6)) * 0.2 + 1.4  # ~3 σ each, all within the gate
+    v = _verdict(drifted)
+    assert v.unmatched == 0 and v.chi2 > v.limit and not v.passed
+
+
+def _two_views(rng, cams, n_frames=30, ghosts=0):
+    points, offsets = [], [0]
+    for _ in range(n_frames):
+        xyz = rng.uniform(-80, 80, (5, 3))
+        for cam in cams:
+            d = np.r_[cam.project(xyz), rng.uniform(0, 300, (ghosts, 2))]
+            points.append(d)
+            offsets.append(offsets[-1] + len(d))
+    return Observations.unlabelled(np.concatenate(points), np.array(offsets), ["side", "top"])
+
+
+@pytest.mark.parametrize("ghosts", [0, 40])
+def test_views_that_agree_and_a_mis_scaled_camera(ghosts):
+    cams = [OrthographicCamera.from_axes("side", 1.0, ["x", "-y"], [150, 150]),
+            OrthographicCamera.from_axes("top", 1.0, ["x", "z"], [150, 150])]
+    scaled = [cams[0], OrthographicCamera.from_axes("top", 2.0, ["x", "z"], [150, 150])]
+    obs = _two_views(np.random.default_rng(3), cams, ghosts=ghosts)
+    right = view_agreement(cams, obs, np.arange(30))
+    assert len(right) == 2  # each view against the other
+    assert all(p.excess > 0.05 for p in right)  # with 40 ghosts among 5 markers too
+    if not ghosts:
+        assert all(p.distance_px < 1e-6 < p.chance_px for p in right)
+    wrong = view_agreement(scaled, obs, np.arange(30))
+    assert all(abs(p.excess) < 0.05 and p.distance_px > 0.5 * p.chance_px for p in wrong)
