@@ -26,8 +26,8 @@ from kinematics.observe.agreement import view_agreement
 from kinematics.observe.observations import Observations
 
 #: How a user fits anyway, said with every refusal.
-ACCEPT_HINT = ("if the set-up is right, fit anyway with --accept-setup "
-               "([anneal] accept_setup = true)")
+ACCEPT_HINT = ("if the set-up is right, set [anneal] accept_setup = true (fit and run: "
+               "--accept-setup) to fit anyway")
 
 
 class SetupError(KinematicsError):
