@@ -98,4 +98,4 @@ def _nearest_line(fmat: np.ndarray, pa: np.ndarray, pb: np.ndarray, labelled: bo
                            ) / norm[:n]
             return d
         d = np.abs(lines[:, :2] @ pb.T + lines[:, 2:]) / norm[:, None]
-        return np.nanmin(np.where(np.isfinite(d), d, np.inf), axis=1)
+        return np.where(np.isfinite(d), d, np.inf).min(axis=1)  # NaN rows: no partner

@@ -13,7 +13,7 @@ examples:
   videotrack batch myproject
   # what would run, and why (nothing is written)
   videotrack batch myproject --dry-run
-  # two trials of session 1 again, recomputing although they are up to date
+  # two trials of the folder session1 again, recomputing although they are up to date
   videotrack batch myproject --trial 'session1/trial0[12]' --force
   # on a Dask cluster (a scheduler address, or the file 'dask scheduler' wrote)
   videotrack batch myproject --scheduler tcp://head-node:8786
@@ -23,7 +23,7 @@ a project (see docs/batch.md):
                                           [chain]      path = "chain.xml"
                                           [cameras]    path = "cameras.toml"
                                           [[views]] ... [[filters.steps]] ...
-  myproject/session1/config.toml        optional: keys that differ in session 1
+  myproject/session1/config.toml        optional: keys that differ in session1/
   myproject/session1/trial01/walk.avi   a trial: a folder with its video(s)
   myproject/session1/trial01/config.toml  optional: keys that differ in this trial
 

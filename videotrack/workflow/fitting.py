@@ -89,7 +89,8 @@ def fit_project(
     previous = [results[f] for f in before] if before and len(todo) and all(
         int(f) in done for f in before) else None
     observed = detections.observations if isinstance(detections, KeypointInput) else detections
-    if stream is not None and not done and frames is None:
+    streamed = stream is not None and not done and frames is None
+    if streamed:
         stream.fitter.check_setup(observed)  # on every record, now they are detected
         gen = stream.results(len(todo))
     else:
@@ -107,7 +108,7 @@ def fit_project(
     ordered = [results[int(f)] for f in idx]
     table = results_from_fit(model.body, ordered, model.view_names, detections)
     base = results_path.absolute().parent
-    used = stream.fitter if stream is not None and not done and frames is None else fitter
+    used = stream.fitter if streamed else fitter  # the fitter whose checks and noise judged
     found = [relative_message(w, base) for w in (*notes, *used.setup_warnings,
                                                  *fit_warnings(table, detections))]
     write_results(results_path, table, {**sidecar, **threshold_entry(ordered),
