@@ -29,16 +29,10 @@ import threading
 import numpy as np
 from numba import njit, prange
 
-from kinematics._kernels.anneal import (
-    anneal_chain,
-    clear_frame,
-    finish_run,
-    observed,
-    stream_state,
-    take_runs,
-    wants_run,
-    write_frame,
-)
+from kinematics._kernels.anneal import anneal_chain
+from kinematics._kernels.fastmath import stream_state
+from kinematics._kernels.frames import clear_frame, finish_run, take_runs, wants_run, write_frame
+from kinematics._kernels.objective import observed
 
 #: Threads per block of the annealing kernel (each thread one run).
 THREADS = 128

@@ -34,9 +34,9 @@ from pathlib import Path
 import numpy as np
 from numba.core import config
 
-from kinematics._kernels.anneal import G_IDENTITY, H_ZERO, NAN_MARKER_COST, ROOT_POSE
 from kinematics._kernels.cache import default_cache_dir
 from kinematics._kernels.camera import ORTHOGRAPHIC
+from kinematics._kernels.codes import G_IDENTITY, H_ZERO, NAN_MARKER_COST, ROOT_POSE
 from kinematics.fileio import atomic_write_text
 
 
@@ -48,7 +48,8 @@ def _kernels_digest() -> str:
     try:
         return hashlib.sha256(b"".join(
             (Path(__file__).parent / name).read_bytes()
-            for name in ("anneal.py", "camera.py", "lanes.py", "lane_codegen.py"))).hexdigest()[:16]
+            for name in ("codes.py", "fastmath.py", "camera.py", "lanes.py", "lane_codegen.py")
+        )).hexdigest()[:16]
     except OSError:  # sources not shipped (a frozen app): numba cannot cache them either
         return "unknown"
 
@@ -172,7 +173,7 @@ _MIXED = {0: (1, 2), 1: (2, 0), 2: (0, 1)}
 
 
 def _kinematics(code: _Code, folded):
-    """Joint frames and markers of one lane: the scalar ``_project_cs``, folded."""
+    """Joint frames and markers of one lane: the scalar ``project_cs``, folded."""
     (parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index, joint_flags,
      marker_joint, marker_local, slide_index) = folded
     nj = parent.shape[0]
@@ -396,7 +397,7 @@ def fused_source(folded, cams, n_det: int, error, single: bool = False,
 import numpy as np
 from numba import cfunc
 
-from kinematics._kernels.anneal import sincos, sincos32
+from kinematics._kernels.fastmath import sincos, sincos32
 from kinematics._kernels.lanes import FUSED_SIGNATURE
 
 

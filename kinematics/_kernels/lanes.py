@@ -28,7 +28,7 @@ Found with ``perf record`` on a running fit and ``gdb`` on the hot addresses (sc
 against packed ``zmm``), and LLVM's ``-pass-remarks-missed=loop-vectorize`` through
 ``llvmlite.binding.set_option`` (with ``NUMBA_DEBUGINFO=1`` for line numbers).
 
-The readable twin and test oracle is the scalar kernel :func:`kinematics._kernels.anneal.
+The readable twin and test oracle is the scalar kernel :func:`kinematics._kernels.frames.
 fit_frames`: each run here performs exactly the scalar kernel's arithmetic in the same order
 on the same random stream (splitmix64 per seed, frame and run), so the outputs agree to the
 last bit — whatever the number of lanes or threads. What a lane cannot do cheaply (loading a
@@ -53,27 +53,13 @@ from __future__ import annotations
 import numpy as np
 from numba import cfunc, njit, prange, types
 
-from kinematics._kernels.anneal import (
-    NAN_MARKER_COST,
-    OBJ_LABELLED,
-    OBJ_POINTS3D,
-    ROOT_POSE,
-    clear_frame,
-    evaluate,
-    finish_run,
-    hist_at,
-    log_unit,
-    mul33,
-    next_uniform,
-    observed,
-    project_posture,
-    sincos,
-    stream_state,
-    take_runs,
-    wants_run,
-    write_frame,
-)
+from kinematics._kernels.anneal import hist_at
 from kinematics._kernels.camera import ORTHOGRAPHIC
+from kinematics._kernels.codes import NAN_MARKER_COST, OBJ_LABELLED, OBJ_POINTS3D, ROOT_POSE
+from kinematics._kernels.fastmath import log_unit, next_uniform, sincos, stream_state
+from kinematics._kernels.frames import clear_frame, finish_run, take_runs, wants_run, write_frame
+from kinematics._kernels.objective import evaluate, observed
+from kinematics._kernels.posture import mul33, project_posture
 
 #: Runs annealed together per thread: eight 512-bit registers of float64. More lanes spread
 #: each loop's fixed cost (bench/bench_lanes.py: 32 and 128 were slower); fewer than 16
@@ -135,7 +121,7 @@ def project_lanes(vals, cs, sn, parent, chain, pre_rot, pre_trans, post_trans, e
                   elem_index, joint_flags, marker_joint, marker_local, slide_index, kind, P, K,
                   dist, R, t, rot, pos, mk, proj):
     """Markers of every lane's posture projected into every view (the scalar
-    ``_project_cs`` per lane, the same values to the last bit): fills ``proj``
+    ``project_cs`` per lane, the same values to the last bit): fills ``proj``
     (nv, nm, 2, L), ``rot`` (nj + n_chains, 9, L), ``pos`` (nj + n_chains, 3, L) and ``mk``.
     Rows ``nj + c`` of ``rot`` and ``pos`` hold chain c's root: each lane's seed rotation
     (the identity for a root without one) and root position, set when a run is loaded.

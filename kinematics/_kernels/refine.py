@@ -4,11 +4,11 @@
 Refinement is Levenberg-Marquardt on the pairs (model marker i in view v, its nearest
 detection), kept only within a distance gate so ghosts and occluded markers drop out.
 Residuals are ``p_i^v - d^v`` (two per pair); the Jacobian is taken by forward differences
-of :func:`kinematics._kernels.anneal.project_posture`; steps are clipped to the axis ranges
+of :func:`kinematics._kernels.posture.project_posture`; steps are clipped to the axis ranges
 and never touch locked axes; pairs are re-assigned after every accepted step (as in ICP).
 For Gaussian centroid noise this is the maximum-likelihood posture given the pairs, which
 annealing on the sum of distances (Eq. 5) only approaches. Body and cameras in the folded
-layout of :mod:`kinematics._kernels.anneal`, whose ``fit_frames`` calls
+layout of :mod:`kinematics._kernels.posture`; :func:`kinematics._kernels.frames.fit_frames` calls
 :func:`refine_posture` on every annealing run when refinement is on.
 """
 
@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from kinematics._kernels.anneal import (
+from kinematics._kernels.codes import (
     DOF_HISTOGRAM,
     NO_CLAIMS,
     OBJ_CLOUD,
@@ -25,16 +25,11 @@ from kinematics._kernels.anneal import (
     OBJ_CLOUD_VIEWS,
     OBJ_LABELLED,
     OBJ_POINTS3D,
-    _has_pinhole,
-    _project_cs,
-    cloud_nearest,
-    hidden_in,
-    one_to_one,
-    point_of,
-    project_posture,
-    sincos,
-    solve_spd,
 )
+from kinematics._kernels.error2d import one_to_one, point_of
+from kinematics._kernels.error3d import cloud_nearest
+from kinematics._kernels.fastmath import sincos, solve_spd
+from kinematics._kernels.posture import has_pinhole, hidden_in, project_cs, project_posture
 
 #: Forward-difference step of the Jacobian, radians.
 FD_STEP = 1e-7
@@ -61,12 +56,12 @@ def assign_pairs(objective, proj, mk, points, conf, view_off, obs3, gate, pair):
 
     Unlabelled points (``OBJ_NEAREST``): ``pair[v * nm + i]`` = index of marker i's nearest
     detection in view v, none where it is hidden
-    (:func:`kinematics._kernels.anneal.hidden_in`). Labelled keypoints: the row of marker
+    (:func:`kinematics._kernels.posture.hidden_in`). Labelled keypoints: the row of marker
     i's own keypoint in view v (if present, with confidence > 0). 3D points: ``pair[i] =
     i`` where marker i's point is present. Unlabelled 3D points (``OBJ_CLOUD``):
     ``pair[i]`` = the row of marker i's nearest cloud point (px-equivalents, as
-    :func:`kinematics._kernels.anneal.cloud_error`); with ``OBJ_CLOUD_ONE`` each point
-    pairs with one marker at most (:func:`kinematics._kernels.anneal.one_to_one`), so a
+    :func:`kinematics._kernels.error3d.cloud_error`); with ``OBJ_CLOUD_ONE`` each point
+    pairs with one marker at most (:func:`kinematics._kernels.error2d.one_to_one`), so a
     marker whose own point is missing does not take a neighbour's; ``OBJ_CLOUD_VIEWS``
     pairs as ``OBJ_CLOUD_ONE``, and a marker left without a point with its nearest
     detection in each view among those within their own gate, ``conf`` (px):
@@ -351,7 +346,7 @@ def refine_posture(angles, free_idx, lo, hi, dof_kind, n_steps, gate, root_pos, 
     # two columns share (a fly's six legs: a sixth of the work; the sums' order, and so
     # every bit of the result, as over all rows)
     span = entry_spans(free_idx, parent, elem_axis, elem_index, slide_index, marker_joint)
-    pinhole = _has_pinhole(kind)
+    pinhole = has_pinhole(kind)
     rot0, pos0, mk0, proj0 = np.empty_like(rot), np.empty_like(pos), np.empty_like(mk), \
         np.empty_like(proj)
     nb = nv + 1  # row blocks of a marker range at most (:func:`_row_block`)
@@ -382,7 +377,7 @@ def refine_posture(angles, free_idx, lo, hi, dof_kind, n_steps, gate, root_pos, 
             x, s0, c0 = angles[i], sn[i], cs[i]
             angles[i] = x + FD_STEP
             sn[i], cs[i] = sincos(angles[i])
-            _project_cs(angles, cs, sn, root_pos, root_rot, parent, chain, pre_rot, pre_trans,
+            project_cs(angles, cs, sn, root_pos, root_rot, parent, chain, pre_rot, pre_trans,
                         post_trans, elem_axis, elem_index, joint_flags, marker_joint,
                         marker_local, slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj,
                         pinhole, (j0, j1, m0, m1), mk[:0])

@@ -11,7 +11,7 @@ from dataclasses import replace
 import numba
 import numpy as np
 
-from kinematics._kernels import anneal as _ak
+from kinematics._kernels import frames as _frames
 from kinematics.fit import temporal
 from kinematics.fit.problem import (
     FitOutputs,
@@ -140,7 +140,7 @@ class CandidatesMixin:
         # no start search: the neighbour's posture is the start
         parts = self._partitions(p, search=False)
         # keyed by frame + 1_000_003: a random stream apart from the frames' own runs
-        _ak.fit_frames(np.array([0, 1], np.int64), np.array([position + 1_000_003], np.int64),
+        _frames.fit_frames(np.array([0, 1], np.int64), np.array([position + 1_000_003], np.int64),
                        np.ascontiguousarray(pos[None]), np.ascontiguousarray(rot[None]),
                        state, self.problem.folded, cams, self.problem.dofs,
                        schedule_of(local), self._error_args(p, arrays.objective), arrays,

@@ -10,10 +10,12 @@ import warnings
 import numba
 import numpy as np
 
-from kinematics._kernels import anneal as _ak
+from kinematics._kernels import codes as _codes
 from kinematics._kernels import cuda as _ck
+from kinematics._kernels import frames as _frames
 from kinematics._kernels import lane_codegen as _codegen
 from kinematics._kernels import lanes as _lk
+from kinematics._kernels import objective as _objective
 from kinematics.cameras import CameraArrays
 from kinematics.errors import KinematicsError
 from kinematics.fit.problem import (
@@ -78,13 +80,13 @@ class DispatchMixin:
             groups = np.unique(np.linspace(0, n, min(threads, n) + 1).astype(np.int64))
             error = self._error_args(p, arrays.objective)
             # labelled keypoints and 3D points have no float32 kernel: theirs stays float64
-            single = p.precision == "float32" and arrays.objective == _ak.OBJ_NEAREST
+            single = p.precision == "float32" and arrays.objective == _codes.OBJ_NEAREST
             fused, n_fused = self._fused_kernel(arrays, error, single)
             _lk.fit_frames_lanes(groups, frame_ids, roots, rots, start, pr.folded, pr.cams,
                                  pr.dofs, schedule_of(p), error, arrays,
                                  float(p.claim_gate_px), _lk.LANES, fused, n_fused, single, out)
         else:
-            _ak.fit_frames(seg_off, frame_ids, roots, rots, start, pr.folded, cams,
+            _frames.fit_frames(seg_off, frame_ids, roots, rots, start, pr.folded, cams,
                            pr.dofs, schedule_of(p), self._error_args(p, arrays.objective),
                            arrays, parts, out)
         view_error = out.view_error if nv == self.n_views else np.zeros((n, self.n_views))
@@ -119,7 +121,7 @@ class DispatchMixin:
         n, pr = len(out.runs), self.problem
         res = np.full((n, self.n_views, pr.folded.marker_joint.size), np.nan)
         unexplained = np.zeros(n, np.int64)
-        _ak.block_residuals(out.angles, out.runs > 0, roots, rots, pr.folded, pr.cams,
+        _objective.block_residuals(out.angles, out.runs > 0, roots, rots, pr.folded, pr.cams,
                             block.points, block.offsets, gate, res, unexplained)
         return res, unexplained
 
@@ -127,7 +129,7 @@ class DispatchMixin:
         """Cameras and observations as ``fit_frames`` takes them: for a 3D objective (a
         cloud) without the views, whose projections such a fit never reads (they were most
         of an iteration's cost with six pinhole cameras)."""
-        if arrays.objective != _ak.OBJ_CLOUD:
+        if arrays.objective != _codes.OBJ_CLOUD:
             return self.problem.cams, arrays
         cams = CameraArrays(*(np.ascontiguousarray(a[:0]) for a in self.problem.cams))
         return cams, arrays._replace(points=np.empty((0, 2)), conf=np.empty(0),
@@ -143,11 +145,11 @@ class DispatchMixin:
         ``single``: a kernel computing in float32 (precision 'float32'; unlabelled points
         only, as :meth:`_fit_block` asks)."""
         # labelled keypoints and 3D points: point i is marker i's, no scan
-        labelled = arrays.objective == _ak.OBJ_LABELLED
-        points3d = arrays.objective == _ak.OBJ_POINTS3D
+        labelled = arrays.objective == _codes.OBJ_LABELLED
+        points3d = arrays.objective == _codes.OBJ_POINTS3D
         counts = np.diff(arrays.offsets)
         c_cap = 0 if labelled or points3d else int(counts.max()) if counts.size else 0
-        if (arrays.objective not in (_ak.OBJ_NEAREST, _ak.OBJ_LABELLED, _ak.OBJ_POINTS3D)
+        if (arrays.objective not in (_codes.OBJ_NEAREST, _codes.OBJ_LABELLED, _codes.OBJ_POINTS3D)
                 or os.environ.get("VIDEOTRACK_NO_CODEGEN")
                 or not _codegen.fits(self.problem.folded, self.problem.cams, c_cap,
                                      points3d)):
@@ -183,7 +185,7 @@ class DispatchMixin:
         fits, goes to the scalar kernel), and never takes the GPU: its results equal the
         scalar kernel's to within rounding only, and a result file should not depend on
         the machine (docs/fitting.md, 'Reproducibility')."""
-        valid = (objective in (_ak.OBJ_NEAREST, _ak.OBJ_LABELLED, _ak.OBJ_POINTS3D)
+        valid = (objective in (_codes.OBJ_NEAREST, _codes.OBJ_LABELLED, _codes.OBJ_POINTS3D)
                  and parts.bounds.shape[0] == 1
                  and parts.samples == 0 and p.start == "mean" and not p.error.one_to_one
                  and parts.confirm == 0 and not hidden)
@@ -212,7 +214,7 @@ class DispatchMixin:
         per_view = np.empty(self.n_views)
         obs3 = (arrays.points3d[0] if arrays.points3d.shape[1]
                 else np.zeros((self.problem.folded.marker_joint.size, 4)))
-        e = _ak.posture_error(np.ascontiguousarray(state), root_pos, root_rot,
+        e = _objective.posture_error(np.ascontiguousarray(state), root_pos, root_rot,
                               *self.problem.folded, *self.problem.cams, arrays.objective,
                               arrays.points, arrays.conf, arrays.offsets, obs3,
                               *self._error_args(p, arrays.objective), per_view)
@@ -224,7 +226,7 @@ class DispatchMixin:
         a cloud point 0.1 mm away at 100 px/mm already cost the most, and a far limb had no
         slope to follow (the fly with the defaults: 3 % of frames right, 45 % with this)."""
         args = error_args(p.error)
-        if objective == _ak.OBJ_CLOUD:
+        if objective == _codes.OBJ_CLOUD:
             views = self.n_views if self.unseen is None else int(
                 (~self.unseen).sum(axis=0).max())  # the views that show a marker
             return args._replace(cap=args.cap * views, penalty_cap=args.penalty_cap * views)

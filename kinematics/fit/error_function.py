@@ -1,8 +1,8 @@
 """The error function of the posture fit (paper Eq. 5) and its variants, in plain NumPy.
 
 This module is the readable specification and the test oracle of the numba kernels in
-:mod:`kinematics._kernels.anneal` (which the fitter runs); the tests compare the two on random
-postures and detections.
+:mod:`kinematics._kernels.error2d` and :mod:`kinematics._kernels.error3d` (which the fitter
+runs); the tests compare the two on random postures and detections.
 
 Eq. 5 sums, over the views k and the model markers i, the distance from the projected marker
 p_i^k to its nearest detected point in that view::
@@ -284,7 +284,7 @@ def cloud_error(markers, cloud, options: ErrorOptions | None = None, claimed=Non
 
 
 def nearest_residuals(proj, points, view_off, seen, gate: float) -> tuple[np.ndarray, int]:
-    """NumPy twin of the kernel ``_kernels.anneal.nearest_residuals``: (n_views, n_markers)
+    """NumPy twin of the kernel ``_kernels.error2d.nearest_residuals``: (n_views, n_markers)
     distance of each seen model marker (``seen``, bool) to the nearest detection of its view
     (NaN where a view has none or the marker is not seen), and how many detections lie
     farther than ``gate`` from every seen marker of their view (all of a view that sees

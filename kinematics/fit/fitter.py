@@ -6,7 +6,7 @@ video as a generator of :class:`FrameResult` in frame order, computing chunks of
 parallel on all of numba's threads. Closing the generator cancels the run (between chunks).
 The generator never prints and never touches files.
 
-Per frame (numba kernels in :mod:`kinematics._kernels.anneal`; the jobs around them
+Per frame (numba kernels in :mod:`kinematics._kernels.frames`; the jobs around them
 in the mixins of :mod:`kinematics.fit`):
 
 1. start from the histogram means (Sect. 3.1) or the previous frame's result;
@@ -52,7 +52,9 @@ from dataclasses import replace
 import numba
 import numpy as np
 
-from kinematics._kernels import anneal as _ak
+from kinematics._kernels import codes as _codes
+from kinematics._kernels import objective as _objective
+from kinematics._kernels import posture as _posture
 from kinematics.errors import KinematicsError
 from kinematics.fit import tuning as _tuning
 from kinematics.fit.candidates import CandidatesMixin
@@ -195,7 +197,7 @@ class Fitter(MatchMixin, RootsMixin, DispatchMixin, StatusMixin, PolishMixin, Ca
         """A frame's ``obs3`` slot for detections given per view: the markers no view shows
         (``view_markers``) as the kernels read hidden marks, or no mark."""
         if self.unseen is None:
-            return _ak.NO_HIDDEN
+            return _codes.NO_HIDDEN
         return np.ascontiguousarray(self.unseen.T, dtype=float)
 
     def observations(self, data) -> Observations:
@@ -269,7 +271,7 @@ class Fitter(MatchMixin, RootsMixin, DispatchMixin, StatusMixin, PolishMixin, Ca
         nj, nm, ns = f.parent.size, f.marker_joint.size, state.size
         proj = np.empty((self.n_views, nm, 2))
         mk = np.empty((nm, 3))
-        _ak.project_posture(state, root_pos, root_rot, *f, *self.problem.cams, np.empty(ns),
+        _posture.project_posture(state, root_pos, root_rot, *f, *self.problem.cams, np.empty(ns),
                             np.empty(ns), np.empty((nj, 3, 3)), np.empty((nj, 3)), mk, proj)
         return (proj, mk) if markers else proj
 
@@ -315,8 +317,8 @@ class Fitter(MatchMixin, RootsMixin, DispatchMixin, StatusMixin, PolishMixin, Ca
         opts = self.params.error
         state, pos, rot = self.state(angles_deg, root_positions)
         nm = self.problem.folded.marker_joint.size
-        e = _ak.posture_error(state, pos, rot, *self.problem.folded, *self.problem.cams,
-                              _ak.OBJ_NEAREST, frame.points, np.ones(len(frame.points)),
+        e = _objective.posture_error(state, pos, rot, *self.problem.folded, *self.problem.cams,
+                              _codes.OBJ_NEAREST, frame.points, np.ones(len(frame.points)),
                               frame.offsets, np.zeros((nm, 4)), *error_args(opts), per_view)
         return float(e), per_view
 

@@ -9,7 +9,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from kinematics._kernels import anneal as _ak
+from kinematics._kernels import codes as _codes
 from kinematics._kernels import refine as _rk
 from kinematics.fit.result import WITHIN, Candidate, FrameResult, Status
 from kinematics.fit.settings import AnnealParams
@@ -71,7 +71,7 @@ class PolishMixin:
         proj, mk = self._project_state(state, pos, rot, markers=True)
         gate = float(p.final_polish_px)
         pair = np.empty(len(mk), np.int64)
-        _rk.assign_pairs(_ak.OBJ_CLOUD_ONE, np.empty((0, len(mk), 2)), mk, arrays.points,
+        _rk.assign_pairs(_codes.OBJ_CLOUD_ONE, np.empty((0, len(mk), 2)), mk, arrays.points,
                          arrays.conf, arrays.offsets, cloud, gate, pair)
         covered = pair >= 0
         # E's distance beyond which a marker is unexplained (no cap: the gate)
@@ -90,9 +90,9 @@ class PolishMixin:
             state = start.copy()
             placed = marks[pair[marks] < 0]
             if placed.size == 0:  # the cloud alone: no view's projections to compute
-                objective, cams = _ak.OBJ_CLOUD_ONE, self._kernel_inputs(arrays)[0]
+                objective, cams = _codes.OBJ_CLOUD_ONE, self._kernel_inputs(arrays)[0]
             else:
-                objective, cams = _ak.OBJ_CLOUD_VIEWS, pr.cams
+                objective, cams = _codes.OBJ_CLOUD_VIEWS, pr.cams
             _rk.refine_posture(state, moved, pr.lo, pr.hi, pr.dof_kind,
                                self.tuning.polish_steps, gate,
                                pos, rot, *folded, *cams, objective, arrays.points, gates,

@@ -31,7 +31,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from kinematics._kernels import anneal as _ak
+from kinematics._kernels import codes as _codes
 from kinematics.cameras import CameraArrays, pack_cameras
 from kinematics.errors import KinematicsError
 from kinematics.model import Body, validate_body
@@ -40,8 +40,8 @@ from kinematics.model.histograms import Histogram
 from kinematics.model.packing import pack_body
 from kinematics.model.rotations import euler_yxz, rot_x, rot_y, rot_z
 
-DOF_HISTOGRAM = _ak.DOF_HISTOGRAM
-DOF_RANGE = _ak.DOF_RANGE
+DOF_HISTOGRAM = _codes.DOF_HISTOGRAM
+DOF_RANGE = _codes.DOF_RANGE
 
 #: The world axis each rotation of Eq. 1 turns about (x=0, y=1, z=2), in AXIS_ORDER.
 _WORLD_AXIS = {"x": 0, "y": 1, "z": 2}
@@ -50,7 +50,7 @@ _SQRT3 = float(np.sqrt(3.0))
 
 
 class FoldedBody(NamedTuple):
-    """A body in the kernels' folded layout (see :mod:`kinematics._kernels.anneal`).
+    """A body in the kernels' folded layout (see :mod:`kinematics._kernels`).
 
     Shapes: ``nj`` joints, ``nm`` markers. Joint ``j`` keeps ``A'_j = A'_parent · pre_rot[j]
     · Π_e E(elem_axis[j, e], angle[elem_index[j, e]])`` and ``p_j = p_parent + A'_parent ·
@@ -359,16 +359,16 @@ def fold_body(body: Body, angles_deg=None) -> FoldedBody:
             pre_rot[j] = big_l[j]
             c = int(arrays.chain[j])
             if c in free_chains:
-                flags[j] |= _ak.ROOT_POSE
+                flags[j] |= _codes.ROOT_POSE
                 slide[j] = body.n_axes + 3 * free_chains.index(c)
         else:
             pre_rot[j] = big_q[p] @ arrays.pre_rot[j] @ big_l[j]
             pre_trans[j] = big_q[p] @ arrays.pre_trans[j]
         post_trans[j] = big_q[j] @ arrays.post_trans[j]
         if np.array_equal(pre_rot[j], np.eye(3)):
-            flags[j] |= _ak.G_IDENTITY
+            flags[j] |= _codes.G_IDENTITY
         if not post_trans[j].any():
-            flags[j] |= _ak.H_ZERO
+            flags[j] |= _codes.H_ZERO
     local = np.einsum("mij,mj->mi", big_q[arrays.marker_joint], arrays.marker_local)
     return FoldedBody(arrays.parent, arrays.chain, np.ascontiguousarray(pre_rot), pre_trans,
                       post_trans, elem_axis, elem_index, flags, arrays.marker_joint,

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
-from kinematics._kernels import anneal as _ak
+from kinematics._kernels import codes as _codes
 from kinematics._kernels import refine as _rk
 from kinematics.errors import KinematicsError
 from kinematics.fit import Fitter
@@ -96,7 +96,7 @@ def refine(fitter: Fitter, angles_deg, detections_frame, root_positions=None, *,
         state, pos, rot = fitter.state(start_deg, start_roots)
         sse, n_pairs = _rk.refine_posture(state, pr.free_idx, pr.lo, pr.hi, pr.dof_kind,
                                           n_steps, gate, pos, rot, *pr.folded, *pr.cams,
-                                          _ak.OBJ_NEAREST, rag.points,
+                                          _codes.OBJ_NEAREST, rag.points,
                                           np.ones(len(rag.points)), rag.offsets,
                                           fitter.unseen_marks)
         angles, roots = pr.posture(state, pos, rot)
@@ -148,7 +148,7 @@ def refine_many(fitter: Fitter, angles_deg, detections, root_positions=None, *,
     sse = np.empty(n)
     pairs = np.empty(n, np.int64)
     marks = fitter.unseen_marks
-    obs = ObservationArrays(_ak.OBJ_NEAREST, rag.points, np.ones(len(rag.points)),
+    obs = ObservationArrays(_codes.OBJ_NEAREST, rag.points, np.ones(len(rag.points)),
                             rag.offsets, np.ascontiguousarray(np.broadcast_to(
                                 marks, (n, *marks.shape))))
     _rk.refine_frames(state, pos, rot, pr.folded, pr.cams, pr.dofs, steps, gate, obs, sse,
@@ -184,7 +184,7 @@ def refine_reference(fitter: Fitter, angles_deg, detections_frame, root_position
     nv, nm = fitter.n_views, len(fitter.body.marker_names)
     proj0 = fitter.project(np.rad2deg(angles), roots)
     pair = np.empty(nv * nm, np.int64)
-    n_pairs = _rk.assign_pairs(_ak.OBJ_NEAREST, proj0, np.zeros((nm, 3)), rag.points,
+    n_pairs = _rk.assign_pairs(_codes.OBJ_NEAREST, proj0, np.zeros((nm, 3)), rag.points,
                                np.ones(len(rag.points)), rag.offsets, fitter.unseen_marks, gate,
                                pair)
     free = _free_angles(fitter)

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from kinematics._kernels import anneal as _ak
+from kinematics._kernels import root_track as _root_track
 from kinematics.fit import placement
 from kinematics.model.fk import forward_kinematics_reference
 from kinematics.observe.observations import Observations
@@ -52,7 +52,7 @@ class RootsMixin:
                 marks = self._marks(obs, idx)
                 if marks is not None:  # a view where the root marker is hidden: none
                     p_k, off_k = _emptied(pts, off, marks[:, :, self._root_marker[k]])
-                _ak.track_root(p_k, off_k, x0, gate, 1e-9, self.problem.cams, track)
+                _root_track.track_root(p_k, off_k, x0, gate, 1e-9, self.problem.cams, track)
             else:  # a labelled root marker needs no tracking; gaps keep the last position
                 track = _carry_forward(labelled[:, self._root_marker[k]], x0)
             out[:, k] = self._roots[k] + (track - x0)

@@ -8,7 +8,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from kinematics._kernels import anneal as _ak
+from kinematics._kernels import error2d as _error2d
+from kinematics._kernels import error3d as _error3d
 from kinematics.fit.result import FrameResult, Status
 from kinematics.fit.settings import AnnealParams
 from kinematics.observe.observations import Observations
@@ -131,10 +132,10 @@ class StatusMixin:
                     out[v] = np.where(arrays.conf[view_off[v]: view_off[v + 1]] > 0,
                                       np.linalg.norm(proj[v] - d, axis=1), np.nan)
         elif obs.n_views:  # 3D points have no views, even with cameras
-            unexplained = int(_ak.nearest_residuals(proj, pts, view_off, seen, float(gate),
+            unexplained = int(_error2d.nearest_residuals(proj, pts, view_off, seen, float(gate),
                                                     out))
         if obs.kind == "cloud":
-            unexplained = int(_ak.count_unexplained_cloud(mk, arrays.points3d[0], gate))
+            unexplained = int(_error3d.count_unexplained_cloud(mk, arrays.points3d[0], gate))
         return out, unexplained
 
 def auto_threshold(score: np.ndarray, k: float, floor: float) -> float:

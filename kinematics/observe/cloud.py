@@ -492,7 +492,7 @@ def cloud_observations(cameras, obs: Observations, unseen=None, **options) -> Ob
     of one colour of markers, ``Fitter(view_markers=...)``). The views that show the same
     markers (one colour, seen by several cameras) are triangulated together, apart from the
     others, and each point gets a column per marker after x, y, z, s: 1 where the marker
-    may take it (:func:`kinematics._kernels.anneal.may_take`).
+    may take it (:func:`kinematics._kernels.error2d.may_take`).
     """
     cams = _camera_list(cameras)
     if unseen is None or not np.any(unseen):

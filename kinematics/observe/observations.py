@@ -34,7 +34,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from kinematics._kernels import anneal as _ak
+from kinematics._kernels import codes as _codes
 from kinematics.errors import KinematicsError
 
 KINDS = ("points", "keypoints", "points3d", "cloud")
@@ -58,8 +58,8 @@ class ObservationArrays(NamedTuple):
                                  self.points3d[k: k + 1])
 
 
-_OBJECTIVE = {"points": _ak.OBJ_NEAREST, "keypoints": _ak.OBJ_LABELLED,
-              "points3d": _ak.OBJ_POINTS3D, "cloud": _ak.OBJ_CLOUD}
+_OBJECTIVE = {"points": _codes.OBJ_NEAREST, "keypoints": _codes.OBJ_LABELLED,
+              "points3d": _codes.OBJ_POINTS3D, "cloud": _codes.OBJ_CLOUD}
 
 
 @dataclass(frozen=True, eq=False)
@@ -144,7 +144,7 @@ class Observations:
         (n_frames, n_views, n_markers) of bool, e.g. a marker occluded in one view, or whose
         blob merged with another's. For unlabelled points such a marker is left out of that
         view's E: it costs nothing and explains no point
-        (:func:`kinematics._kernels.anneal.hidden_in`). For labelled keypoints its keypoint
+        (:func:`kinematics._kernels.posture.hidden_in`). For labelled keypoints its keypoint
         there counts as missing. Not for 3D points or a cloud, which have no views to hide a
         marker in. Marks add to those already made; no mark at all gives these observations
         back."""
@@ -349,7 +349,7 @@ class Observations:
 
 def sorted_by_x(pts: np.ndarray, off: np.ndarray) -> np.ndarray:
     """The points of each (frame, view) cell sorted by x (stable): the kernels search a view
-    with many detections by a sweep along x (``_kernels.anneal.nearest_sorted``). Which
+    with many detections by a sweep along x (``_kernels.error2d.nearest_sorted``). Which
     detection is which does not matter to an unlabelled fit."""
     cell = np.repeat(np.arange(len(off) - 1), np.diff(off))
     return np.ascontiguousarray(pts[np.lexsort((pts[:, 0], cell))])

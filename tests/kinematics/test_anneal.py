@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from kinematics._kernels import anneal as ak
+from kinematics._kernels import fastmath as _fastmath
 from kinematics.errors import KinematicsError
 from kinematics.fit import AnnealParams, Fitter, SplitMix64, anneal_reference
 from kinematics.fit.error_function import ErrorOptions
@@ -31,19 +32,19 @@ def angle_errors(body, results, truth):
 def test_random_stream_python_equals_kernel():
     for seed, frame, run in [(0, 0, 0), (1, 0, 0), (0, 1, 0), (0, 0, 1), (2**62, 10**6, 4)]:
         out = np.empty(50)
-        ak.uniforms(ak.stream_state(seed, frame, run), out)
+        _fastmath.uniforms(_fastmath.stream_state(seed, frame, run), out)
         rng = SplitMix64(seed, frame, run)
         np.testing.assert_array_equal(out, [rng.uniform() for _ in range(50)])
     firsts = {SplitMix64(0, f, r).uniform() for f in range(20) for r in range(5)}
     assert len(firsts) == 100  # every (frame, run) has its own stream
     draws = np.empty(100_000)
-    ak.uniforms(ak.stream_state(3, 0, 0), draws)
+    _fastmath.uniforms(_fastmath.stream_state(3, 0, 0), draws)
     assert draws.min() >= 0 and draws.max() < 1 and abs(draws.mean() - 0.5) < 0.005
 
 
 def test_sincos_is_accurate():
     x = np.random.default_rng(0).uniform(-20, 20, 20_000)
-    got = np.array([ak.sincos(v) for v in x])
+    got = np.array([_fastmath.sincos(v) for v in x])
     np.testing.assert_allclose(got[:, 0], np.sin(x), rtol=0, atol=5e-16)
     np.testing.assert_allclose(got[:, 1], np.cos(x), rtol=0, atol=5e-16)
 
@@ -419,7 +420,7 @@ def test_annealing_loop_allocates_nothing(locust):
     pr = fitter.problem
     _, its = fresh(pr.start, pr.free_idx, pr.step, pr.hist, pr.nbins, 1e-300, pr.dof_kind,
                    pr.lo, pr.hi, 16, 500, 100, 100, 200.0, 1.0, 0.75, 0.75, 0.0,
-                   ak.stream_state(0, 0, 0), np.zeros((1, 3)), pr.identity_rotations(),
+                   _fastmath.stream_state(0, 0, 0), np.zeros((1, 3)), pr.identity_rotations(),
                    *pr.folded, *pr.cams, 0, pts, np.ones(len(pts)), off, np.zeros((nm, 4)),
                    False, 1.0, np.inf, np.inf, False, 0, nj, 0, nm, np.zeros(len(pts), np.bool_),
                    *scratch)

@@ -10,6 +10,11 @@ import numpy as np
 import pytest
 
 from kinematics._kernels import anneal as ak
+from kinematics._kernels import codes as _codes
+from kinematics._kernels import error3d as _error3d
+from kinematics._kernels import fastmath as _fastmath
+from kinematics._kernels import objective as _objective
+from kinematics._kernels import posture as _posture
 from kinematics._kernels import refine as rk
 from kinematics.errors import KinematicsError
 from kinematics.fit import AnnealParams, Candidate, Fitter, FrameResult
@@ -35,7 +40,7 @@ def test_cloud_error_kernel_equals_twin(opts):
     for _ in range(20):
         mk, cloud = random_cloud(rng)
         nearest = np.empty(len(mk), np.int64)
-        got = ak.cloud_error(mk, cloud, 0, len(mk), ak.NO_CLAIMS,
+        got = _error3d.cloud_error(mk, cloud, 0, len(mk), _codes.NO_CLAIMS,
                              opts.penalty_weight if opts.bidirectional else 0.0, opts.cap,
                              opts.penalty_cap, opts.one_to_one, nearest)
         assert got == pytest.approx(cloud_error(mk, cloud, opts), rel=1e-12)
@@ -54,7 +59,7 @@ def test_a_cloud_of_colours_lets_a_marker_take_only_its_colours_points(opts):
         may = (point_colour[:, None] == colour[None]).astype(float)
         coloured = np.concatenate([cloud, may], axis=1)
         nearest = np.empty(len(mk), np.int64)
-        got = ak.cloud_error(mk, coloured, 0, len(mk), ak.NO_CLAIMS,
+        got = _error3d.cloud_error(mk, coloured, 0, len(mk), _codes.NO_CLAIMS,
                              opts.penalty_weight if opts.bidirectional else 0.0, opts.cap,
                              opts.penalty_cap, opts.one_to_one, nearest)
         assert got == pytest.approx(cloud_error(mk, coloured, opts), rel=1e-12)
@@ -63,9 +68,9 @@ def test_a_cloud_of_colours_lets_a_marker_take_only_its_colours_points(opts):
             if c != -1 and not opts.one_to_one:
                 assert may[point, i]
         claimed = np.zeros(len(cloud), np.bool_)
-        ak.claim_cloud(mk, coloured, np.ones(len(mk), np.bool_), 1e9, claimed)
+        _error3d.claim_cloud(mk, coloured, np.ones(len(mk), np.bool_), 1e9, claimed)
         assert all(may[c].any() for c in np.flatnonzero(claimed))
-        far = ak.count_unexplained_cloud(mk, coloured, 1e9)  # only colours no marker has
+        far = _error3d.count_unexplained_cloud(mk, coloured, 1e9)  # only colours no marker has
         assert far == int(((cloud[:, 3] > 0) & ~may.any(axis=1)).sum())
 
 
@@ -77,7 +82,7 @@ def test_partition_cloud_error_leaves_claimed_points_out():
         claimed = np.zeros(len(cloud), np.bool_)
         others = np.ones(len(mk), np.bool_)
         others[2:5] = False
-        ak.claim_cloud(mk, cloud, others, 40.0, claimed)  # markers outside 2:5 claim
+        _error3d.claim_cloud(mk, cloud, others, 40.0, claimed)  # markers outside 2:5 claim
         want = set()
         for i in [0, 1, 5, 6]:
             d = cloud[:, 3] * np.linalg.norm(mk[i] - cloud[:, :3], axis=1)
@@ -85,7 +90,8 @@ def test_partition_cloud_error_leaves_claimed_points_out():
             if d.min() <= 40.0:
                 want.add(int(np.argmin(d)))
         assert set(np.flatnonzero(claimed)) == want
-        got = ak.partition_error(ak.OBJ_CLOUD, np.zeros((0, len(mk), 2)), mk, np.empty((0, 2)),
+        got = _objective.partition_error(_codes.OBJ_CLOUD, np.zeros((0, len(mk), 2)), mk,
+                                         np.empty((0, 2)),
                                  np.empty(0), np.zeros(1, np.int64), cloud, opts.cap, 2, 5,
                                  claimed, opts.penalty_weight, opts.penalty_cap,
                                  opts.one_to_one, np.empty(len(mk), np.int64))
@@ -97,11 +103,11 @@ def test_refinement_pairs_markers_with_their_nearest_point_in_pixels():
     cloud = np.array([[0.1, 0.0, 0.0, 10.0], [3.0, 0.5, 0.0, 10.0], [0.0, 0.0, 0.05, 0.0]])
     pair = np.empty(2, np.int64)
     proj = np.zeros((0, 2, 2))
-    n = rk.assign_pairs(ak.OBJ_CLOUD, proj, mk, np.empty((0, 2)), np.empty(0),
+    n = rk.assign_pairs(_codes.OBJ_CLOUD, proj, mk, np.empty((0, 2)), np.empty(0),
                         np.zeros(1, np.int64), cloud, 2.0, pair)  # gate 2 px = 0.2 units
     assert n == 1 and pair.tolist() == [0, -1]  # padding row 2 is never a pair
     res = np.empty(6)
-    sse = rk.fill_residuals(ak.OBJ_CLOUD, proj, mk, np.empty((0, 2)), np.empty(0), cloud,
+    sse = rk.fill_residuals(_codes.OBJ_CLOUD, proj, mk, np.empty((0, 2)), np.empty(0), cloud,
                             pair, res)
     assert sse == pytest.approx(1.0)  # 0.1 units at 10 px per unit
 
@@ -114,18 +120,18 @@ def test_polish_pairs_each_point_with_one_marker():
     pair = np.empty(4, np.int64)
     args = (np.zeros((0, 4, 2)), mk, np.empty((0, 2)), np.empty(0), np.zeros(1, np.int64),
             cloud, 5.0, pair)
-    assert rk.assign_pairs(ak.OBJ_CLOUD, *args) == 4 and pair.tolist() == [0, 0, 2, 2]
-    assert rk.assign_pairs(ak.OBJ_CLOUD_ONE, *args) == 3
+    assert rk.assign_pairs(_codes.OBJ_CLOUD, *args) == 4 and pair.tolist() == [0, 0, 2, 2]
+    assert rk.assign_pairs(_codes.OBJ_CLOUD_ONE, *args) == 3
     assert pair.tolist() == [0, 1, 2, -1]  # marker 3's spare point is 46 px off: no pair
     res = np.empty(12)
-    sse = rk.fill_residuals(ak.OBJ_CLOUD_ONE, args[0], mk, args[2], args[3], cloud, pair,
+    sse = rk.fill_residuals(_codes.OBJ_CLOUD_ONE, args[0], mk, args[2], args[3], cloud, pair,
                             res)
     assert sse == pytest.approx(1.0 + 9.0)  # 0.1 and 0.3 units at 10 px per unit
     # two markers that both lost point 0 take the one spare point in turn: the first keeps it
     mk = np.array([[0.0, 0.0, 0.0], [0.2, 0.0, 0.0], [-0.2, 0.0, 0.0]])
     cloud = np.array([[0.0, 0.0, 0.0, 10.0], [1.0, 0.0, 0.0, 10.0]])
     pair = np.empty(3, np.int64)
-    assert rk.assign_pairs(ak.OBJ_CLOUD_ONE, np.zeros((0, 3, 2)), mk, np.empty((0, 2)),
+    assert rk.assign_pairs(_codes.OBJ_CLOUD_ONE, np.zeros((0, 3, 2)), mk, np.empty((0, 2)),
                            np.empty(0), np.zeros(1, np.int64), cloud, 50.0, pair) == 2
     assert pair.tolist() == [0, 1, -1]
 
@@ -172,7 +178,7 @@ def test_match_3d_refuses_two_views():
 def test_3d_points_fit_with_cameras_given():
     """Labelled 3D points need no cameras, but a fitter made with them fits them too (the
     views simply have no observations), to the bit as without them: the annealing, the
-    search and the refinement project a 3D objective into no view (_drawn_views)."""
+    search and the refinement project a 3D objective into no view (drawn_views)."""
     body = three_legs()
     cams = ring()
     angles, _ = planted_postures(body, cams, 3, seed=2, shuffle=True)
@@ -413,12 +419,12 @@ def test_the_unclaimed_points_score_as_the_claims_do(opts):
         if trial % 3 == 0:  # one column per marker: which markers may take the point
             cloud = np.concatenate([cloud, rng.integers(0, 2, (len(cloud), len(mk)))], 1)
         claimed = rng.random(len(cloud)) < 0.4
-        rest, none = ak.unclaimed_cloud(cloud, claimed)
+        rest, none = _error3d.unclaimed_cloud(cloud, claimed)
         assert none.size == 0 and len(rest) == int(((cloud[:, 3] > 0) & ~claimed).sum())
         for m0, m1 in ((0, len(mk)), (2, 5)):
-            want = ak.cloud_error(mk, cloud, m0, m1, claimed, penalty, opts.cap,
+            want = _error3d.cloud_error(mk, cloud, m0, m1, claimed, penalty, opts.cap,
                                   opts.penalty_cap, opts.one_to_one, np.empty(len(mk), np.int64))
-            got = ak.cloud_error(mk, rest, m0, m1, none, penalty, opts.cap, opts.penalty_cap,
+            got = _error3d.cloud_error(mk, rest, m0, m1, none, penalty, opts.cap, opts.penalty_cap,
                                  opts.one_to_one, np.empty(len(mk), np.int64))
             assert got == want
 
@@ -441,9 +447,9 @@ def test_each_distance_computed_once_scores_as_cloud_error(opts):
         for m0, m1 in ((0, len(mk)), (2, 5)):
             want_near = np.full(len(mk), -7, np.int64)
             got_near = want_near.copy()
-            want = ak.cloud_error(mk, cloud, m0, m1, ak.NO_CLAIMS, penalty, opts.cap,
+            want = _error3d.cloud_error(mk, cloud, m0, m1, _codes.NO_CLAIMS, penalty, opts.cap,
                                   opts.penalty_cap, False, want_near)
-            got = ak.cloud_error_once(mk, cloud, m0, m1, penalty, opts.cap, opts.penalty_cap,
+            got = _error3d.cloud_error_once(mk, cloud, m0, m1, penalty, opts.cap, opts.penalty_cap,
                                       got_near, np.empty(len(mk)), np.empty(len(cloud)))
             assert got == want
             assert np.array_equal(got_near, want_near)
@@ -475,18 +481,18 @@ def test_the_start_search_scores_a_draw_from_its_beam(match):
     args = (*pr.folded, *cams_k)
     for p in range(1, 4):  # each leg (trunk at the start posture)
         work = pr.start.copy()
-        ak.project_posture(work, roots[0], rots[0], *args, cs, sn, rot, pos, mk, proj)
+        _posture.project_posture(work, roots[0], rots[0], *args, cs, sn, rot, pos, mk, proj)
         j0, j1, m0, m1 = parts.bounds[p, :4]
         e = ak.beam_start(work, parts.stage_off[p], parts.stage_off[p + 1],
                           parts.stage_dof_off, parts.stage_dofs, parts.stage_mark,
                           parts.stage_joint, 16,
-                          np.uint64(ak.stream_state(0, p, 0)), hist, nbins, 1e-300, dof_kind,
+                          np.uint64(_fastmath.stream_state(0, p, 0)), hist, nbins, 1e-300, dof_kind,
                           lo, hi,
                           roots[0], rots[0], *args, arrays.objective, arrays.points,
                           arrays.conf, arrays.offsets, obs3, 10.0, j0, j1, m0, m1, claimed,
                           np.inf, False, 0, 0.0, cs, sn, rot, pos, mk, proj, nearest)
-        ak.project_posture(work, roots[0], rots[0], *args, cs, sn, rot, pos, mk, proj)
-        whole = ak.partition_error(arrays.objective, proj, mk, arrays.points, arrays.conf,
+        _posture.project_posture(work, roots[0], rots[0], *args, cs, sn, rot, pos, mk, proj)
+        whole = _objective.partition_error(arrays.objective, proj, mk, arrays.points, arrays.conf,
                                    arrays.offsets, obs3, 10.0, m0, m1, claimed, 0.0, np.inf,
                                    False, nearest)
         assert np.isfinite(e) and e == pytest.approx(whole, rel=1e-9, abs=1e-9)

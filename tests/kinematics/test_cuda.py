@@ -10,8 +10,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from kinematics._kernels import anneal as _ak
 from kinematics._kernels import cuda as _ck
+from kinematics._kernels import frames as _frames
 from kinematics._kernels import lanes as _lk
 from kinematics.errors import KinematicsError
 from kinematics.fit import AnnealParams, Fitter
@@ -42,7 +42,7 @@ def outputs(fitter: Fitter, detections, rounds: bool) -> FitOutputs:
     if rounds:
         _ck.fit_frames_rounds(*args, float(p.claim_gate_px), out, gpu=False)
     else:
-        _ak.fit_frames(np.arange(len(sel) + 1, dtype=np.int64), *args, fitter._partitions(p),
+        _frames.fit_frames(np.arange(len(sel) + 1, dtype=np.int64), *args, fitter._partitions(p),
                        out)
     return out
 
@@ -115,7 +115,7 @@ def test_the_cuda_backend_fits_with_the_rounds_alone(locust, monkeypatch):
     def refuse(*args):
         raise AssertionError("a CPU kernel fitted the block again")
 
-    monkeypatch.setattr(_ak, "fit_frames", refuse)
+    monkeypatch.setattr(_frames, "fit_frames", refuse)
     monkeypatch.setattr(_lk, "fit_frames_lanes", refuse)
     got = Fitter(locust, locust_cameras(), replace(params, backend="cuda")).fit(dets)
     assert_same(expected, got)

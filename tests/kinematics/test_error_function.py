@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from kinematics._kernels import anneal as ak
+from kinematics._kernels import codes as _codes
+from kinematics._kernels import error2d as _error2d
 from kinematics.cameras import OrthographicCamera, PinholeCamera
 from kinematics.errors import KinematicsError
 from kinematics.fit import AnnealParams, Fitter
@@ -28,11 +29,11 @@ def kernel_error(proj, detections, opts: ErrorOptions):
     pts = np.concatenate([np.reshape(d, (-1, 2)) for d in detections]).astype(float)
     per_view = np.empty(len(detections))
     nearest = np.empty(proj.shape[1], np.int64)
-    e = ak.projection_error(np.ascontiguousarray(proj), pts, off, ak.NO_HIDDEN,
+    e = _error2d.projection_error(np.ascontiguousarray(proj), pts, off, _codes.NO_HIDDEN,
                             opts.bidirectional,
                             float(opts.penalty_weight), opts.cap, opts.penalty_cap,
                             opts.one_to_one, per_view, nearest)
-    fast = ak._paper_error(np.ascontiguousarray(proj), pts, off, opts.cap)
+    fast = _error2d.paper_error(np.ascontiguousarray(proj), pts, off, opts.cap)
     return e, per_view, fast
 
 
@@ -147,7 +148,7 @@ def test_fold_keeps_locked_rotations_out_of_the_loop(locust):
     np.testing.assert_array_equal(folded.elem_axis, [[1, 0, 2], [2, -1, -1], [2, -1, -1]])
     np.testing.assert_array_equal(folded.elem_index[:, 0], [0, 5, 8])
     # J2's default orientation (180 deg about z) is folded into the tibia marker.
-    assert folded.joint_flags[2] & ak.G_IDENTITY
+    assert folded.joint_flags[2] & _codes.G_IDENTITY
 
 
 @pytest.mark.parametrize("opts", ERROR_VARIANTS, ids=ERROR_VARIANT_IDS)
@@ -210,7 +211,7 @@ def test_nearest_residuals_kernel_equals_twin(seed):
     seen = rng.uniform(size=(nv, nm)) < 0.7
     seen[2] = seed % 2 == 0
     out = np.full((nv, nm), np.nan)
-    n = ak.nearest_residuals(proj, points, view_off, seen, 8.0, out)
+    n = _error2d.nearest_residuals(proj, points, view_off, seen, 8.0, out)
     twin, n_twin = nearest_residuals(proj, points, view_off, seen, 8.0)
     np.testing.assert_array_equal(out, twin)
     assert n == n_twin

@@ -8,7 +8,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from kinematics._kernels import anneal as ak
+from kinematics._kernels import codes as _codes
+from kinematics._kernels import error2d as _error2d
+from kinematics._kernels import objective as _objective
 from kinematics._kernels import refine as rk
 from kinematics.errors import KinematicsError
 from kinematics.fit import AnnealParams, Fitter
@@ -44,13 +46,13 @@ def test_kernels_equal_the_twin_with_hidden_markers(opts):
         marks = hidden.T.astype(float)
         want, want_views = projection_error(proj, dets, opts, hidden)
         per_view, nearest = np.empty(nv), np.empty(nm, np.int64)
-        got = ak.projection_error(proj, pts, off, marks, opts.bidirectional,
+        got = _error2d.projection_error(proj, pts, off, marks, opts.bidirectional,
                                   opts.penalty_weight, opts.cap, opts.penalty_cap,
                                   opts.one_to_one, per_view, nearest)
         assert got == pytest.approx(want, rel=1e-12)
         np.testing.assert_allclose(per_view, want_views, rtol=1e-12)
         penalty = opts.penalty_weight if opts.bidirectional else 0.0
-        whole = ak.partition_error(ak.OBJ_NEAREST, proj, np.zeros((nm, 3)), pts,
+        whole = _objective.partition_error(_codes.OBJ_NEAREST, proj, np.zeros((nm, 3)), pts,
                                    np.ones(len(pts)), off, marks, opts.cap, 0, nm,
                                    np.zeros(len(pts), np.bool_), penalty, opts.penalty_cap,
                                    opts.one_to_one, nearest)
@@ -60,13 +62,13 @@ def test_kernels_equal_the_twin_with_hidden_markers(opts):
         m1 = int(rng.integers(m0 + 1, nm + 1))
         claimed = rng.random(len(pts)) < 0.3
         free = [pts[off[v]:off[v + 1]][~claimed[off[v]:off[v + 1]]] for v in range(nv)]
-        part = ak.partition_error(ak.OBJ_NEAREST, proj, np.zeros((nm, 3)), pts,
+        part = _objective.partition_error(_codes.OBJ_NEAREST, proj, np.zeros((nm, 3)), pts,
                                   np.ones(len(pts)), off, marks, opts.cap, m0, m1, claimed,
                                   penalty, opts.penalty_cap, opts.one_to_one, nearest)
         _, want_part = projection_error(proj[:, m0:m1], free, opts, hidden[:, m0:m1])
         for v in range(nv):  # every detection claimed: each seen marker costs the most
             if off[v + 1] > off[v] and not len(free[v]):
-                missing = opts.cap if np.isfinite(opts.cap) else ak.NAN_MARKER_COST
+                missing = opts.cap if np.isfinite(opts.cap) else _codes.NAN_MARKER_COST
                 want_part[v] = missing * (~hidden[v, m0:m1]).sum()
         assert part == pytest.approx(want_part.sum(), rel=1e-12)
 
@@ -76,12 +78,12 @@ def test_a_hidden_marker_claims_pairs_and_explains_nothing():
     pts, off = packed([np.array([[0.5, 0.0], [10.5, 0.0]])])
     marks = np.array([[0.0], [1.0]])  # marker 1 hidden in the only view
     claimed = np.zeros(2, np.bool_)
-    ak.claim_detections(proj, pts, off, marks, np.ones(2, np.bool_), 3.0, claimed)
+    _error2d.claim_detections(proj, pts, off, marks, np.ones(2, np.bool_), 3.0, claimed)
     assert claimed.tolist() == [True, False]
-    assert ak.count_unexplained(proj, pts, off, marks, 3.0) == 1
-    assert ak.count_unexplained(proj, pts, off, ak.NO_HIDDEN, 3.0) == 0
+    assert _error2d.count_unexplained(proj, pts, off, marks, 3.0) == 1
+    assert _error2d.count_unexplained(proj, pts, off, _codes.NO_HIDDEN, 3.0) == 0
     pair = np.empty(2, np.int64)
-    n = rk.assign_pairs(ak.OBJ_NEAREST, proj, np.zeros((2, 3)), pts, np.ones(2), off, marks,
+    n = rk.assign_pairs(_codes.OBJ_NEAREST, proj, np.zeros((2, 3)), pts, np.ones(2), off, marks,
                         3.0, pair)
     assert n == 1 and pair.tolist() == [0, -1]
 

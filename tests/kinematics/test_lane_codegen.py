@@ -8,9 +8,14 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from kinematics._kernels import anneal as _ak
+from kinematics._kernels import codes as _codes
+from kinematics._kernels import error2d as _error2d
+from kinematics._kernels import error3d as _error3d
+from kinematics._kernels import fastmath as _fastmath
 from kinematics._kernels import lane_codegen as cg
 from kinematics._kernels import lanes as _lk
+from kinematics._kernels import objective as _objective
+from kinematics._kernels import posture as _posture
 from kinematics._kernels.lanes import PAD
 from kinematics.fit import AnnealParams, Fitter
 from kinematics.model.chain_xml import load_body
@@ -35,7 +40,7 @@ def _problem(kind):
         pre_rot, post_trans, flags = f.pre_rot.copy(), f.post_trans.copy(), f.joint_flags.copy()
         pre_rot[1] = euler_yxz(0.3, -0.2, 0.1)
         post_trans[1:] = [[2.0, -1.5, 0.7], [0.3, 4.0, -2.0]]
-        flags[1:] &= ~(_ak.G_IDENTITY | _ak.H_ZERO)
+        flags[1:] &= ~(_codes.G_IDENTITY | _codes.H_ZERO)
         pr = replace(pr, folded=f._replace(pre_rot=pre_rot, post_trans=post_trans,
                                            joint_flags=flags))
     return pr
@@ -65,7 +70,7 @@ def _lanes(pr, n_lanes, c_cap, rng):
         pos[nj:, :, ln] = root_pos
         mk = np.empty((folded.marker_joint.size, 3))
         proj = np.empty((nv, folded.marker_joint.size, 2))
-        _ak.project_posture(cand[:, ln].copy(), root_pos, root_rot, *folded, *cams,
+        _posture.project_posture(cand[:, ln].copy(), root_pos, root_rot, *folded, *cams,
                             np.empty(cand.shape[0]), np.empty(cand.shape[0]),
                             np.empty((nj, 3, 3)), np.empty((nj, 3)), mk, proj)
         points, off = [], [0]
@@ -102,9 +107,9 @@ def test_generated_error_equals_the_scalar_kernel(kind, error, c_cap):
     _lk.call_fused(cg.fused_kernel(pr.folded, pr.cams, c_cap, error), *args, e)
     bidirectional, weight, cap, penalty_cap = error
     for ln, (root_pos, root_rot, points, off) in enumerate(scalar):
-        ref = _ak.posture_error(args[0][:, ln].copy(), root_pos, root_rot, *pr.folded,
-                                *pr.cams, _ak.OBJ_NEAREST, points, np.empty(0), off,
-                                _ak.NO_HIDDEN, bidirectional, weight, cap, penalty_cap, False,
+        ref = _objective.posture_error(args[0][:, ln].copy(), root_pos, root_rot, *pr.folded,
+                                *pr.cams, _codes.OBJ_NEAREST, points, np.empty(0), off,
+                                _codes.NO_HIDDEN, bidirectional, weight, cap, penalty_cap, False,
                                 np.empty(len(pr.cams.kind)))
         assert e[ln] == ref, f"lane {ln}"
 
@@ -124,7 +129,7 @@ def test_generated_labelled_error_equals_the_scalar_kernel(kind, cap):
     refs = []
     for ln, (root_pos, root_rot, _, _) in enumerate(scalar):
         mk, proj = np.empty((nm, 3)), np.empty((nv, nm, 2))
-        _ak.project_posture(cand[:, ln].copy(), root_pos, root_rot, *pr.folded, *pr.cams,
+        _posture.project_posture(cand[:, ln].copy(), root_pos, root_rot, *pr.folded, *pr.cams,
                             np.empty(cand.shape[0]), np.empty(cand.shape[0]),
                             np.empty((pr.folded.parent.size, 3, 3)),
                             np.empty((pr.folded.parent.size, 3)), mk, proj)
@@ -144,7 +149,7 @@ def test_generated_labelled_error_equals_the_scalar_kernel(kind, cap):
         points = np.concatenate(rows).reshape(-1, 2)
         off = np.cumsum(np.r_[0, counts]).astype(np.int64)
         conf = np.concatenate([np.r_[w[v], 1.0, 1.0][:counts[v]] for v in range(nv)])
-        refs.append(_ak.labelled_error(proj, points, conf, off, cap, np.empty(nv)))
+        refs.append(_error2d.labelled_error(proj, points, conf, off, cap, np.empty(nv)))
     e = np.empty(n_lanes)
     fused = cg.fused_kernel(pr.folded, pr.cams, 0, (False, 0.0, cap, np.inf), labelled=True)
     _lk.call_fused(fused, cand, rot, pos, dx, dy, dx.astype(np.float32),
@@ -172,7 +177,7 @@ def test_generated_3d_point_error_equals_the_scalar_kernel():
         root_rot = np.stack([euler_yxz(*rng.uniform(-0.5, 0.5, 3)) for _ in range(nc)])
         rot[nj:, :, ln], pos[nj:, :, ln] = root_rot.reshape(nc, 9), root_pos
         mk = np.empty((nm, 3))
-        _ak.project_posture(cand[:, ln].copy(), root_pos, root_rot, *pr.folded, *pr.cams,
+        _posture.project_posture(cand[:, ln].copy(), root_pos, root_rot, *pr.folded, *pr.cams,
                             np.empty(cand.shape[0]), np.empty(cand.shape[0]),
                             np.empty((nj, 3, 3)), np.empty((nj, 3)), mk,
                             np.empty((0, nm, 2)))
@@ -180,7 +185,7 @@ def test_generated_3d_point_error_equals_the_scalar_kernel():
         pts[rng.random(nm) < 0.15, rng.integers(0, 3)] = np.nan
         pts[rng.random(nm) < 0.1, 3] = 0.0
         o3[:, :, ln] = pts
-        refs.append(_ak.points3d_error(mk, pts, cap))
+        refs.append(_error3d.points3d_error(mk, pts, cap))
     dx = np.zeros((0, 1, n_lanes))
     e = np.empty(n_lanes)
     fused = cg.fused_kernel(pr.folded, pr.cams, 0, (False, 0.0, cap, np.inf), points3d=True)
@@ -272,9 +277,9 @@ def test_log_of_a_draw_is_within_one_ulp_of_libm():
     rng = np.random.default_rng(0)
     x = np.concatenate([rng.integers(1, 2**53, 20000) * 2.0**-53,
                         [2.0**-53, 0.5, 1 - 2.0**-53, np.sqrt(0.5), np.nextafter(np.sqrt(0.5), 1)]])
-    got = np.array([_ak.log_unit(v) for v in x])
+    got = np.array([_fastmath.log_unit(v) for v in x])
     assert np.all(np.abs(got - np.log(x)) <= np.spacing(np.abs(np.log(x))))
-    assert _ak.log_unit(0.0) == -np.inf
+    assert _fastmath.log_unit(0.0) == -np.inf
 
 
 def test_allowed_runs_of_a_histogram():

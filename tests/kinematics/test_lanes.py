@@ -10,7 +10,8 @@ import numba
 import numpy as np
 import pytest
 
-from kinematics._kernels import anneal as _ak
+from kinematics._kernels import codes as _codes
+from kinematics._kernels import fastmath as _fastmath
 from kinematics._kernels import lanes as _lk
 from kinematics.errors import KinematicsError
 from kinematics.fit import AnnealParams, Fitter
@@ -36,13 +37,14 @@ def fit_both(body, cams, detections, params):
 
 def _sincos_twin(x: float) -> tuple[float, float]:
     """The kernels' sine/cosine written with branches, in Python floats (IEEE doubles)."""
-    k = float(np.rint(x * _ak._TWO_OVER_PI))
-    r = (x - k * _ak._PIO2_HI) - k * _ak._PIO2_LO
+    fm = _fastmath
+    k = float(np.rint(x * fm._TWO_OVER_PI))
+    r = (x - k * fm._PIO2_HI) - k * fm._PIO2_LO
     z = r * r
-    s = r + r * z * (_ak._S1 + z * (_ak._S2 + z * (_ak._S3 + z * (_ak._S4 + z * (
-        _ak._S5 + z * _ak._S6)))))
-    c = 1.0 - 0.5 * z + z * z * (_ak._C1 + z * (_ak._C2 + z * (_ak._C3 + z * (_ak._C4 + z * (
-        _ak._C5 + z * _ak._C6)))))
+    s = r + r * z * (fm._S1 + z * (fm._S2 + z * (fm._S3 + z * (fm._S4 + z * (
+        fm._S5 + z * fm._S6)))))
+    c = 1.0 - 0.5 * z + z * z * (fm._C1 + z * (fm._C2 + z * (fm._C3 + z * (fm._C4 + z * (
+        fm._C5 + z * fm._C6)))))
     return [(s, c), (c, -s), (-s, -c), (-c, s)][int(k) & 3]
 
 
@@ -58,7 +60,7 @@ def test_branch_free_sincos_is_the_branching_one_to_the_bit():
 
 def test_float32_sincos_is_within_two_float32_ulp():
     x = np.random.default_rng(1).uniform(-1000.0, 1000.0, 20000)
-    got = np.array([_ak.sincos32(v) for v in x], dtype=float)
+    got = np.array([_fastmath.sincos32(v) for v in x], dtype=float)
     xf = x.astype(np.float32).astype(float)  # the kernel's input, rounded to float32
     for k, true in enumerate((np.sin(xf), np.cos(xf))):
         ulp = np.spacing(np.abs(true).astype(np.float32)).astype(float)
@@ -274,16 +276,16 @@ def test_auto_uses_lanes_only_where_valid(locust):
     def backend(params, objective, n):
         return f._backend(params, objective, parts, n)
 
-    assert backend(f.params, _ak.OBJ_NEAREST, many // 2) == "lanes"
-    assert backend(f.params, _ak.OBJ_NEAREST, many // 2 - 1) == "scalar"
-    assert backend(f.params, _ak.OBJ_NEAREST, 1) == "scalar"  # a single frame (GUI)
-    assert backend(f.params, _ak.OBJ_LABELLED, many) == "lanes"  # labelled 2D keypoints
-    assert backend(f.params, _ak.OBJ_POINTS3D, many) == "lanes"  # 3D points
-    assert backend(f.params, _ak.OBJ_CLOUD, many) == "scalar"
-    assert backend(replace(f.params, backend="scalar"), _ak.OBJ_NEAREST, many) == "scalar"
+    assert backend(f.params, _codes.OBJ_NEAREST, many // 2) == "lanes"
+    assert backend(f.params, _codes.OBJ_NEAREST, many // 2 - 1) == "scalar"
+    assert backend(f.params, _codes.OBJ_NEAREST, 1) == "scalar"  # a single frame (GUI)
+    assert backend(f.params, _codes.OBJ_LABELLED, many) == "lanes"  # labelled 2D keypoints
+    assert backend(f.params, _codes.OBJ_POINTS3D, many) == "lanes"  # 3D points
+    assert backend(f.params, _codes.OBJ_CLOUD, many) == "scalar"
+    assert backend(replace(f.params, backend="scalar"), _codes.OBJ_NEAREST, many) == "scalar"
     for name in ("lanes", "cuda"):
         with pytest.raises(KinematicsError, match=f"the {name} backend") as err:
-            backend(replace(f.params, backend=name, start="previous"), _ak.OBJ_NEAREST, many)
+            backend(replace(f.params, backend=name, start="previous"), _codes.OBJ_NEAREST, many)
         assert err.value.field == "backend"
 
 

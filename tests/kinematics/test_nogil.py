@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from kinematics._kernels import anneal as ak
+from kinematics._kernels import fastmath as _fastmath
 from kinematics.fit import AnnealParams, Fitter
 from tests.fixtures.planted import planted_detections
 from videotrack.synth.motion import smooth_random_motion
@@ -52,7 +53,7 @@ def test_main_thread_runs_while_one_annealing_run_goes_on(locust):
     def run(n_end):
         return ak.anneal_chain(pr.start, pr.free_idx, pr.step, pr.hist, pr.nbins, 1e-300,
                                pr.dof_kind, pr.lo, pr.hi, 16, n_end, n_end, n_end, 200.0,
-                               1.0, 0.75, 0.75, 0.0, ak.stream_state(0, 0, 0),
+                               1.0, 0.75, 0.75, 0.0, _fastmath.stream_state(0, 0, 0),
                                np.zeros((1, 3)), pr.identity_rotations(), *pr.folded,
                                *pr.cams, 0, pts, np.ones(len(pts)), off, np.zeros((nm, 4)),
                                False, 1.0, np.inf, np.inf, False, 0, nj, 0, nm,

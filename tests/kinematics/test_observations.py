@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from kinematics._kernels import anneal as ak
+from kinematics._kernels import error2d as _error2d
+from kinematics._kernels import error3d as _error3d
 from kinematics.errors import KinematicsError
 from kinematics.fit import AnnealParams, Fitter
 from kinematics.fit.error_function import labelled_error, points3d_error
@@ -34,7 +35,7 @@ def test_labelled_error_kernel_equals_twin(opts):
     conf = np.ascontiguousarray(kp[..., 2].ravel())
     off = np.arange(nv + 1, dtype=np.int64) * nm
     per_view = np.empty(nv)
-    got = ak.labelled_error(proj, pts, conf, off, opts.cap, per_view)
+    got = _error2d.labelled_error(proj, pts, conf, off, opts.cap, per_view)
     assert got == pytest.approx(want, rel=1e-12)
     np.testing.assert_allclose(per_view, want_view, rtol=1e-12)
 
@@ -46,7 +47,7 @@ def test_points3d_error_kernel_equals_twin(opts):
     pts = np.concatenate([mk + rng.normal(0, 1, mk.shape), rng.uniform(0.2, 1, (6, 1))], 1)
     pts[2, :3] = np.nan
     pts[4, 3] = 0.0
-    assert ak.points3d_error(mk, pts, opts.cap) == pytest.approx(
+    assert _error3d.points3d_error(mk, pts, opts.cap) == pytest.approx(
         points3d_error(mk, pts, opts), rel=1e-12)
 
 

@@ -9,7 +9,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from kinematics._kernels import anneal as ak
+from kinematics._kernels import codes as _codes
+from kinematics._kernels import error3d as _error3d
+from kinematics._kernels import objective as _objective
 from kinematics.errors import KinematicsError
 from kinematics.fit import AnnealParams, Fitter
 from kinematics.fit.error_function import cloud_error, one_to_one, projection_error
@@ -27,7 +29,8 @@ def kernel_view_error(proj, pts, opts, m0=0, m1=None, claimed=None):
     nm = proj.shape[1]
     m1 = nm if m1 is None else m1
     claimed = np.zeros(len(pts), np.bool_) if claimed is None else claimed
-    return ak.partition_error(ak.OBJ_NEAREST, np.ascontiguousarray(proj), np.zeros((nm, 3)),
+    return _objective.partition_error(_codes.OBJ_NEAREST, np.ascontiguousarray(proj),
+                                      np.zeros((nm, 3)),
                               np.asarray(pts, float), np.ones(len(pts)),
                               np.array([0, len(pts)], np.int64), np.zeros((nm, 4)), opts.cap,
                               m0, m1, claimed, opts.penalty_weight if opts.bidirectional
@@ -100,7 +103,7 @@ def test_cloud_kernel_equals_twin_with_claims():
     for _ in range(50):
         mk, cloud = random_cloud(rng, n_markers=7, n_points=6)
         claimed = rng.random(len(cloud)) < 0.25
-        got = ak.cloud_error(mk, cloud, 1, 6, claimed, opts.penalty_weight, opts.cap,
+        got = _error3d.cloud_error(mk, cloud, 1, 6, claimed, opts.penalty_weight, opts.cap,
                              opts.penalty_cap, True, np.empty(len(mk), np.int64))
         assert got == pytest.approx(cloud_error(mk[1:6], cloud, opts, claimed), rel=1e-12)
 

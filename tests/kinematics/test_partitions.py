@@ -8,7 +8,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from kinematics._kernels import anneal as ak
+from kinematics._kernels import codes as _codes
+from kinematics._kernels import error2d as _error2d
+from kinematics._kernels import objective as _objective
 from kinematics.errors import KinematicsError
 from kinematics.fit import AnnealParams, Fitter
 from kinematics.fit.problem import FitProblem, partitions_of
@@ -60,7 +62,8 @@ def test_partition_cost_equals_the_twin_on_its_markers():
     off = np.r_[0, np.cumsum(counts)].astype(np.int64)
     for cap in (np.inf, 6.0):
         for m0, m1 in ((0, 7), (2, 5), (6, 7)):
-            got = ak.partition_error(0, proj, np.zeros((nm, 3)), pts, np.ones(len(pts)), off,
+            got = _objective.partition_error(0, proj, np.zeros((nm, 3)), pts, np.ones(len(pts)),
+                                             off,
                                      np.zeros((nm, 4)), cap, m0, m1,
                                      np.zeros(len(pts), np.bool_), 0.0, 3.0, False,
                                      np.empty(nm, np.int64))
@@ -79,15 +82,17 @@ def test_claimed_detections_are_not_shared():
     off = np.array([0, 2], np.int64)
     claimed = np.zeros(2, np.bool_)
     A = np.array([True, False])  # the claimers: A's marker
-    ak.claim_detections(proj, pts, off, ak.NO_HIDDEN, A, 3.0, claimed)  # markers outside B claim
+    # markers outside B claim
+    _error2d.claim_detections(proj, pts, off, _codes.NO_HIDDEN, A, 3.0, claimed)
     assert claimed.tolist() == [True, False]
-    e = ak.partition_error(0, proj, np.zeros((2, 3)), pts, np.ones(2), off, np.zeros((2, 4)),
+    e = _objective.partition_error(0, proj, np.zeros((2, 3)), pts, np.ones(2), off,
+                                   np.zeros((2, 4)),
                            np.inf, 1, 2, claimed, 0.0, 3.0, False, np.empty(2, np.int64))
     assert e == pytest.approx(5.0)
-    ak.claim_detections(proj, pts, off, ak.NO_HIDDEN, A, 0.5, claimed)
+    _error2d.claim_detections(proj, pts, off, _codes.NO_HIDDEN, A, 0.5, claimed)
     assert claimed.tolist() == [True, False]
     far = np.array([[[40.0, 40.0], [11.0, 10.0]]])  # A's marker is far from every blob
-    ak.claim_detections(far, pts, off, ak.NO_HIDDEN, A, 3.0, claimed)
+    _error2d.claim_detections(far, pts, off, _codes.NO_HIDDEN, A, 3.0, claimed)
     assert claimed.tolist() == [False, False]
 
 
@@ -127,12 +132,12 @@ def test_partition_pays_for_blobs_it_leaves_unexplained():
     off = np.array([0, 4], np.int64)
     claimed = np.zeros(4, np.bool_)
     claimers = np.array([False, False, True])  # marker 2 claims (50, 0)
-    ak.claim_detections(proj, pts, off, ak.NO_HIDDEN, claimers, 3.0, claimed)
+    _error2d.claim_detections(proj, pts, off, _codes.NO_HIDDEN, claimers, 3.0, claimed)
     args = (0, proj, np.zeros((3, 3)), pts, np.ones(4), off, np.zeros((3, 4)), np.inf, 0, 2,
             claimed)
-    plain = ak.partition_error(*args, 0.0, 3.0, False, np.empty(3, np.int64))
+    plain = _objective.partition_error(*args, 0.0, 3.0, False, np.empty(3, np.int64))
     assert plain == pytest.approx(0.0 + 2.0)
-    bounded = ak.partition_error(*args, 2.0, 3.0, False, np.empty(3, np.int64))
+    bounded = _objective.partition_error(*args, 2.0, 3.0, False, np.empty(3, np.int64))
     assert bounded == pytest.approx(2.0 + 2.0 * min(4.0, 3.0))  # (14, 0) is left over
 
 

@@ -1,5 +1,5 @@
 """The spatial lookup of detections: views with many detections are kept sorted by x and
-searched by a sweep along x (``_kernels.anneal.nearest_sorted``); it must give exactly
+searched by a sweep along x (``_kernels.error2d.nearest_sorted``); it must give exactly
 the nearest detection of a scan, and a fit must not depend on the order of detections."""
 
 from __future__ import annotations
@@ -7,7 +7,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from kinematics._kernels import anneal as ak
+from kinematics._kernels import codes as _codes
+from kinematics._kernels import error2d as _error2d
+from kinematics._kernels import objective as _objective
 from kinematics.fit import AnnealParams, Fitter
 from kinematics.fit.error_function import projection_error
 from kinematics.fit.inputs import as_ragged
@@ -39,7 +41,7 @@ def random_views(rng, nv, nm, counts):
 def test_sweep_finds_the_scans_nearest():
     rng = np.random.default_rng(4)
     for _ in range(300):
-        n = int(rng.integers(ak.SWEEP_MIN + 1, 300))
+        n = int(rng.integers(_error2d.SWEEP_MIN + 1, 300))
         pts = rng.uniform(0, 100, (n, 2))
         pts[: n // 3, 0] = np.round(pts[: n // 3, 0])
         pts = pts[np.argsort(pts[:, 0], kind="stable")]
@@ -47,11 +49,11 @@ def test_sweep_finds_the_scans_nearest():
         px, py = rng.uniform(-20, 120, 2)
         d2 = ((pts - [px, py]) ** 2).sum(axis=1)
         d2[claimed] = np.inf
-        best, arg = ak.nearest_sorted(px, py, pts, 0, n, claimed)
+        best, arg = _error2d.nearest_sorted(px, py, pts, 0, n, claimed)
         assert arg == int(np.argmin(d2)) and best == pytest.approx(d2.min(), rel=1e-12)
-        _, arg_all = ak.nearest_sorted(px, py, pts, 0, n, ak.NO_CLAIMS)
+        _, arg_all = _error2d.nearest_sorted(px, py, pts, 0, n, _codes.NO_CLAIMS)
         assert arg_all == int(np.argmin(((pts - [px, py]) ** 2).sum(axis=1)))
-    assert ak.nearest_sorted(np.nan, 0.0, pts, 0, len(pts), ak.NO_CLAIMS) == (np.inf, -1)
+    assert _error2d.nearest_sorted(np.nan, 0.0, pts, 0, len(pts), _codes.NO_CLAIMS) == (np.inf, -1)
 
 
 @pytest.mark.parametrize("hide", [False, True], ids=["all-seen", "hidden-marks"])
@@ -60,27 +62,28 @@ def test_kernels_equal_the_twin_on_many_detections(opts, hide):
     rng = np.random.default_rng(9)
     for _ in range(40):
         nv, nm = 3, int(rng.integers(2, 12))
-        counts = [int(rng.integers(ak.SWEEP_MIN_FAST + 1, ak.SWEEP_MIN_FAST + 80)),
-                  int(rng.integers(0, 5)), int(rng.integers(ak.SWEEP_MIN + 1, ak.SWEEP_MIN + 40))]
+        counts = [int(rng.integers(_error2d.SWEEP_MIN_FAST + 1, _error2d.SWEEP_MIN_FAST + 80)),
+                  int(rng.integers(0, 5)),
+                  int(rng.integers(_error2d.SWEEP_MIN + 1, _error2d.SWEEP_MIN + 40))]
         proj, dets, pts, off = random_views(rng, nv, nm, counts)
         hidden = rng.random((nv, nm)) < (0.3 if hide else 0.0)
-        marks = hidden.T.astype(float) if hide else ak.NO_HIDDEN  # the kernels' (nm, nv)
+        marks = hidden.T.astype(float) if hide else _codes.NO_HIDDEN  # the kernels' (nm, nv)
         want, want_views = projection_error(proj, dets, opts, hidden)
         per_view = np.empty(nv)
         nearest = np.empty(nm, np.int64)
-        got = ak.projection_error(proj, pts, off, marks, opts.bidirectional,
+        got = _error2d.projection_error(proj, pts, off, marks, opts.bidirectional,
                                   opts.penalty_weight, opts.cap, opts.penalty_cap,
                                   opts.one_to_one, per_view, nearest)
         assert got == pytest.approx(want, rel=1e-12)
         np.testing.assert_allclose(per_view, want_views, rtol=1e-12)
-        whole = ak.partition_error(ak.OBJ_NEAREST, proj, np.zeros((nm, 3)), pts,
+        whole = _objective.partition_error(_codes.OBJ_NEAREST, proj, np.zeros((nm, 3)), pts,
                                    np.ones(len(pts)), off, marks, opts.cap, 0, nm,
                                    np.zeros(len(pts), np.bool_), opts.penalty_weight
                                    if opts.bidirectional else 0.0, opts.penalty_cap,
                                    opts.one_to_one, nearest)
         assert whole == pytest.approx(want, rel=1e-12)
         if not (opts.bidirectional or opts.one_to_one or hide):
-            assert ak._paper_error(proj, pts, off, opts.cap) == pytest.approx(want, rel=1e-12)
+            assert _error2d.paper_error(proj, pts, off, opts.cap) == pytest.approx(want, rel=1e-12)
 
 
 def test_ragged_detections_are_sorted_by_x_in_each_view():
