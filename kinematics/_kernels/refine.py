@@ -263,8 +263,17 @@ def _row_block(objective, nv, nm, a, b, k):
     return base + 2 * (k * nm + a), base + 2 * (k * nm + b)
 
 
+@njit(cache=True, nogil=True, inline="always")
+def row_view(objective, nv, nm, row):
+    """The view of residual ``row`` (:func:`fill_residuals`' layout); ``nv`` for a 3D row."""
+    if objective in (OBJ_POINTS3D, OBJ_CLOUD, OBJ_CLOUD_ONE):
+        return nv
+    base = 3 * nm if objective == OBJ_CLOUD_VIEWS else 0
+    return nv if row < base else (row - base) // (2 * nm)
+
+
 @njit(cache=True, nogil=True)
-def _pair_rows(objective, pair, nv, nm, rows):
+def pair_rows(objective, pair, nv, nm, rows):
     """The residual rows of :func:`fill_residuals` that the pairs fill, in order, into
     ``rows``; returns their number (the other rows are zero and are skipped)."""
     n = 0
@@ -287,7 +296,7 @@ def _pair_rows(objective, pair, nv, nm, rows):
 
 
 @njit(cache=True, nogil=True)
-def _packed_index(rows, n_rows, pk):
+def packed_index(rows, n_rows, pk):
     """``pk[row]``: how many of the used ``rows[:n_rows]`` (ascending) come before original
     row ``row``, for row 0..len(pk) - 1."""
     k = 0
@@ -295,6 +304,65 @@ def _packed_index(rows, n_rows, pk):
         while k < n_rows and rows[k] < row:
             k += 1
         pk[row] = k
+
+
+@njit(cache=True, nogil=True)
+def jacobian(angles, free_idx, span, root_pos, root_rot, parent, chain, pre_rot, pre_trans,
+             post_trans, elem_axis, elem_index, joint_flags, marker_joint, marker_local,
+             slide_index, kind, P, K, dist, R, t, objective, points, conf, obs3, pair, rows,
+             pk, res, res1, cs, sn, rot, pos, mk, proj, rot0, pos0, mk0, proj0, pinhole, jac):
+    """The Jacobian of the used residual ``rows`` (packed: ``pk``) by forward differences,
+    one column per free entry from its subtree ``span`` only, into ``jac``. ``res`` holds
+    the residuals at ``angles``; ``rot``, ``pos``, ``mk``, ``proj``, ``cs`` and ``sn`` its
+    posture, which they hold again on return (each column's subtree is put back)."""
+    nv = proj.shape[0]
+    nm = mk.shape[0]
+    nb = nv + 1  # row blocks of a marker range at most (:func:`_row_block`)
+    rot0[:], pos0[:], mk0[:], proj0[:] = rot, pos, mk, proj
+    for q in range(free_idx.shape[0]):
+        i = free_idx[q]
+        j0, j1, m0, m1 = span[q, 0], span[q, 1], span[q, 2], span[q, 3]
+        x, s0, c0 = angles[i], sn[i], cs[i]
+        angles[i] = x + FD_STEP
+        sn[i], cs[i] = sincos(angles[i])
+        project_cs(angles, cs, sn, root_pos, root_rot, parent, chain, pre_rot, pre_trans,
+                   post_trans, elem_axis, elem_index, joint_flags, marker_joint, marker_local,
+                   slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj, pinhole,
+                   (j0, j1, m0, m1), mk[:0])
+        angles[i], sn[i], cs[i] = x, s0, c0
+        fill_rows(objective, proj, mk, points, conf, obs3, pair, res1, m0, m1)
+        for b in range(nb):  # the Jacobian's rows of the pairs, packed
+            r0, r1 = _row_block(objective, nv, nm, m0, m1, b)
+            for kk in range(pk[r0], pk[r1]):
+                jac[kk, q] = (res1[rows[kk]] - res[rows[kk]]) / FD_STEP
+        rot[j0:j1], pos[j0:j1] = rot0[j0:j1], pos0[j0:j1]
+        mk[m0:m1], proj[:, m0:m1] = mk0[m0:m1], proj0[:, m0:m1]
+
+
+@njit(cache=True, nogil=True)
+def normal_equations(objective, nv, nm, span, pk, jac, packed, jtj, jtr):
+    """``jtj`` = J^T J and ``jtr`` = -J^T r of the packed Jacobian ``jac`` and residuals
+    ``packed``, each product once (symmetric), over the rows two columns share (their
+    ``span``'s markers)."""
+    nb = nv + 1
+    nf = jtj.shape[0]
+    for r in range(nf):
+        s = 0.0
+        for b in range(nb):
+            r0, r1 = _row_block(objective, nv, nm, span[r, 2], span[r, 3], b)
+            for k in range(pk[r0], pk[r1]):
+                s -= jac[k, r] * packed[k]
+        jtr[r] = s
+        for c in range(r, nf):
+            s = 0.0
+            ma, mb = max(span[r, 2], span[c, 2]), min(span[r, 3], span[c, 3])
+            if ma < mb:
+                for b in range(nb):
+                    r0, r1 = _row_block(objective, nv, nm, ma, mb, b)
+                    for k in range(pk[r0], pk[r1]):
+                        s += jac[k, r] * jac[k, c]
+            jtj[r, c] = s
+            jtj[c, r] = s
 
 
 @njit(cache=True, nogil=True)
@@ -349,7 +417,6 @@ def refine_posture(angles, free_idx, lo, hi, dof_kind, n_steps, gate, root_pos, 
     pinhole = has_pinhole(kind)
     rot0, pos0, mk0, proj0 = np.empty_like(rot), np.empty_like(pos), np.empty_like(mk), \
         np.empty_like(proj)
-    nb = nv + 1  # row blocks of a marker range at most (:func:`_row_block`)
     pk = np.empty(nr + 1, np.int64)  # pk[row]: the used rows before original row ``row``
     project_posture(angles, root_pos, root_rot, parent, chain, pre_rot, pre_trans, post_trans,
                     elem_axis, elem_index, joint_flags, marker_joint, marker_local, slide_index,
@@ -363,53 +430,19 @@ def refine_posture(angles, free_idx, lo, hi, dof_kind, n_steps, gate, root_pos, 
     for k in range(nr):
         rows[k] = k
     if both:
-        n_rows = _pair_rows(objective, pair, nv, nm, rows)
+        n_rows = pair_rows(objective, pair, nv, nm, rows)
     lam = 1e-3
     step = 0
     while step < n_steps and n_pairs > 0 and cost > 0.0:
-        _packed_index(rows, n_rows, pk)
-        # rot, pos, mk, proj, cs and sn hold the posture ``angles``: kept, and each column's
-        # subtree put back after it
-        rot0[:], pos0[:], mk0[:], proj0[:] = rot, pos, mk, proj
-        for q in range(nf):
-            i = free_idx[q]
-            j0, j1, m0, m1 = span[q, 0], span[q, 1], span[q, 2], span[q, 3]
-            x, s0, c0 = angles[i], sn[i], cs[i]
-            angles[i] = x + FD_STEP
-            sn[i], cs[i] = sincos(angles[i])
-            project_cs(angles, cs, sn, root_pos, root_rot, parent, chain, pre_rot, pre_trans,
-                        post_trans, elem_axis, elem_index, joint_flags, marker_joint,
-                        marker_local, slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj,
-                        pinhole, (j0, j1, m0, m1), mk[:0])
-            angles[i], sn[i], cs[i] = x, s0, c0
-            fill_rows(objective, proj, mk, points, conf, obs3, pair, res1, m0, m1)
-            for b in range(nb):  # the Jacobian's rows of the pairs, packed
-                r0, r1 = _row_block(objective, nv, nm, m0, m1, b)
-                for kk in range(pk[r0], pk[r1]):
-                    jac[kk, q] = (res1[rows[kk]] - res[rows[kk]]) / FD_STEP
-            rot[j0:j1], pos[j0:j1] = rot0[j0:j1], pos0[j0:j1]
-            mk[m0:m1], proj[:, m0:m1] = mk0[m0:m1], proj0[:, m0:m1]
+        packed_index(rows, n_rows, pk)
+        jacobian(angles, free_idx, span, root_pos, root_rot, parent, chain, pre_rot,
+                 pre_trans, post_trans, elem_axis, elem_index, joint_flags, marker_joint,
+                 marker_local, slide_index, kind, P, K, dist, R, t, objective, points, conf,
+                 obs3, pair, rows, pk, res, res1, cs, sn, rot, pos, mk, proj, rot0, pos0, mk0,
+                 proj0, pinhole, jac)
         for kk in range(n_rows):
             packed[kk] = res[rows[kk]]
-        # J^T J and -J^T r once per Jacobian (symmetric: each product computed once), over
-        # the rows the columns share
-        for r in range(nf):
-            s = 0.0
-            for b in range(nb):
-                r0, r1 = _row_block(objective, nv, nm, span[r, 2], span[r, 3], b)
-                for k in range(pk[r0], pk[r1]):
-                    s -= jac[k, r] * packed[k]
-            jtr[r] = s
-            for c in range(r, nf):
-                s = 0.0
-                ma, mb = max(span[r, 2], span[c, 2]), min(span[r, 3], span[c, 3])
-                if ma < mb:
-                    for b in range(nb):
-                        r0, r1 = _row_block(objective, nv, nm, ma, mb, b)
-                        for k in range(pk[r0], pk[r1]):
-                            s += jac[k, r] * jac[k, c]
-                jtj[r, c] = s
-                jtj[c, r] = s
+        normal_equations(objective, nv, nm, span, pk, jac, packed, jtj, jtr)
         # Damped Gauss-Newton steps with growing damping until one lowers the cost.
         improved = False
         tries = 0
@@ -441,7 +474,7 @@ def refine_posture(angles, free_idx, lo, hi, dof_kind, n_steps, gate, root_pos, 
                                    pair)
             cost = fill_residuals(objective, proj, mk, points, conf, obs3, pair, res)
             if both:
-                n_rows = _pair_rows(objective, pair, nv, nm, rows)
+                n_rows = pair_rows(objective, pair, nv, nm, rows)
             step = n_steps if converged else step + 1
         else:
             step = n_steps  # converged: no damped step lowers the cost

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Iterator
 from dataclasses import replace
+from itertools import chain
 
 import numpy as np
 
@@ -90,10 +91,9 @@ class ConfidenceMixin:
             yield from (r for _, r in stream)
             return
         extras = self._extras(obs, idx)
-        for position, r in held:
-            yield self._judge(obs, position, r, extras)[0]
-        for position, r in stream:
-            yield self._judge(obs, int(position), r, extras)[0]
+        judged = ((int(position), self._judge(obs, int(position), r, extras)[0])
+                  for position, r in chain(held, stream))
+        yield from self._with_sd(obs, judged)
 
     def _measure_video(self, obs: Observations, held: list[tuple[int, FrameResult]]) -> None:
         """σ per view from fitted ``(position, result)`` pairs (unless ``noise_px`` gives it)

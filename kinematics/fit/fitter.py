@@ -75,13 +75,14 @@ from kinematics.fit.settings import AnnealParams
 from kinematics.fit.status import StatusMixin
 from kinematics.fit.tracking import TrackingMixin
 from kinematics.fit.tuning import Tuning
+from kinematics.fit.uncertainty import UncertaintyMixin
 from kinematics.model import Body
 from kinematics.observe.cloud import cloud_observations
 from kinematics.observe.observations import Observations
 
 
 class Fitter(MatchMixin, RootsMixin, DispatchMixin, StatusMixin, PolishMixin, CandidatesMixin,
-             PathMixin, TrackingMixin, ConfidenceMixin):
+             PathMixin, TrackingMixin, ConfidenceMixin, UncertaintyMixin):
     """Fits a body's posture to marker detections, frame by frame.
 
     Parameters

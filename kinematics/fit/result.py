@@ -99,6 +99,10 @@ class FrameResult:
         The re-analysis threshold on E that decided the status: with ``threshold_mode``
         'auto' the one measured on the video, which a front end should show as its bar
         (NaN for results not made by a fit).
+    sd_deg : ndarray, shape (n_axes,), or None
+        Per axis, the standard deviation of the angle in degrees given the noise model
+        (:mod:`kinematics.fit.uncertainty`): 0 for locked or pinned axes, widened by the
+        candidates' spread where ``ambiguous``; None where no noise model was measured.
     """
 
     frame: int
@@ -119,6 +123,7 @@ class FrameResult:
     worst_px: float = float("nan")
     candidates: tuple = ()
     threshold: float = float("nan")
+    sd_deg: np.ndarray | None = None
 
     @property
     def spread_deg(self) -> np.ndarray:

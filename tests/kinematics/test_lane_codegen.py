@@ -13,6 +13,7 @@ from kinematics._kernels import error2d as _error2d
 from kinematics._kernels import error3d as _error3d
 from kinematics._kernels import fastmath as _fastmath
 from kinematics._kernels import lane_codegen as cg
+from kinematics._kernels import lane_iterations as _li
 from kinematics._kernels import lanes as _lk
 from kinematics._kernels import objective as _objective
 from kinematics._kernels import posture as _posture
@@ -286,6 +287,6 @@ def test_allowed_runs_of_a_histogram():
     hist = np.zeros((3, 10))
     hist[0, [0, 1, 5, 9]] = 1.0  # runs [0, 2), [5, 6), [9, 10): the last touches the end
     hist[1, ::2] = 1.0  # five runs: too many, the kernel looks bins up instead
-    runs, n_runs = _lk.allowed_runs(hist, np.array([10, 10, 10]), 0.5)
+    runs, n_runs = _li.allowed_runs(hist, np.array([10, 10, 10]), 0.5)
     assert n_runs.tolist() == [3, -1, 0]
     assert runs[0, :3].tolist() == [[0, 2], [5, 6], [9, 10]]

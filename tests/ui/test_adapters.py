@@ -84,7 +84,21 @@ def test_table_timeline_and_highlight_rule():
     np.testing.assert_array_equal(line.error, t.error)
     assert np.isnan(line.angles_deg[1]).all() and (line.angles_deg[2] == 2.0).all()
     row = adapters.table_row(results[2], 2)
-    assert row[0] == 15.0 and row[2:] == (1, "failed")
+    assert row[0] == 15.0 and row[2] == 1 and np.isnan(row[3]) and row[4] == "failed"
+    assert np.isnan(t.sd).all() and np.isnan(line.sd_deg).all()  # no noise model, no sd
+
+
+def test_the_table_and_timeline_carry_the_sd():
+    """The table's sd is a frame's largest axis sd (sorting by it lists the least sure
+    frames first); the timeline keeps every axis' sd for its bands."""
+    from dataclasses import replace
+    sd = np.linspace(0.1, 0.9, 9)
+    results = {0: replace(result(0, 2.0), sd_deg=sd), 1: result(1, 3.0)}
+    t = adapters.frame_table(results, 2, 2)
+    assert t.sd[0] == pytest.approx(0.9) and np.isnan(t.sd[1])
+    line = adapters.timeline(results, 2, 9)
+    np.testing.assert_array_equal(line.sd_deg[0], sd)
+    assert np.isnan(line.sd_deg[1]).all()
 
 
 def test_learning_angles_follow_the_status_option():

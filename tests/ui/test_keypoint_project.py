@@ -277,7 +277,7 @@ def test_triangulated_route_fits_3d_points_and_draws_2d_keypoints(made, tmp_path
     s.error.connect(s.messages.append)
     assert w.open_project(project)
     # no per-view error columns; the threshold is a distance in the chain's units
-    assert w.table.source.headers == ["frame", "error", "runs", "status"]
+    assert w.table.source.headers == ["frame", "error", "runs", "sd", "status"]
     assert w.threshold.suffix() == " mm" and len(w.video_views) == 3
     assert len(w.video_views[2].drawn()["keypoints"]) > 0
     assert s.keypoints.observations.kind == "points3d"

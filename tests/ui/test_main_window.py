@@ -94,7 +94,8 @@ def test_background_fit_updates_table_timeline_and_views(window, qtbot, wait_idl
     for f in range(12):
         r = s.results[f]
         assert model.value(f, 1) == r.error
-        assert model.value(f, 5) == r.status
+        assert model.value(f, 6) == r.status
+        assert model.value(f, 5) == pytest.approx(float(np.max(r.sd_deg)))  # its largest sd
     _x, y = window.timeline.error_curve.getData()
     np.testing.assert_array_equal(y, [s.results[f].error for f in range(12)])
     assert_drawn_is_model(window)  # frame 6 is now drawn in its fitted posture
@@ -297,12 +298,12 @@ def test_manual_correction_with_sliders_and_undo(window, qtbot, wait_idle):
     assert r.status == "corrected" and r.angles_deg[5] == 40.0
     assert_drawn_is_model(window)
     model = window.table.source
-    assert model.value(7, 5) == "corrected"
+    assert model.value(7, 6) == "corrected"
     assert model.data(model.index(7, 0), Qt.ItemDataRole.BackgroundRole) == style.CORRECTED_ROW
     assert panel.sliders.rows[5][0].font().bold()  # the pinned axis is marked
     assert "1 axes pinned" in panel.source.text()
     window.act_undo.trigger()
-    assert s.results[7] is old and model.value(7, 5) == old.status
+    assert s.results[7] is old and model.value(7, 6) == old.status
     assert not panel.sliders.rows[5][0].font().bold()
     window.act_redo.trigger()
     assert s.results[7].status == "corrected"

@@ -212,6 +212,36 @@ def test_export_results(tmp_path, suffix):
         np.testing.assert_allclose(motion.values[:5], res.angles_deg[:5])
 
 
+def test_results_keep_their_sd_through_the_csv_and_into_nwb(tmp_path):
+    """The ``.sd`` columns round-trip through the results CSV; an NWB export carries them
+    as ``JointAngleSD`` (a failed row's empty, as its angles)."""
+    from dataclasses import replace
+
+    from videotrack.io.export import export_results
+    from videotrack.results.files import frame_results, read_results, write_results
+
+    res = fitted_results()
+    res = replace(res, sd=np.abs(res.angles_deg) / 100.0)
+    path = write_results(tmp_path / "walk.results.csv", res, {"seed": 0})
+    header = path.read_text().splitlines()[0].split(",")
+    assert header[header.index("status") - 2:header.index("status")] == ["J0.phi.sd",
+                                                                         "J1.beta.sd"]
+    back = read_results(path)
+    np.testing.assert_array_equal(back.sd, res.sd)
+    np.testing.assert_array_equal(frame_results(back, 0)[2].sd_deg, res.sd[2])
+    older = replace(res, sd=None)  # a file without the columns reads as before
+    assert read_results(write_results(tmp_path / "old.results.csv", older, {})).sd is None
+    pytest.importorskip("ndx_pose")
+    import pynwb
+
+    nwb = export_results(res, tmp_path / "walk.nwb")
+    with pynwb.NWBHDF5IO(str(nwb), mode="r") as io:
+        group = io.read().processing["behavior"]["JointAngleSD"]
+        got = np.asarray(group["J1.beta"].data[:])
+    np.testing.assert_allclose(got[:5], res.sd[:5, 1])
+    assert np.isnan(got[5])
+
+
 def test_export_refuses_unknown_suffix(tmp_path):
     from videotrack.io.export import export_results
 

@@ -24,6 +24,7 @@ class FrameTable:
     error: np.ndarray  # (n,)
     error_per_view: np.ndarray  # (n, n_views)
     runs: np.ndarray  # (n,) int64, 0 where not fitted
+    sd: np.ndarray  # (n,) the largest axis sd, degrees (NaN without one)
     status: list[str]  # (n,)
 
 
@@ -32,19 +33,30 @@ def frame_table(results: Mapping, n_frames: int, n_views: int) -> FrameTable:
     error = np.full(n_frames, np.nan)
     per_view = np.full((n_frames, n_views), np.nan)
     runs = np.zeros(n_frames, np.int64)
+    sd = np.full(n_frames, np.nan)
     status = [NOT_FITTED] * n_frames
     for f, r in results.items():
         if 0 <= f < n_frames:
-            error[f], per_view[f], runs[f], status[f] = table_row(r, n_views)
-    return FrameTable(np.arange(n_frames, dtype=np.int64), error, per_view, runs, status)
+            error[f], per_view[f], runs[f], sd[f], status[f] = table_row(r, n_views)
+    return FrameTable(np.arange(n_frames, dtype=np.int64), error, per_view, runs, sd, status)
+
+
+def largest_sd(result) -> float:
+    """How unsure a frame is: the largest standard deviation of its axes, degrees (NaN
+    without one)."""
+    sd = getattr(result, "sd_deg", None)
+    if sd is None or not np.isfinite(sd).any():
+        return float("nan")
+    return float(np.nanmax(sd))
 
 
 def table_row(result, n_views: int) -> tuple:
-    """One row ``(error, errors per view, runs, status)`` of a result (or of None)."""
+    """One row ``(error, errors per view, runs, largest sd, status)`` of a result (or of
+    None)."""
     if result is None:
-        return np.nan, np.full(n_views, np.nan), 0, NOT_FITTED
+        return np.nan, np.full(n_views, np.nan), 0, np.nan, NOT_FITTED
     return float(result.error), np.asarray(result.error_per_view, float), int(result.runs), \
-        result.status
+        largest_sd(result), result.status
 
 
 def is_bad(error, threshold: float):
@@ -88,16 +100,20 @@ class Timeline:
     frames: np.ndarray  # (n,)
     angles_deg: np.ndarray  # (n, n_axes), NaN where not fitted
     error: np.ndarray  # (n,)
+    sd_deg: np.ndarray  # (n, n_axes), NaN without a standard deviation
 
 
 def timeline(results: Mapping, n_frames: int, n_axes: int) -> Timeline:
-    """Angles and error of every record from ``{frame: FrameResult}``."""
+    """Angles, their sd and the error of every record from ``{frame: FrameResult}``."""
     angles = np.full((n_frames, n_axes), np.nan)
+    sd = np.full((n_frames, n_axes), np.nan)
     error = np.full(n_frames, np.nan)
     for f, r in results.items():
         if 0 <= f < n_frames:
             angles[f], error[f] = r.angles_deg, r.error
-    return Timeline(np.arange(n_frames, dtype=float), angles, error)
+            if getattr(r, "sd_deg", None) is not None:
+                sd[f] = r.sd_deg
+    return Timeline(np.arange(n_frames, dtype=float), angles, error, sd)
 
 
 def learning_angles(results: Mapping, statuses: Sequence[str] | None = GOOD_STATUSES,

@@ -1,4 +1,5 @@
-"""The per-frame error table (Fig. 4, part 1): frame, error, error per view, runs, status.
+"""The per-frame error table (Fig. 4, part 1): frame, error, error per view, runs, the
+largest angle sd, status.
 
 Rows above the re-analysis threshold are shaded red, frames corrected by hand blue. The
 table sorts by any column (numbers as numbers); clicking a row (or moving to it with the
@@ -39,7 +40,7 @@ class FrameTableModel(QAbstractTableModel):
         session.resultsChanged.connect(self.update_frames)
 
     def _headers(self) -> list[str]:
-        return ["frame", "error", *self.views, "runs", "status"]
+        return ["frame", "error", *self.views, "runs", "sd", "status"]
 
     def reset(self) -> None:
         """Rebuild every row (a project, detections or threshold changed)."""
@@ -64,8 +65,8 @@ class FrameTableModel(QAbstractTableModel):
         frames = [f for f in frames if 0 <= f < n]
         t = self.table
         for f in frames:
-            t.error[f], t.error_per_view[f], t.runs[f], t.status[f] = adapters.table_row(
-                self.session.results.get(f), len(self.views))
+            (t.error[f], t.error_per_view[f], t.runs[f], t.sd[f],
+             t.status[f]) = adapters.table_row(self.session.results.get(f), len(self.views))
         if frames:
             self.bad[frames] = self._bad(frames)
             self.dataChanged.emit(self.index(min(frames), 0),
@@ -91,6 +92,9 @@ class FrameTableModel(QAbstractTableModel):
                 return f"part of E from view '{self.views[section - 2]}', pixels"
             if section == 2 + nv:
                 return "annealing runs (1 + re-analyses)"
+            if section == 3 + nv:
+                return ("the largest standard deviation of the frame's angles, degrees: "
+                        "sort by it (largest first) to check the least sure frames first")
         return None
 
     def value(self, row: int, column: int):
@@ -104,6 +108,8 @@ class FrameTableModel(QAbstractTableModel):
             return float(t.error_per_view[row, column - 2])
         if column == 2 + nv:
             return int(t.runs[row])
+        if column == 3 + nv:
+            return float(t.sd[row])
         return t.status[row]
 
     def data(self, index, role=Qt.ItemDataRole.DisplayRole):

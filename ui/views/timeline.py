@@ -1,7 +1,9 @@
 """Timeline of the fitted angles and the error over all frames, with the current frame.
 
 The yellow line marks the current frame; drag it (or click a plot) to move there. Frames
-above the re-analysis threshold show as red dots on the error curve.
+above the re-analysis threshold show as red dots on the error curve. Where the fit gave
+standard deviations, each angle has a faint band of ± 2 sd (about 95 % of right frames lie
+within it).
 """
 
 from __future__ import annotations
@@ -48,6 +50,7 @@ class TimelineView(pg.GraphicsLayoutWidget):
             style.THRESHOLD, width=1, style=Qt.PenStyle.DashLine))
         self.error_plot.addItem(self.threshold_line)
         self.curves: list[pg.PlotDataItem] = []
+        self.bands: list[pg.FillBetweenItem] = []  # ± 2 sd of each curve
         self.lines = []
         for plot in (self.angles_plot, self.error_plot):
             line = pg.InfiniteLine(0, angle=90, movable=True,
@@ -64,19 +67,28 @@ class TimelineView(pg.GraphicsLayoutWidget):
         (``(index, label)`` pairs, e.g. the free axes)."""
         names = [lb for _, lb in labels]
         if names != self._labels:
-            for c in self.curves:
+            for c in (*self.curves, *self.bands):
                 self.angles_plot.removeItem(c)
             self.legend.clear()
             self.curves = [self.angles_plot.plot(pen=pg.mkPen(style.colour(k), width=1.5),
                                                  connect="finite")
                            for k in range(len(names))]
+            self.bands = [self._band(k) for k in range(len(names))]
             style.cache_drawing(*self.curves)
             for curve, name in zip(self.curves, names, strict=True):
                 self.legend.addItem(curve, name)
             self._labels = names
         x = timeline.frames
-        for curve, (index, _) in zip(self.curves, labels, strict=True):
-            curve.setData(x, timeline.angles_deg[:, index], connect="finite")
+        for curve, band, (index, _) in zip(self.curves, self.bands, labels, strict=True):
+            y = timeline.angles_deg[:, index]
+            curve.setData(x, y, connect="finite")
+            spread = 2.0 * timeline.sd_deg[:, index]
+            shown = bool(np.isfinite(spread).any())
+            band.setVisible(shown)
+            if shown:  # the same gaps as the curve's: the fill pairs their pieces
+                spread = np.where(np.isfinite(spread), spread, 0.0)
+                band.curves[0].setData(x, y - spread, connect="finite")
+                band.curves[1].setData(x, y + spread, connect="finite")
         self.error_curve.setData(x, timeline.error, connect="finite")
         with np.errstate(invalid="ignore"):
             bad = np.isfinite(timeline.error) & (timeline.error > threshold)
@@ -85,6 +97,17 @@ class TimelineView(pg.GraphicsLayoutWidget):
         self.threshold_line.setVisible(bool(np.isfinite(threshold)))
         if len(x):
             self.angles_plot.setXRange(-0.5, len(x) - 0.5, padding=0.01)
+
+    def _band(self, k: int) -> pg.FillBetweenItem:
+        """The ± 2 sd band of curve ``k``, in its colour, faint and behind the curves."""
+        low, high = pg.PlotDataItem(), pg.PlotDataItem()
+        colour = pg.mkColor(style.colour(k))
+        colour.setAlpha(50)
+        band = pg.FillBetweenItem(low, high, brush=pg.mkBrush(colour))
+        band.setZValue(-1)
+        band.setVisible(False)
+        self.angles_plot.addItem(band)
+        return band
 
     def set_frame(self, frame: int) -> None:
         for line in self.lines:

@@ -12,8 +12,8 @@ from videotrack.errors import VideoTrackError
 
 #: Output suffix -> what it holds.
 EXPORTS = {".trc": "3D points (OpenSim)", ".mot": "joint angles (OpenSim)",
-           ".c3d": "3D points and joint angles", ".nwb": "3D points and joint angles (NWB, "
-           "ndx-pose; movement loads it)"}
+           ".c3d": "3D points and joint angles",
+           ".nwb": "3D points, joint angles and their sd (NWB, ndx-pose; movement loads it)"}
 
 
 def export_results(results, path: str | os.PathLike, *, units: str = "mm",
@@ -37,10 +37,13 @@ def export_results(results, path: str | os.PathLike, *, units: str = "mm",
     names = [*results.marker_names, *results.joint_names]
     points = np.concatenate([results.markers, results.joints], axis=1).astype(np.float64)
     angles = np.asarray(results.angles_deg, dtype=np.float64).copy()
+    sd = None if results.sd is None else np.asarray(results.sd, dtype=np.float64).copy()
     if only_ok:
         bad = ~results.ok_mask()
         points[bad] = np.nan
         angles[bad] = np.nan
+        if sd is not None:
+            sd[bad] = np.nan
     axes = list(results.axis_labels)
     if suffix == ".trc":
         from videotrack.io.trc import write_trc
@@ -54,5 +57,5 @@ def export_results(results, path: str | os.PathLike, *, units: str = "mm",
     else:
         from videotrack.io.nwb import write_nwb
         write_nwb(path, names, points, frames, rate, units, angle_names=axes, angles=angles,
-                  subject=subject)
+                  angle_sd=sd, subject=subject)
     return path

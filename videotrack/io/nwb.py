@@ -4,7 +4,8 @@
 The processing module ``behavior`` holds a ``PoseEstimation`` named ``PoseEstimation`` with one
 ``PoseEstimationSeries`` per marker (2D or 3D points, NaN when missing, with a confidence) and
 the ``Skeleton`` it refers to; joint angles in degrees are one ``TimeSeries`` per posture
-column in a ``BehavioralTimeSeries`` named ``JointAngles``.
+column in a ``BehavioralTimeSeries`` named ``JointAngles``, and their standard deviations
+(where the results have them) the same way in ``JointAngleSD``.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from videotrack.io._files import atomic_path, column_names, frame_times
 from videotrack.io.mot import Motion
 from videotrack.io.trc import Markers3D
 
-MODULE, POSES, ANGLES = "behavior", "PoseEstimation", "JointAngles"
+MODULE, POSES, ANGLES, ANGLE_SD = "behavior", "PoseEstimation", "JointAngles", "JointAngleSD"
 
 
 def _modules():
@@ -42,10 +43,11 @@ def _timing(frames, rate):
 
 def write_nwb(path: str | os.PathLike, names, points, frames, rate: float,
               units: str = "mm", confidence=None, angle_names=(), angles=None,
-              edges=None, subject: str = "animal", software: str = "VideoTrack",
+              angle_sd=None, edges=None, subject: str = "animal", software: str = "VideoTrack",
               description: str = "kinematic chain fitted by VideoTrack") -> None:
     """Write points (n_frames, n_markers, 2 or 3) in ``units`` (with an optional confidence
-    (n_frames, n_markers)) and optionally joint angles (n_frames, n_axes) in degrees.
+    (n_frames, n_markers)) and optionally joint angles (n_frames, n_axes) in degrees, with
+    their standard deviations ``angle_sd`` (the same shape) if given.
 
     ``edges`` are pairs of marker indices (the chain's segments) for the skeleton;
     ``subject`` becomes the NWB identifier, which movement uses as the individual's name.
@@ -86,12 +88,20 @@ def write_nwb(path: str | os.PathLike, names, points, frames, rate: float,
         if angles.shape != (n, len(angle_names)):
             raise VideoTrackError(f"angles of shape {angles.shape} do not match {n} frames x "
                                   f"{len(angle_names)} axes", file=path)
-        joint_angles = BehavioralTimeSeries(name=ANGLES)
-        for i, a in enumerate(angle_names):
-            joint_angles.add_timeseries(pynwb.TimeSeries(
-                name=a, data=angles[:, i], unit="degrees", description=f"joint angle {a}",
-                comments=f"column {i}", **timing))  # NWB sorts by name; this keeps order
-        module.add(joint_angles)
+        tables = [(ANGLES, angles, "joint angle")]
+        if angle_sd is not None:
+            angle_sd = np.asarray(angle_sd, dtype=np.float64)
+            if angle_sd.shape != angles.shape:
+                raise VideoTrackError(f"angle sd of shape {angle_sd.shape} do not match the "
+                                      f"angles' {angles.shape}", file=path)
+            tables.append((ANGLE_SD, angle_sd, "standard deviation of joint angle"))
+        for table, values, what in tables:
+            group = BehavioralTimeSeries(name=table)
+            for i, a in enumerate(angle_names):
+                group.add_timeseries(pynwb.TimeSeries(
+                    name=a, data=values[:, i], unit="degrees", description=f"{what} {a}",
+                    comments=f"column {i}", **timing))  # NWB sorts by name; this keeps order
+            module.add(group)
     with atomic_path(path) as tmp, pynwb.NWBHDF5IO(str(tmp), mode="w") as io:
         io.write(nwb)
 

@@ -3,12 +3,15 @@
 The CSV has one row per analysed image (frame, or field when de-interlaced)::
 
     frame, video_frame, field, time, <joint>.<axis> ... (degrees), error, error.<view> ...,
-    runs, iterations, matched, unexplained, worst_px, status, <chain>.root.x/y/z ...,
-    <marker>.x/y/z ..., <joint>.x/y/z ..., <marker>.res.<view> ...
+    runs, iterations, matched, unexplained, worst_px, <joint>.<axis>.sd ..., status,
+    <chain>.root.x/y/z ..., <marker>.x/y/z ..., <joint>.x/y/z ..., <marker>.res.<view> ...
 
 ``matched`` counts the marker images within ``claim_gate_px`` of a detection, ``unexplained``
 the detections farther than that from every model marker, ``worst_px`` is the largest marker
-residual: sort by them to find frames to look at.
+residual: sort by them to find frames to look at. The ``.sd`` columns are each angle's
+standard deviation in degrees given the noise model (how sure the fit is of it: about 95 %
+of right frames lie within 2 sd of the truth), 0 for locked axes, empty where no noise
+model was measured.
 
 The ``.res.`` columns are per-marker residuals: how far, in pixels, each fitted model marker
 is from the detection it matched (its nearest) in each view; empty where the view had no
@@ -53,6 +56,8 @@ from videotrack.results.tables import format_cell
 
 #: Every status a results file may hold (a fit's, and ``corrected`` by hand).
 STATUSES = tuple(Status)
+#: Suffix of the per-axis standard deviation columns (FrameResult.sd_deg).
+SD_SUFFIX = ".sd"
 #: Per-frame match counts (FrameResult.matched, .unexplained, .worst_px), between iterations
 #: and status; files written before they existed lack them.
 QUALITY_COLUMNS = ("matched", "unexplained", "worst_px")
@@ -86,6 +91,7 @@ class Results:
     joints: np.ndarray  # (n, j, 3)
     residuals: np.ndarray | None = None  # (n, m, v) pixels, or None (older files)
     quality: np.ndarray | None = None  # (n, 3) matched, unexplained, worst_px; None: older
+    sd: np.ndarray | None = None  # (n, a) degrees; None: no noise model, or an older file
 
     def __len__(self) -> int:
         return self.frames.size
@@ -103,6 +109,8 @@ class Results:
         cols += ["runs", "iterations"]
         if self.quality is not None:
             cols += list(QUALITY_COLUMNS)
+        if self.sd is not None:
+            cols += [f"{a}{SD_SUFFIX}" for a in self.axis_labels]
         cols += ["status"]
         cols += [f"{c}.root.{a}" for c in self.chain_names for a in "xyz"]
         cols += [f"{p}.{a}" for p in (*self.marker_names, *self.joint_names) for a in "xyz"]
@@ -138,6 +146,10 @@ def results_from_fit(body: Body, fit_results: Sequence, view_names: Sequence[str
     if n and all(hasattr(r, "worst_px") for r in fit_results):
         quality = np.array([(r.matched, r.unexplained, r.worst_px) for r in fit_results],
                            dtype=float).reshape(n, 3)
+    sd = None
+    if n and any(getattr(r, "sd_deg", None) is not None for r in fit_results):
+        sd = np.array([np.full(body.n_axes, np.nan) if r.sd_deg is None else r.sd_deg
+                       for r in fit_results], dtype=float).reshape(n, body.n_axes)
     if detections is not None:
         video_frames = np.asarray(detections.video_frames)[frames]
         fields = np.asarray(detections.parities)[frames]
@@ -156,7 +168,7 @@ def results_from_fit(body: Body, fit_results: Sequence, view_names: Sequence[str
         runs=np.array([r.runs for r in fit_results], dtype=np.int64),
         iterations=np.array([r.iterations for r in fit_results], dtype=np.int64),
         status=tuple(r.status for r in fit_results), roots=roots, markers=markers,
-        joints=joints, residuals=residuals, quality=quality,
+        joints=joints, residuals=residuals, quality=quality, sd=sd,
     )
 
 
@@ -171,6 +183,8 @@ def format_results(results: Results) -> str:
                    *results.error_per_view[i], results.runs[i], results.iterations[i]]
         if results.quality is not None:
             numbers += [*results.quality[i]]
+        if results.sd is not None:
+            numbers += [*results.sd[i]]
         points = [*results.roots[i].ravel(), *results.markers[i].ravel(),
                   *results.joints[i].ravel()]
         if results.residuals is not None:
@@ -350,8 +364,15 @@ def read_results(path: str | os.PathLike) -> Results:
     n = data.shape[0]
     points = data[:, i_status + 1:i_res].reshape(n, -1, 3)
     quality = None
-    if tuple(header[i_runs + 2:i_status]) == QUALITY_COLUMNS:
-        quality = data[:, i_runs + 2:i_status]
+    i_sd = next((c for c in range(i_runs + 2, i_status) if header[c].endswith(SD_SUFFIX)),
+                i_status)
+    if tuple(header[i_runs + 2:i_sd]) == QUALITY_COLUMNS:
+        quality = data[:, i_runs + 2:i_sd]
+    sd = None
+    if i_sd < i_status:
+        if header[i_sd:i_status] != [f"{a}{SD_SUFFIX}" for a in axis_labels]:
+            raise VideoTrackError("sd columns do not match the axes", file=path, line=1)
+        sd = data[:, i_sd:i_status]
     residuals = None
     if res_cols:
         res_views = tuple(dict.fromkeys(h.rsplit(".res.", 1)[1] for h in header[i_res:]))
@@ -369,7 +390,7 @@ def read_results(path: str | os.PathLike) -> Results:
         error_per_view=data[:, i_err + 1:i_runs], runs=data[:, i_runs].astype(np.int64),
         iterations=data[:, i_runs + 1].astype(np.int64), status=tuple(status),
         roots=points[:, :nc], markers=points[:, nc:nc + n_markers],
-        joints=points[:, nc + n_markers:], residuals=residuals, quality=quality,
+        joints=points[:, nc + n_markers:], residuals=residuals, quality=quality, sd=sd,
     )
 
 
@@ -386,6 +407,7 @@ def frame_results(table: Results, seed: int) -> dict:
             status=table.status[i], root_positions=np.array(table.roots[i]),
             marker_residuals=(None if table.residuals is None
                               else np.array(table.residuals[i]).T),
+            sd_deg=None if table.sd is None else np.array(table.sd[i]),
             **({} if table.quality is None else {
                 "matched": int(table.quality[i, 0]) if np.isfinite(table.quality[i, 0])
                 else 0,
