@@ -18,13 +18,8 @@ from kinematics._kernels import lanes as _lk
 from kinematics._kernels import objective as _objective
 from kinematics.cameras import CameraArrays
 from kinematics.errors import KinematicsError
-from kinematics.fit.problem import (
-    ErrorArgs,
-    FitOutputs,
-    error_args,
-    partitions_of,
-    schedule_of,
-)
+from kinematics.fit.partitions import partitions_of
+from kinematics.fit.problem import ErrorArgs, FitOutputs, error_args, schedule_of
 from kinematics.fit.result import FrameResult
 from kinematics.fit.settings import AnnealParams
 from kinematics.observe.observations import ObservationArrays, Observations

@@ -16,7 +16,8 @@ from kinematics._kernels import lane_iterations as _li
 from kinematics._kernels import lanes as _lk
 from kinematics.errors import KinematicsError
 from kinematics.fit import AnnealParams, Fitter
-from kinematics.fit.problem import FitOutputs, error_args, partitions_of, schedule_of
+from kinematics.fit.partitions import partitions_of
+from kinematics.fit.problem import FitOutputs, error_args, schedule_of
 from kinematics.fit.settings import ErrorOptions
 from kinematics.model.fk import forward_kinematics, forward_kinematics_reference
 from kinematics.observe.observations import Observations

@@ -13,7 +13,8 @@ from kinematics._kernels import error2d as _error2d
 from kinematics._kernels import objective as _objective
 from kinematics.errors import KinematicsError
 from kinematics.fit import AnnealParams, Fitter
-from kinematics.fit.problem import FitProblem, partitions_of
+from kinematics.fit.partitions import partitions_of
+from kinematics.fit.problem import FitProblem
 from kinematics.model import Body
 from kinematics.model.chain_xml import load_body
 from tests.fixtures.bodies import three_legs
