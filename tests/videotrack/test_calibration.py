@@ -359,6 +359,15 @@ def test_command_calibrates_rendered_views(tmp_path, capsys, monkeypatch):
     # the same again: from the cache, outputs replaced
     assert cli(*args) == 0
     assert not stray  # no library warning reaches the user
+    # a board view as the world frame, then the poses refined from points: the refinement
+    # keeps the reference camera, not the board's name, fixed
+    rng = np.random.default_rng(5)
+    X = rng.normal(0, 80, (120, 3)) + np.array([0, 80, 500.0])
+    p2d = np.array([c.project(X) for c in in_reference_frame(cams)])
+    np.savez(tmp_path / "points.npz", p2d=p2d + rng.normal(0, 0.2, p2d.shape))
+    capsys.readouterr()
+    assert cli(*args, "--world-view", "0", "--refine-points", tmp_path / "points.npz") == 0
+    assert "world frame: the board in view 0" in capsys.readouterr().out
 
 
 def test_command_calibrates_an_aruco_grid_and_names_a_mismatched_one(tmp_path, capsys):

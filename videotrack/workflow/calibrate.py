@@ -178,6 +178,7 @@ def _calibrate(board_path, cams, outputs, reference, cache, world_view, distorti
                    symmetric=board.type == "checkerboard")
     cal = calibrate(corners, board.object_points, opts, progress=progress)
     report = make_report(cal, corners, board)
+    fixed = opts.reference  # the camera refinement keeps in place, whatever frame is the world
     if world_view is not None:
         from videotrack.calibration.bundle import reframe
 
@@ -189,8 +190,7 @@ def _calibrate(board_path, cams, outputs, reference, cache, world_view, distorti
     lines = tuple(report.lines())
     refinement = None
     if refine_points:
-        cal.cameras, refinement = _refine(refine_points, cal.cameras,
-                                          list(cams).index(reference))
+        cal.cameras, refinement = _refine(refine_points, cal.cameras, fixed)
     _write(outputs, {c.name: c for c in cal.cameras}, report.overall["median"])
     if outputs.report_png:
         save_png(outputs.report_png, cal, corners)
