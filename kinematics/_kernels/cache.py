@@ -9,6 +9,9 @@ Windows), unless ``NUMBA_CACHE_DIR`` is set. numba keys the cache by source path
 never mix; but it checks only a kernel's own file, and a kernel compiles in the kernels of
 other modules it calls (``fit_frames`` the refinement's): ``<digest>`` is of every kernel
 module's source, so a change to any of them compiles afresh instead of reusing stale code.
+The digest covers the modules of the records kernels take too (:data:`RECORD_MODULES`):
+numba's cache index pickles an argument's NamedTuple class by module and name, so a record
+moved to another module made every cached kernel fail to load ("Can't get attribute").
 """
 
 from __future__ import annotations
@@ -26,9 +29,19 @@ def default_cache_dir() -> Path:
     return Path(base or Path.home() / ".cache") / "videotrack" / "numba"
 
 
+#: Modules (relative to the package root) defining the NamedTuple records kernels take as
+#: arguments: BodyArrays, CameraArrays, FoldedBody, DofArrays, Schedule, ErrorArgs,
+#: FitOutputs, Partitions, ObservationArrays.
+RECORD_MODULES = ("model/packing.py", "cameras/models.py", "fit/problem.py",
+                  "fit/partitions.py", "observe/observations.py")
+
+
 def kernels_digest() -> str:
-    """A digest of the source of every kernel module of the package."""
-    paths = sorted(Path(__file__).parent.glob("*.py"))
+    """A digest of the source of every kernel module of the package and of the modules of
+    the records the kernels take."""
+    root = Path(__file__).parents[1]
+    paths = [*sorted(Path(__file__).parent.glob("*.py")),
+             *(root / name for name in RECORD_MODULES)]
     try:
         if paths:
             return hashlib.sha256(b"".join(path.read_bytes() for path in paths)).hexdigest()[:12]

@@ -47,7 +47,8 @@ class NoiseModel(NamedTuple):
 
     def to_record(self) -> dict:
         """As plain numbers (a results sidecar keeps it)."""
-        out = {"sigma_px": [round(float(s), 6) for s in self.sigma_px], "source": self.source}
+        # full precision: a resumed fit must judge and give sds as the uninterrupted one
+        out = {"sigma_px": [float(s) for s in self.sigma_px], "source": self.source}
         if self.outliers is not None:
             out["outliers"] = [int(k) for k in self.outliers]
         return out
