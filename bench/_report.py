@@ -31,6 +31,27 @@ def print_table(rows, target: str = "goal", results=("result",)) -> None:
         print(f"| {name.ljust(width)} | {' | '.join(str(v) for v in values)} | {goal} |")
 
 
+def print_markdown(header, rows) -> None:
+    """Print ``rows`` (tuples, one value per column of ``header``) as a markdown table."""
+    print("| " + " | ".join(header) + " |")
+    print("|" + " --- |" * len(header))
+    for r in rows:
+        print("| " + " | ".join(str(v) for v in r) + " |")
+
+
+#: ``videotrack synth`` clutter of the status benches: 2 static and 1 flickering ghost per
+#: view, 2 % occluded marker images.
+CLUTTER = ("--ghosts", "2", "--flicker-ghosts", "1", "--occlusions", "0.02")
+
+
+def synth_locust(folder: Path, frames: int, seed: int, clutter: bool) -> None:
+    """``videotrack synth``'s locust project in ``folder`` (movement and render seeded by
+    ``seed``), with :data:`CLUTTER` if ``clutter``."""
+    subprocess.run(["videotrack", "synth", str(folder), "--frames", str(frames),
+                    "--motion-seed", str(seed), "--seed", str(seed),
+                    *(CLUTTER if clutter else ())], check=True, capture_output=True)
+
+
 def in_out_folder(out: Path | None, prefix: str, run: Callable[[Path, bool], int]) -> int:
     """``run(folder, keep)`` in ``out`` (created) or, without one, in a temporary folder that
     is removed afterwards (``keep`` False)."""

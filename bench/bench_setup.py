@@ -41,19 +41,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 # the wrong set-ups the tests refuse (a plain module there; "tests" may be another package's)
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "fixtures"))
 
-from _report import machine
+from _report import machine, print_markdown, synth_locust
 from setup_cases import CASES, make_case
 
 AXES = ("J0.phi", "J0.psi", "J0.alpha", "J1.beta", "J2.gamma")
 OFF_DEG = 5.0
 FLAGGED_NOT = ("ok", "reanalysed")
-
-
-def _synth(folder: Path, frames: int, seed: int, clutter: bool) -> None:
-    extra = ["--ghosts", "2", "--flicker-ghosts", "1", "--occlusions", "0.02"] if clutter else []
-    subprocess.run(["videotrack", "synth", str(folder), "--frames", str(frames),
-                    "--motion-seed", str(seed), "--seed", str(seed), *extra],
-                   check=True, capture_output=True)
 
 
 def _score(folder: Path, truth: Path) -> dict:
@@ -101,7 +94,7 @@ def main(argv=None) -> int:
         for seed in seeds:
             for clutter in ((False, True) if args.clutter else (False,)):
                 base = Path(tmp) / f"base-{seed}-{int(clutter)}"
-                _synth(base, frames, seed, clutter)
+                synth_locust(base, frames, seed, clutter)
                 names = (["right"] if clutter or seed != seeds[0] else list(CASES))
                 for name in names:
                     folder = Path(tmp) / f"{name.replace(' ', '_')}-{seed}-{int(clutter)}"
@@ -118,10 +111,7 @@ def main(argv=None) -> int:
           f"({time.perf_counter() - t0:.0f} s)\n")
     header = ("case", "exit", "frames ok", "off", "off, not flagged", "false alarms",
               "refused with")
-    print("| " + " | ".join(header) + " |")
-    print("|" + " --- |" * len(header))
-    for r in rows:
-        print("| " + " | ".join(str(v) for v in r) + " |")
+    print_markdown(header, rows)
     print("\ngoals: wrong set-ups exit ≠ 0 with 0 frames ok; right: 0 off frames not "
           "flagged, false alarms ≤ 1 % (clutter ≤ 2 %)")
     return 0

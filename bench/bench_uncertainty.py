@@ -40,17 +40,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 # planted detections (a plain module there; "tests" may be another package's)
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "fixtures"))
 
-from _report import machine
+from _report import machine, print_markdown, synth_locust
 
 AXES = ("J0.phi", "J0.psi", "J0.alpha", "J1.beta", "J2.gamma")
 UNFLAGGED = ("ok", "reanalysed")
 
 
 def _project(folder: Path, frames: int, seed: int, clutter: bool) -> None:
-    extra = ["--ghosts", "2", "--flicker-ghosts", "1", "--occlusions", "0.02"] if clutter else []
-    subprocess.run(["videotrack", "synth", str(folder), "--frames", str(frames),
-                    "--motion-seed", str(seed), "--seed", str(seed), *extra],
-                   check=True, capture_output=True)
+    synth_locust(folder, frames, seed, clutter)
     subprocess.run(["videotrack", "run", str(folder / "project.toml")], check=False,
                    capture_output=True)
 
@@ -136,10 +133,7 @@ def main(argv=None) -> int:
           f"({time.perf_counter() - t0:.0f} s)\n")
     header = ("project", "σ (px)", "axis-frames", "≤ 2 sd, unflagged", "≤ 2 sd, all",
               "median sd (°)", "RMSE unflagged (°)")
-    print("| " + " | ".join(header) + " |")
-    print("|" + " --- |" * len(header))
-    for r in rows:
-        print("| " + " | ".join(str(v) for v in r) + " |")
+    print_markdown(header, rows)
     print("\ngoal: |error| ≤ 2 sd for 90–98 % of axis-frames")
     return 0
 
