@@ -107,7 +107,9 @@ class ConfidenceMixin:
             return
         counted = [(pos, r) for pos, r in held if r.runs > 0]
         sigma = noise.measure_sigma([r.marker_residuals for _, r in counted],
-                                    float(p.noise_floor_px), float(p.claim_gate_px))
+                                    float(p.noise_floor_px), float(p.claim_gate_px),
+                                    quantile=self.tuning.noise_sigma_quantile,
+                                    free_axes=int(self.problem.free_idx.size))
         if sigma is None:
             return
         source = "measured"
@@ -123,8 +125,13 @@ class ConfidenceMixin:
         positions = np.array([pos for pos, _ in counted], np.int64)
         extras = self._extras(obs, positions)
         verdicts = [self._judge(obs, pos, r, extras)[1] for pos, r in counted]
+        # the spacing test reads the residuals' core (their median): a tail of sliding skin
+        # markers is no sign of a chain matched to random detections
+        core = noise.measure_sigma([r.marker_residuals for _, r in counted],
+                                   float(p.noise_floor_px), float(p.claim_gate_px),
+                                   quantile=0.5, free_axes=int(self.problem.free_idx.size))
         self._problem(setup_check.fit_problems(
-            self.view_names, sigma, setup_check.detection_spacing(obs, positions), verdicts,
+            self.view_names, core, setup_check.detection_spacing(obs, positions), verdicts,
             self.tuning, obs.labelled))
 
     def _extras(self, obs: Observations, positions) -> np.ndarray:

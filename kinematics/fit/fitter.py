@@ -69,6 +69,7 @@ from kinematics.fit.problem import (
     FitProblem,
     error_args,
 )
+from kinematics.fit.reacquire import ReacquireMixin
 from kinematics.fit.result import Candidate, FrameResult
 from kinematics.fit.roots import RootsMixin
 from kinematics.fit.settings import AnnealParams
@@ -82,7 +83,7 @@ from kinematics.observe.observations import Observations
 
 
 class Fitter(MatchMixin, RootsMixin, DispatchMixin, StatusMixin, PolishMixin, CandidatesMixin,
-             PathMixin, TrackingMixin, ConfidenceMixin, UncertaintyMixin):
+             PathMixin, TrackingMixin, ConfidenceMixin, UncertaintyMixin, ReacquireMixin):
     """Fits a body's posture to marker detections, frame by frame.
 
     Parameters
@@ -146,6 +147,7 @@ class Fitter(MatchMixin, RootsMixin, DispatchMixin, StatusMixin, PolishMixin, Ca
         #: judged the frames kept)
         self.fixed_noise = None
         self._noise_measured = False
+        self._seeds = self._run_params = None  # a fit's root seeds and settings (_iter)
         self.setup_warnings: list[str] = []
 
     def with_pins(self, pins) -> Fitter:
@@ -464,6 +466,7 @@ class Fitter(MatchMixin, RootsMixin, DispatchMixin, StatusMixin, PolishMixin, Ca
         obs = self.observations(detections)
         idx = self._frame_indices(frames, obs.n_frames)
         self.noise, self._noise_measured = self.fixed_noise, self.fixed_noise is not None
+        self._seeds = self._run_params = None
         if check_setup:  # (else the caller checks and keeps what it accepts)
             self.setup_warnings = []
             self._check_detections(obs)
@@ -476,13 +479,14 @@ class Fitter(MatchMixin, RootsMixin, DispatchMixin, StatusMixin, PolishMixin, Ca
         if p.candidates > 1 and p.start != "track":  # the frames to look at, after the polish
             out = flag_misplaced(out, p.claim_gate_px, before=before, starts=starts,
                                  tuning=self.tuning)
-        return self._noise_judged(obs, idx, out)
+        return self._noise_judged(obs, idx, self._reacquired(obs, idx, out))
 
     def _iter(self, obs: Observations, idx: np.ndarray, chunk_size: int | None,
               starts: np.ndarray | None = None, before: Sequence[FrameResult] = (),
               cancel: Callable[[], bool] | None = None) -> Iterator[FrameResult]:
         starts = np.zeros(0, np.int64) if starts is None else starts
         roots, rots = self._place(obs, idx)
+        self._seeds = roots, rots  # what a free root re-acquires from (reacquire.py)
         params = self.params
         if params.start == "track":  # measures its threshold on its first tracked frames
             yield from self._track(obs, idx, roots, rots, params, cancel)
@@ -495,6 +499,7 @@ class Fitter(MatchMixin, RootsMixin, DispatchMixin, StatusMixin, PolishMixin, Ca
                 params = replace(params, reanalysis_threshold=self._threshold_of(
                     obs, positions, [r.error for r in sample]))
             self._measure_video(obs, list(zip(positions.tolist(), sample, strict=True)))
+        self._run_params = params  # (with its threshold measured): re-fits use the same
         threads = numba.get_num_threads()
         seg = self.params.segment_length if self.params.start == "previous" else 1
         if chunk_size is None:  # enough frames (or segments) to keep every thread busy

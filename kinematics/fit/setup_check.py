@@ -115,7 +115,8 @@ def fit_problems(view_names: Sequence[str], sigma: np.ndarray, spacing: np.ndarr
                  verdicts: Sequence[Verdict], tuning: Tuning, labelled: bool = False
                  ) -> list[str]:
     """What fitted frames say of the set-up (a sample of frames fitted once, or the first
-    frames tracked): σ so large against the detections' ``spacing`` that matching markers to
+    frames tracked): σ (of the residuals' core, their median) so large against the
+    detections' ``spacing`` that matching markers to
     their nearest detection means nothing, or more than ``Tuning.setup_fail_share`` of them
     gross: a marker far from every detection (``Verdict.gross``) where none is missing (of
     ``labelled`` keypoints, more than ``Tuning.setup_gross_share`` of them)."""

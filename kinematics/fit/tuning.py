@@ -78,10 +78,17 @@ class Tuning:
     misplaced_unexplained_k: float = 2.0
     #: ... among the results this many frames on either side
     misplaced_half: int = 32
+    # -- free roots that re-acquire (kinematics.fit.reacquire)
+    #: frames held back: the stretch before a re-acquired frame that a wrong placement can
+    #: have held and that is re-fitted from the new one (-1: free roots never re-acquire)
+    reacquire_back: int = 96
     # -- the noise model and the set-up checks (kinematics.fit.noise, .setup_check)
     #: labelled keypoints off their label a frame may have: what this share of the sample
     #: frames have at most (a DLC-like file: 10 % of keypoints swapped or missing)
     noise_outlier_share: float = 0.9
+    #: σ is the Rayleigh σ of this quantile of the sample's matched residuals (a real
+    #: mouse's: median 55 % of right frames failed, 0.9 4 %, 0.95 0.5 %)
+    noise_sigma_quantile: float = 0.9
     #: a marker image this many σ from its detection is unmatched (Rayleigh tail 3e-4)
     noise_gate_k: float = 4.0
     #: a frame's matched residuals fail above the χ² quantile 1 - this
@@ -95,8 +102,10 @@ class Tuning:
     setup_sample: int = 64
     #: a view shows too few detections below this share of its markers (median frame)
     setup_detection_share: float = 0.25
-    #: σ above detections' spacing / this: a nearest-detection match means nothing there
-    setup_spacing_sigmas: float = 20.0
+    #: the residuals' core σ above detections' spacing / this: a nearest-detection match
+    #: means nothing there (a 4-σ gate then covers a third of the image; the stick insect's
+    #: chain on a locust: 7.8; a real mouse with 15-px spacing: 20)
+    setup_spacing_sigmas: float = 12.0
     #: a frame is gross where a marker lies farther than claim_gate_px from every detection,
     #: no missing one excusing it; of labelled keypoints, more than this share (a keypoint
     #: may be mislabelled: a DLC-like file has one in most frames)

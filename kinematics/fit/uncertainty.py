@@ -74,8 +74,6 @@ class UncertaintyMixin:
         cams, arrays = self._kernel_inputs(obs.arrays(positions))
         sigma = np.asarray(self.noise.sigma_px, float)
         scale = np.r_[1.0 / sigma[: cams.kind.shape[0]], 1.0 / sigma.mean()]
-        if self.noise.source == "measured":
-            scale = scale / self._dof_correction(cams.kind.shape[0], scale)
         gate = float(self.tuning.noise_gate_k * sigma.max())
         nf = pr.free_idx.size
         info = np.zeros((n, nf, nf))
@@ -86,19 +84,6 @@ class UncertaintyMixin:
         return [replace(r, sd_deg=self._axis_sd(cov[k], rot[k], r))
                 if pairs[k] > 0 and np.isfinite(state[k, 0]) else r
                 for k, (_, r) in enumerate(batch)]
-
-    def _dof_correction(self, n_views: int, scale: np.ndarray) -> np.ndarray:
-        """Per row block, how much a σ measured on fitted residuals is too small: the fit
-        absorbed the free axes of their m coordinates (m the marker images' coordinates,
-        all markers seen), so √(m / (m - n_free)) unbiases it; 1 for a view at the floor,
-        whose noise is below it already."""
-        nm = len(self.body.marker_names)
-        m = 2 * nm * n_views if n_views else 3 * nm
-        nf = self.problem.free_idx.size
-        if m <= nf:
-            return np.ones_like(scale)
-        above = 1.0 / scale > float(self.params.noise_floor_px) + 1e-12
-        return np.where(above, np.sqrt(m / (m - nf)), 1.0)
 
     def _axis_sd(self, cov: np.ndarray, rot: np.ndarray, r: FrameResult) -> np.ndarray:
         """Per-axis sd in degrees from the free entries' covariance ``cov`` (radians²)."""
