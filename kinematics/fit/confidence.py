@@ -143,8 +143,9 @@ class ConfidenceMixin:
 
     def _judge(self, obs: Observations, position: int, r: FrameResult, extras: np.ndarray
                ) -> tuple[FrameResult, noise.Verdict | None]:
-        """``r`` made ``failed`` where its residuals fail the noise test, and the verdict
-        (None for a frame without a fit)."""
+        """``r`` made ``failed`` where its residuals fail the noise test (``ambiguous``
+        where too few of its markers are on a detection: :meth:`_few_matched`), and the
+        verdict (None for a frame without a fit)."""
         if not r.runs or r.marker_residuals is None or r.marker_residuals.shape[0] == 0:
             return r, None
         frames = np.array([position], np.int64)
@@ -154,4 +155,17 @@ class ConfidenceMixin:
                           float(self.params.claim_gate_px))
         if not v.passed and r.status in JUDGED:
             r = replace(r, status=Status.FAILED)
+        elif r.status in WITHIN and not obs.labelled and self._few_matched(obs, r, frames):
+            r = replace(r, status=Status.AMBIGUOUS)
         return r, v
+
+    def _few_matched(self, obs: Observations, r: FrameResult, frames: np.ndarray) -> bool:
+        """Whether at most ``Tuning.few_matched_share`` of the markers the views show lie
+        on a detection (within the noise gate) in some view: unlabelled detections that few
+        can be any of the markers, and a posture that puts other markers on them fits as
+        well (a free mouse seen by 3 of its 6 markers)."""
+        gate = self.tuning.noise_gate_k * self.noise.sigma_px[:, None]
+        res = r.marker_residuals
+        on = int((np.isfinite(res) & (res <= gate)).any(axis=0).sum())
+        shown = int(self._shown(obs, frames)[0].max())
+        return on <= self.tuning.few_matched_share * shown

@@ -89,6 +89,9 @@ class Tuning:
     #: σ is the Rayleigh σ of this quantile of the sample's matched residuals (a real
     #: mouse's: median 55 % of right frames failed, 0.9 4 %, 0.95 0.5 %)
     noise_sigma_quantile: float = 0.9
+    #: a frame with at most this share of its markers on a detection is ambiguous
+    #: (unlabelled: a free mouse seen by 3 of 6 markers was placed 22 mm off, "ok")
+    few_matched_share: float = 0.5
     #: a marker image this many σ from its detection is unmatched (Rayleigh tail 3e-4)
     noise_gate_k: float = 4.0
     #: a frame's matched residuals fail above the χ² quantile 1 - this

@@ -6,7 +6,8 @@ At the fitted posture the pair residuals (each model marker and its detection wi
 the covariance of the angles is ``(J^T Σ^-1 J)^-1`` (the Cramér-Rao bound, which the least
 squares optimum of refinement attains for Gaussian centroid noise). Where a frame is
 ``ambiguous`` its candidates' spread widens it: ``sd² + (spread / 2)²``. Locked and pinned
-axes get 0; frames without a fit or without pairs NaN. The kernel is
+axes get 0; frames without a fit or without pairs NaN; so do the axes the matched markers
+leave undetermined (:func:`undetermined`), and their frame is ``ambiguous``. The kernel is
 :func:`kinematics._kernels.uncertainty.information_frames`, its twin
 :func:`kinematics.fit.refine.cramer_rao_bound`.
 """
@@ -22,7 +23,7 @@ import numpy as np
 from kinematics._kernels import codes as _codes
 from kinematics._kernels import uncertainty as _uk
 from kinematics.fit.problem import euler_yxz_from_matrix
-from kinematics.fit.result import FrameResult, Status
+from kinematics.fit.result import WITHIN, FrameResult, Status
 from kinematics.model.rotations import euler_yxz
 from kinematics.observe.observations import Observations
 
@@ -44,6 +45,16 @@ def _euler_derivative(seed: np.ndarray) -> np.ndarray:
         lo = euler_yxz_from_matrix(seed @ euler_yxz(*(-d)))
         out[:, k] = ((hi - lo + np.pi) % (2 * np.pi) - np.pi) / (2 * _EULER_STEP)
     return out
+
+
+def undetermined(info: np.ndarray, rcond: float = 1e-9, share: float = 0.01) -> np.ndarray:
+    """(n, n_free) bool: the free entries of each frame's information matrix (n, n_free,
+    n_free) that lie in its null space (eigenvalues below ``rcond`` times the largest) by more
+    than ``share`` of their weight: more axes than the matched markers determine (a free body
+    with two of its markers seen), so any value of them fits alike."""
+    w, v = np.linalg.eigh(info)
+    null = w < rcond * np.maximum(w[:, -1:], 1e-300)
+    return np.einsum("nij,nj->ni", v ** 2, null.astype(float)) > share
 
 
 class UncertaintyMixin:
@@ -81,9 +92,28 @@ class UncertaintyMixin:
         _uk.information_frames(state, pos, rot, pr.folded, cams, pr.free_idx, gate, arrays,
                                np.ascontiguousarray(scale), info, pairs)
         cov = np.linalg.pinv(info, hermitian=True)
-        return [replace(r, sd_deg=self._axis_sd(cov[k], rot[k], r))
+        loose = undetermined(info)
+        return [self._given_sd(r, cov[k], rot[k], loose[k])
                 if pairs[k] > 0 and np.isfinite(state[k, 0]) else r
                 for k, (_, r) in enumerate(batch)]
+
+    def _given_sd(self, r: FrameResult, cov: np.ndarray, rot: np.ndarray, loose: np.ndarray
+                  ) -> FrameResult:
+        """``r`` with its sd; NaN for the axes the detections leave undetermined (``loose``
+        free entries), and ``ambiguous`` where any is: other postures fit exactly as well."""
+        sd = self._axis_sd(cov, rot, r)
+        if not loose.any():
+            return replace(r, sd_deg=sd)
+        pr = self.problem
+        free = pr.free_idx
+        angle = free < pr.n_axes
+        sd[free[loose & angle]] = np.nan
+        for q in range(len(pr.free_chains)):  # a free root's Euler angles mix its offsets
+            ix = pr.root_axes[q]
+            if loose[np.isin(free, ix)].any():
+                sd[ix] = np.nan
+        status = Status.AMBIGUOUS if r.status in WITHIN else r.status
+        return replace(r, sd_deg=sd, status=status)
 
     def _axis_sd(self, cov: np.ndarray, rot: np.ndarray, r: FrameResult) -> np.ndarray:
         """Per-axis sd in degrees from the free entries' covariance ``cov`` (radians²)."""

@@ -263,3 +263,28 @@ def test_a_wrong_placement_held_is_searched_afresh():
     err = joint_errors(body, res, angles, roots)
     assert err[4:].max() < 0.5, err  # re-acquired where the limb is seen
     assert all(r.status == "ok" for r in res[4:])
+
+
+def test_a_frame_with_half_its_markers_on_detections_is_never_ok():
+    """Three of a free mouse's six markers, unlabelled, can be any three of them: a frame
+    whose posture puts only three markers on detections is ``ambiguous``, however well it
+    fits them (the real mouse: 22 mm off and ``ok`` before)."""
+    from dataclasses import replace
+
+    from kinematics.fit import noise
+    from kinematics.fit.result import Status
+
+    body = mouse_like()
+    cams = three_pinholes()
+    _, _, frames = planted_frames(body, cams, n=1)
+    frames[0] = [v[:3] for v in frames[0]]  # three detections per view
+    fitter = Fitter(body, cams, AnnealParams(noise_px=0.1, accept_setup=True))
+    obs = fitter.observations(frames)
+    fitter.noise = noise.NoiseModel(np.full(3, 0.1), "given")
+    base = fitter.fit_frame(frames[0])
+    extras = np.zeros(3, np.int64)
+    for on, want in ((3, Status.AMBIGUOUS), (4, Status.OK)):
+        res = np.full((3, 6), 30.0)
+        res[:, :on] = 0.05  # these markers on a detection in every view
+        r = replace(base, status=Status.OK, marker_residuals=res)
+        assert fitter._judge(obs, 0, r, extras)[0].status == want

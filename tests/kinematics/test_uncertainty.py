@@ -93,3 +93,38 @@ def test_no_noise_model_gives_no_sd(locust):
     dets = planted_detections(locust, cams, truth, seed=2)
     results = list(Fitter(locust, cams, AnnealParams.paper()).iter_fit(dets))
     assert all(r.sd_deg is None for r in results)
+
+
+def test_axes_the_markers_leave_undetermined_have_no_sd_and_their_frame_is_ambiguous():
+    """A free mouse body seen by its pelvis, then (frames 12-15) by its knee and ankle
+    only: 2 markers cannot place 9 free axes, so any value of some fits alike."""
+    from tests.fixtures.bodies import mouse_like
+    from tests.fixtures.cameras import three_pinholes
+    from tests.fixtures.planted import planted_frames
+
+    body = mouse_like()
+    cams = three_pinholes()
+    _, _, frames = planted_frames(body, cams, n=16)
+    knee_ankle = [body.marker_names.index(m) for m in ("kneeM", "ankle")]
+    for f in range(12, 16):
+        frames[f] = [v[knee_ankle] for v in frames[f]]
+    res = Fitter(body, cams, replace(AnnealParams(), noise_px=0.1, accept_setup=True)
+                 ).fit(frames)
+    for r in res[:11]:  # (frame 11's posture is pulled by the path toward frame 12's)
+        assert np.isfinite(r.sd_deg).all() and r.status != Status.AMBIGUOUS
+    for r in res[12:]:
+        assert np.isnan(r.sd_deg[:3]).all()  # the body's turn: no pelvis marker seen
+        assert r.status in (Status.AMBIGUOUS, Status.FAILED)
+
+
+def test_the_null_space_of_the_information_names_the_undetermined_axes():
+    from kinematics.fit.uncertainty import undetermined
+
+    rng = np.random.default_rng(0)
+    j = rng.normal(size=(12, 4))
+    full = j.T @ j
+    j[:, 3] = 0.0  # axis 3 moves no marker
+    j[:, 2] = j[:, 1]  # axes 1 and 2 move them alike: only their sum is determined
+    loose = undetermined(np.stack([full, j.T @ j]))
+    assert not loose[0].any()
+    assert loose[1].tolist() == [False, True, True, True]
