@@ -161,11 +161,14 @@ class ConfidenceMixin:
 
     def _few_matched(self, obs: Observations, r: FrameResult, frames: np.ndarray) -> bool:
         """Whether at most ``Tuning.few_matched_share`` of the markers the views show lie
-        on a detection (within the noise gate) in some view: unlabelled detections that few
-        can be any of the markers, and a posture that puts other markers on them fits as
-        well (a free mouse seen by 3 of its 6 markers)."""
+        on a detection (within the noise gate) in two views (in one, with one view showing
+        detections): unlabelled detections that few can be any of the markers, and a
+        posture that puts other markers on them fits as well (a free mouse seen by 3 of its
+        6 markers; a detection near a marker in one view of three is a coincidence as often
+        as not)."""
         gate = self.tuning.noise_gate_k * self.noise.sigma_px[:, None]
         res = r.marker_residuals
-        on = int((np.isfinite(res) & (res <= gate)).any(axis=0).sum())
+        need = min(2, int((obs.view_counts(frames)[0] > 0).sum()))
+        on = int(((np.isfinite(res) & (res <= gate)).sum(axis=0) >= max(need, 1)).sum())
         shown = int(self._shown(obs, frames)[0].max())
         return on <= self.tuning.few_matched_share * shown

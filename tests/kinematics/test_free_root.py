@@ -283,8 +283,10 @@ def test_a_frame_with_half_its_markers_on_detections_is_never_ok():
     fitter.noise = noise.NoiseModel(np.full(3, 0.1), "given")
     base = fitter.fit_frame(frames[0])
     extras = np.zeros(3, np.int64)
-    for on, want in ((3, Status.AMBIGUOUS), (4, Status.OK)):
+    for on, lone, want in ((3, 0, Status.AMBIGUOUS), (4, 0, Status.OK),
+                           (3, 2, Status.AMBIGUOUS)):
         res = np.full((3, 6), 30.0)
-        res[:, :on] = 0.05  # these markers on a detection in every view
+        res[:, :on] = 0.05  # these markers on a detection in every view ...
+        res[0, on: on + lone] = 0.05  # ... these in one view only: as likely a coincidence
         r = replace(base, status=Status.OK, marker_residuals=res)
         assert fitter._judge(obs, 0, r, extras)[0].status == want
