@@ -106,9 +106,9 @@ class Tuning:
     #: a view shows too few detections below this share of its markers (median frame)
     setup_detection_share: float = 0.25
     #: the residuals' core σ above detections' spacing / this: a nearest-detection match
-    #: means nothing there (a 4-σ gate then covers a third of the image; the stick insect's
-    #: chain on a locust: 7.8; a real mouse with 15-px spacing: 20)
-    setup_spacing_sigmas: float = 12.0
+    #: means nothing there (a 4-σ gate then reaches halfway to the next detection; the stick
+    #: insect's chain on a locust: 6.2; a fly with fused markers: 11.3; a real mouse: 20)
+    setup_spacing_sigmas: float = 8.0
     #: a frame is gross where a marker lies farther than claim_gate_px from every detection,
     #: no missing one excusing it; of labelled keypoints, more than this share (a keypoint
     #: may be mislabelled: a DLC-like file has one in most frames)

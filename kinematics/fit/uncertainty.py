@@ -7,7 +7,7 @@ the covariance of the angles is ``(J^T Σ^-1 J)^-1`` (the Cramér-Rao bound, whi
 squares optimum of refinement attains for Gaussian centroid noise). Where a frame is
 ``ambiguous`` its candidates' spread widens it: ``sd² + (spread / 2)²``. Locked and pinned
 axes get 0; frames without a fit or without pairs NaN; so do the axes the matched markers
-leave undetermined (:func:`undetermined`), and their frame is ``ambiguous``. The kernel is
+leave undetermined (:func:`undetermined`). The kernel is
 :func:`kinematics._kernels.uncertainty.information_frames`, its twin
 :func:`kinematics.fit.refine.cramer_rao_bound`.
 """
@@ -23,7 +23,7 @@ import numpy as np
 from kinematics._kernels import codes as _codes
 from kinematics._kernels import uncertainty as _uk
 from kinematics.fit.problem import euler_yxz_from_matrix
-from kinematics.fit.result import WITHIN, FrameResult, Status
+from kinematics.fit.result import FrameResult, Status
 from kinematics.model.rotations import euler_yxz
 from kinematics.observe.observations import Observations
 
@@ -100,10 +100,11 @@ class UncertaintyMixin:
     def _given_sd(self, r: FrameResult, cov: np.ndarray, rot: np.ndarray, loose: np.ndarray
                   ) -> FrameResult:
         """``r`` with its sd; NaN for the axes the detections leave undetermined (``loose``
-        free entries), and ``ambiguous`` where any is: other postures fit exactly as well."""
+        free entries: any value of them fits alike, where a pseudo-inverse would say 0)."""
         sd = self._axis_sd(cov, rot, r)
         if not loose.any():
             return replace(r, sd_deg=sd)
+
         pr = self.problem
         free = pr.free_idx
         angle = free < pr.n_axes
@@ -112,8 +113,7 @@ class UncertaintyMixin:
             ix = pr.root_axes[q]
             if loose[np.isin(free, ix)].any():
                 sd[ix] = np.nan
-        status = Status.AMBIGUOUS if r.status in WITHIN else r.status
-        return replace(r, sd_deg=sd, status=status)
+        return replace(r, sd_deg=sd)
 
     def _axis_sd(self, cov: np.ndarray, rot: np.ndarray, r: FrameResult) -> np.ndarray:
         """Per-axis sd in degrees from the free entries' covariance ``cov`` (radians²)."""
