@@ -84,9 +84,10 @@ def measure_sigma(residuals: Sequence[np.ndarray], floor: float, gate: float,
                   ) -> np.ndarray | None:
     """σ per view from the residuals (each (n_views, n_markers), NaN: none) of fitted frames:
     the Rayleigh σ whose ``quantile`` their matched residuals (within ``gate``) in that view
-    have, unbiased for the ``free_axes`` the fit absorbed from each frame's coordinates, at
-    least ``floor`` (a view without any: the other views' median). None with fewer than
-    ``least`` frames (a fit of a few frames cannot measure its video)."""
+    have (at least their median's), unbiased for the ``free_axes`` the fit absorbed from
+    each frame's coordinates, at least ``floor`` (a view without any: the other views'
+    median). None with fewer than ``least`` frames (a fit of a few frames cannot measure
+    its video)."""
     frames = [np.asarray(r, float) for r in residuals if r is not None and np.isfinite(r).any()]
     if len(frames) < least:
         return None
@@ -95,8 +96,9 @@ def measure_sigma(residuals: Sequence[np.ndarray], floor: float, gate: float,
     matched = np.isfinite(stack) & (stack <= gate)
     for v in range(stack.shape[1]):
         vals = stack[:, v][matched[:, v]]
-        if vals.size:
-            sigma[v] = float(np.quantile(vals, quantile)) / rayleigh_quantile(quantile)
+        if vals.size:  # the median's σ at least: a tail lighter than a Gaussian's lowers
+            sigma[v] = max(float(np.quantile(vals, q)) / rayleigh_quantile(q)  # nothing
+                           for q in (0.5, quantile))
     if not np.isfinite(sigma).any():
         return None
     coords = 2.0 * float(np.median(matched.sum(axis=(1, 2))))  # a frame's, typically

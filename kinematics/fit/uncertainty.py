@@ -23,7 +23,7 @@ import numpy as np
 from kinematics._kernels import codes as _codes
 from kinematics._kernels import uncertainty as _uk
 from kinematics.fit.problem import euler_yxz_from_matrix
-from kinematics.fit.result import WITHIN, FrameResult, Status
+from kinematics.fit.result import FrameResult, Status
 from kinematics.model.rotations import euler_yxz
 from kinematics.observe.observations import Observations
 
@@ -55,16 +55,6 @@ def undetermined(info: np.ndarray, rcond: float = 1e-9, share: float = 0.01) -> 
     w, v = np.linalg.eigh(info)
     null = w < rcond * np.maximum(w[:, -1:], 1e-300)
     return np.einsum("nij,nj->ni", v ** 2, null.astype(float)) > share
-
-
-def unusually_loose(loose: np.ndarray, fitted: np.ndarray) -> np.ndarray:
-    """(n,) bool: the frames with a loose entry (:func:`undetermined`) that most ``fitted``
-    frames of ``loose`` (n, n_free) determine. An entry loose in most frames is the chain's
-    (a roll about a segment whose markers lie on its axis), no sign of a frame gone wrong."""
-    if not fitted.any():
-        return np.zeros(len(loose), bool)
-    usual = loose[fitted].mean(axis=0) > 0.5
-    return (loose & ~usual).any(axis=1) & fitted
 
 
 class UncertaintyMixin:
@@ -104,16 +94,13 @@ class UncertaintyMixin:
         cov = np.linalg.pinv(info, hermitian=True)
         loose = undetermined(info)
         fitted = (pairs > 0) & np.isfinite(state[:, 0])
-        odd = unusually_loose(loose, fitted)
-        return [self._given_sd(r, cov[k], rot[k], loose[k], odd[k])
-                if fitted[k] else r for k, (_, r) in enumerate(batch)]
+        return [self._given_sd(r, cov[k], rot[k], loose[k]) if fitted[k] else r
+                for k, (_, r) in enumerate(batch)]
 
-    def _given_sd(self, r: FrameResult, cov: np.ndarray, rot: np.ndarray, loose: np.ndarray,
-                  unusual: bool) -> FrameResult:
+    def _given_sd(self, r: FrameResult, cov: np.ndarray, rot: np.ndarray, loose: np.ndarray
+                  ) -> FrameResult:
         """``r`` with its sd; NaN for the axes the detections leave undetermined (``loose``
-        free entries: any value of them fits alike, where a pseudo-inverse would say 0);
-        ``ambiguous`` where one of them is ``unusual`` (determined in most frames: a knee's
-        flexion with the ankle not seen)."""
+        free entries: any value of them fits alike, where a pseudo-inverse would say 0)."""
         sd = self._axis_sd(cov, rot, r)
         if not loose.any():
             return replace(r, sd_deg=sd)
@@ -125,8 +112,7 @@ class UncertaintyMixin:
             ix = pr.root_axes[q]
             if loose[np.isin(free, ix)].any():
                 sd[ix] = np.nan
-        status = Status.AMBIGUOUS if unusual and r.status in WITHIN else r.status
-        return replace(r, sd_deg=sd, status=status)
+        return replace(r, sd_deg=sd)
 
     def _axis_sd(self, cov: np.ndarray, rot: np.ndarray, r: FrameResult) -> np.ndarray:
         """Per-axis sd in degrees from the free entries' covariance ``cov`` (radians²)."""

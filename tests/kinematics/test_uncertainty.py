@@ -130,14 +130,3 @@ def test_the_null_space_of_the_information_names_the_undetermined_axes():
     assert loose[1].tolist() == [False, True, True, True]
 
 
-
-def test_only_an_axis_usually_determined_flags_the_frames_that_lose_it():
-    from kinematics.fit.uncertainty import unusually_loose
-
-    loose = np.zeros((10, 4), bool)
-    loose[:, 3] = True  # the chain's: never determined
-    loose[7:9, 1] = True  # determined in 8 of 10 frames, not in 7 and 8
-    fitted = np.ones(10, bool)
-    fitted[9] = False
-    assert np.flatnonzero(unusually_loose(loose, fitted)).tolist() == [7, 8]
-    assert not unusually_loose(loose, np.zeros(10, bool)).any()
