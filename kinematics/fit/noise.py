@@ -4,15 +4,16 @@ residuals against it.
 σ is measured once per video, on a sample of its frames: under a right posture and set-up a
 matched marker lies about σ from its detection (a 2D residual of Rayleigh distribution, whose
 q-quantile is σ √(-2 ln(1 - q))). σ is read at the quantile ``Tuning.noise_sigma_quantile``
-(0.9) of the sample's matched residuals, not their median: on a real animal the residuals are
-detection noise plus the chain's misfit (skin markers slide), whose tail is heavier than a
-Gaussian's, and a median-based σ failed 55 % of a mouse's right frames (the 0.9 quantile: 4 %);
-a quantile is still robust to the frames that went wrong as long as they give fewer than a
-tenth of the matched residuals. The fit absorbed the free axes of the m marker coordinates, so
-the residuals' σ is made unbiased by √(m / (m - free axes)); σ is then bounded below by
-``noise_floor_px`` (a detector's centroid is never exact to better than that; renders are).
-A σ far above what the detections allow is a set-up fault (:mod:`kinematics.fit.setup_check`),
-not noise, so a wrong camera or chain cannot raise σ until garbage passes.
+(0.9) of the sample's matched residuals, and at least at their median: on a real animal the
+residuals are detection noise plus the chain's misfit (skin markers slide), whose tail is
+heavier than a Gaussian's, and a median-based σ failed 55 % of a mouse's right frames (the 0.9
+quantile: 4 %); a quantile is still robust to the frames that went wrong as long as they give
+fewer than a tenth of the matched residuals. The fit absorbed the free axes of the m marker
+coordinates, so the residuals' σ is made unbiased by √(m / (m - free axes)); σ is then bounded
+below by ``noise_floor_px`` (a detector's centroid is never exact to better than that; renders
+are). A σ far above what the detections allow is a set-up fault
+(:mod:`kinematics.fit.setup_check`), not noise, so a wrong camera or chain cannot raise σ
+until garbage passes.
 
 A frame passes when its residuals are what σ allows:
 

@@ -157,9 +157,7 @@ class ReacquireMixin:
         and re-fitted: the better of that fit and ``r``, and the track to carry on (None
         once it has merged with the seeds' or lost its constellation)."""
         pose = self._registered(obs, k, position, track, models, seeds_pos, seeds_rot)
-        if pose is None:
-            return r, passed, None
-        if not pose:  # the seeds agree with the track: merged
+        if not pose:  # the track's constellation lost (None), or merged with the seeds ({})
             return r, passed, None
         fit = self._refit(obs, k, position, [pose], seeds_pos, seeds_rot, extras)[0]
         if self._better(fit, (r, passed)):
