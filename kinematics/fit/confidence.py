@@ -115,11 +115,16 @@ class ConfidenceMixin:
         source = "measured"
         if p.noise_px is not None:  # labelled: the outliers are measured all the same
             sigma, source = np.full(obs.n_views, float(p.noise_px)), "given"
-        outliers = (noise.usual_outliers([r.marker_residuals for _, r in counted], sigma,
-                                         self.tuning.noise_gate_k,
+        residuals = [r.marker_residuals for _, r in counted]
+        scale = (noise.measure_marker_scale(residuals, sigma, float(p.claim_gate_px),
+                                            self.tuning.noise_sigma_quantile)
+                 if source == "measured" else None)
+        model = noise.NoiseModel(sigma, source, None, scale)
+        outliers = (noise.usual_outliers(residuals, model.per_image(len(self.body.marker_names)),
+                                         self.tuning.noise_gate_k, self.tuning.noise_p,
                                          self.tuning.noise_outlier_share)
                     if obs.labelled else None)
-        self.noise = noise.NoiseModel(sigma, source, outliers)
+        self.noise = model._replace(outliers=outliers)
         if source == "given":
             return
         positions = np.array([pos for pos, _ in counted], np.int64)
@@ -149,15 +154,31 @@ class ConfidenceMixin:
         if not r.runs or r.marker_residuals is None or r.marker_residuals.shape[0] == 0:
             return r, None
         frames = np.array([position], np.int64)
-        v = noise.verdict(r.marker_residuals, self.noise.sigma_px, obs.view_counts(frames)[0],
-                          self._shown(obs, frames)[0], extras, len(self.problem.free_idx),
-                          self.tuning.noise_gate_k, self.tuning.noise_p, self.noise.outliers,
-                          float(self.params.claim_gate_px))
+        res, t = r.marker_residuals, self.tuning
+        sigma = self.noise.per_image(res.shape[1])
+        counts, shown = obs.view_counts(frames)[0], self._shown(obs, frames)[0]
+        args = (res, sigma, counts, shown, extras, len(self.problem.free_idx), t.noise_gate_k,
+                t.noise_p, self.noise.outliers, float(self.params.claim_gate_px))
+        v = noise.verdict(*args)
+        gate = noise.gate_px(res, sigma, t.noise_gate_k, t.noise_p)
+        if (v.passed and not obs.labelled
+                and noise.excuse_matters(res, gate, counts, shown, extras)):
+            v = noise.verdict(*args, fused=self._fused(obs, position, r, gate))
         if not v.passed and r.status in JUDGED:
             r = replace(r, status=Status.FAILED)
         elif r.status in WITHIN and not obs.labelled and self._few_matched(obs, r, frames):
             r = replace(r, status=Status.AMBIGUOUS)
         return r, v
+
+    def _fused(self, obs: Observations, position: int, r: FrameResult, gate: np.ndarray
+               ) -> np.ndarray:
+        """Per view, the missing detections that fused blobs account for in ``r``'s posture
+        (:func:`noise.fused_markers`)."""
+        state, pos, rot = self.problem.state(r.angles_deg, r.root_positions)
+        proj = self._project_state(state, pos, rot)
+        arrays = obs.arrays(np.array([position], np.int64))
+        return noise.fused_markers(proj, arrays.points, arrays.offsets, gate,
+                                   np.isfinite(r.marker_residuals))
 
     def _few_matched(self, obs: Observations, r: FrameResult, frames: np.ndarray) -> bool:
         """Whether at most ``Tuning.few_matched_share`` of the markers the views show lie
@@ -166,8 +187,8 @@ class ConfidenceMixin:
         posture that puts other markers on them fits as well (a free mouse seen by 3 of its
         6 markers; a detection near a marker in one view of three is a coincidence as often
         as not)."""
-        gate = self.tuning.noise_gate_k * self.noise.sigma_px[:, None]
-        res = r.marker_residuals
+        res = r.marker_residuals  # the plain gate: a wider one would call more markers on
+        gate = self.tuning.noise_gate_k * self.noise.per_image(res.shape[1])
         need = min(2, int((obs.view_counts(frames)[0] > 0).sum()))
         on = int(((np.isfinite(res) & (res <= gate)).sum(axis=0) >= max(need, 1)).sum())
         shown = int(self._shown(obs, frames)[0].max())

@@ -15,12 +15,21 @@ are). A σ far above what the detections allow is a set-up fault
 (:mod:`kinematics.fit.setup_check`), not noise, so a wrong camera or chain cannot raise σ
 until garbage passes.
 
+A marker the chain fits worse than the others (a coxa marker the rigid chain misplaces by
+0.1-0.2 mm on a fly, a sliding skin marker) has residuals wider than its view's σ on every
+frame: its σ is its view's times its own scale (:func:`measure_marker_scale`, at least 1),
+measured on the same sample, so that one marker's misfit does not fail most frames.
+
 A frame passes when its residuals are what σ allows:
 
-* each marker image within ``Tuning.noise_gate_k`` σ of its detection is matched; one farther
-  off (or without one) is unmatched, and is allowed only where its view shows fewer
-  detections than it has markers plus the video's usual extras (an occluded or fused
-  marker); any unmatched marker beyond those fails the frame;
+* each marker image within k σ of its detection is matched, k such that all n marker images of
+  a right frame fall within it with probability 1 - ``Tuning.noise_p`` (:func:`gate_k`, at
+  least ``Tuning.noise_gate_k``: a fly's 180 images need 4.9 σ, where 4 σ put one of them
+  outside on 6 % of right frames); one farther off (or without one) is unmatched, and is
+  allowed only where its view shows fewer detections than it has markers plus the video's
+  usual extras (an occluded marker), less the detections that are fused blobs (two markers
+  matched to one detection account for one missing detection, not for a third marker far
+  off); any unmatched marker beyond those fails the frame;
 * labelled keypoints are measured to their own label, so a missing one has no residual; a
   labeller mislabels a share of them, so a frame may have as many off their label per view as
   ``Tuning.noise_outlier_share`` of the sample frames have at most (:func:`usual_outliers`);
@@ -40,12 +49,18 @@ from scipy.stats import chi2
 
 
 class NoiseModel(NamedTuple):
-    """σ per view (pixels), how it was found, and (labelled keypoints) the keypoints per view
-    a frame may have off their label."""
+    """σ per view (pixels), how it was found, (labelled keypoints) the keypoints per view a
+    frame may have off their label, and each marker's σ as a multiple of its view's."""
 
     sigma_px: np.ndarray  # (n_views,)
     source: str  # "measured" (on a sample of the video's frames) or "given"
     outliers: np.ndarray | None = None  # (n_views,) int, labelled keypoints only
+    marker_scale: np.ndarray | None = None  # (n_markers,) >= 1; None: 1 for every marker
+
+    def per_image(self, n_markers: int) -> np.ndarray:
+        """(n_views, n_markers) σ of each marker image."""
+        scale = np.ones(n_markers) if self.marker_scale is None else self.marker_scale
+        return self.sigma_px[:, None] * scale[None, :]
 
     def to_record(self) -> dict:
         """As plain numbers (a results sidecar keeps it)."""
@@ -53,22 +68,28 @@ class NoiseModel(NamedTuple):
         out = {"sigma_px": [float(s) for s in self.sigma_px], "source": self.source}
         if self.outliers is not None:
             out["outliers"] = [int(k) for k in self.outliers]
+        if self.marker_scale is not None:
+            out["marker_scale"] = [float(w) for w in self.marker_scale]
         return out
 
     @classmethod
-    def from_record(cls, record, n_views: int) -> NoiseModel | None:
+    def from_record(cls, record, n_views: int, n_markers: int) -> NoiseModel | None:
         """:meth:`to_record`'s record read back, or None where it is not one of ``n_views``
-        views (a sidecar of other views, or edited by hand)."""
+        views and ``n_markers`` markers (a sidecar of other views, or edited by hand)."""
         try:
             sigma = np.array([float(s) for s in record["sigma_px"]])
             outliers = record.get("outliers")
             outliers = None if outliers is None else np.array([int(k) for k in outliers])
+            scale = record.get("marker_scale")
+            scale = None if scale is None else np.array([float(w) for w in scale])
         except (KeyError, TypeError, ValueError, AttributeError):
             return None
         if (sigma.shape != (n_views,) or not (np.isfinite(sigma) & (sigma > 0)).all()
-                or (outliers is not None and outliers.shape != (n_views,))):
+                or (outliers is not None and outliers.shape != (n_views,))
+                or (scale is not None and (scale.shape != (n_markers,)
+                                           or not (np.isfinite(scale) & (scale >= 1)).all()))):
             return None
-        return cls(sigma, str(record.get("source", "measured")), outliers)
+        return cls(sigma, str(record.get("source", "measured")), outliers, scale)
 
 
 class FrameCounts(NamedTuple):
@@ -115,6 +136,36 @@ def rayleigh_quantile(q: float) -> float:
     return float(np.sqrt(-2.0 * np.log1p(-q)))
 
 
+def measure_marker_scale(residuals: Sequence[np.ndarray], sigma: np.ndarray, gate: float,
+                         quantile: float = 0.9, least: int = 16, cap: float = 3.0
+                         ) -> np.ndarray | None:
+    """Each marker's σ as a multiple of its view's (``sigma``) from the residuals (each
+    (n_views, n_markers)) of a sample's fitted frames: the ``quantile`` of its matched
+    residuals (within ``gate``) in units of their view's σ, over the Rayleigh quantile,
+    between 1 and ``cap``; 1 for a marker with fewer than ``least`` of them. None where every
+    marker's is 1."""
+    frames = [np.asarray(r, float) for r in residuals if r is not None and np.isfinite(r).any()]
+    if not frames:
+        return None
+    stack = np.stack(frames)  # (n, n_views, n_markers)
+    matched = np.isfinite(stack) & (stack <= gate)
+    z = stack / np.asarray(sigma, float)[None, :, None]
+    scale = np.ones(stack.shape[2])
+    for m in range(stack.shape[2]):
+        vals = z[:, :, m][matched[:, :, m]]
+        if vals.size >= least:
+            scale[m] = float(np.quantile(vals, quantile)) / rayleigh_quantile(quantile)
+    scale = np.clip(scale, 1.0, cap)
+    return None if (scale == 1.0).all() else scale
+
+
+def gate_k(n_images: int, p: float, least: float) -> float:
+    """The gate in σ that all ``n_images`` marker images of a right frame fall within with
+    probability about 1 - ``p`` (each 2D Gaussian residual lies beyond k σ with probability
+    exp(-k²/2)), at least ``least``."""
+    return max(float(least), float(np.sqrt(2.0 * np.log(max(n_images, 1) / p))))
+
+
 def usual_extras(detections: np.ndarray, shown: np.ndarray, share: float = 0.9) -> np.ndarray:
     """Per view, the extra detections (beyond the markers shown) that ``share`` of the frames
     have at most: static and flickering ghosts the video always has are no sign of an
@@ -125,13 +176,15 @@ def usual_extras(detections: np.ndarray, shown: np.ndarray, share: float = 0.9) 
     return np.ceil(np.quantile(extra, share, axis=0)).astype(np.int64)
 
 
-def usual_outliers(residuals: Sequence[np.ndarray], sigma: np.ndarray, gate_k: float,
-                   share: float = 0.9) -> np.ndarray:
-    """Per view, the labelled keypoints farther than ``gate_k`` σ from their label that
-    ``share`` of the frames (residuals of a sample, each (n_views, n_markers)) have at most:
-    the labeller's mislabels, no sign of a wrong posture."""
-    off = np.stack([(np.isfinite(r) & (r > gate_k * sigma[:, None])).sum(axis=1)
-                    for r in residuals])
+def usual_outliers(residuals: Sequence[np.ndarray], sigma: np.ndarray, least_k: float,
+                   p: float, share: float = 0.9) -> np.ndarray:
+    """Per view, the labelled keypoints off their label (beyond :func:`gate_k` σ; ``sigma``
+    (n_views, n_markers) or per view) that ``share`` of the frames (residuals of a sample,
+    each (n_views, n_markers)) have at most: the labeller's mislabels, no sign of a wrong
+    posture."""
+    sigma = _per_image(sigma, np.asarray(residuals[0]).shape[1])
+    off = np.stack([(np.isfinite(r) & (r > gate_k(int(np.isfinite(r).sum()), p, least_k)
+                                       * sigma)).sum(axis=1) for r in residuals])
     return np.ceil(np.quantile(off, share, axis=0)).astype(np.int64)
 
 
@@ -153,27 +206,70 @@ class Verdict(NamedTuple):
     limit: float  # its χ² limit
 
 
+def _per_image(sigma: np.ndarray, n_markers: int) -> np.ndarray:
+    sigma = np.asarray(sigma, float)
+    return sigma if sigma.ndim == 2 else np.repeat(sigma[:, None], n_markers, axis=1)
+
+
+def gate_px(residuals: np.ndarray, sigma: np.ndarray, least_k: float, p: float) -> np.ndarray:
+    """(n_views, n_markers) gate of a frame's marker images in px: :func:`gate_k` σ for the
+    images with a residual."""
+    r = np.asarray(residuals, float)
+    return gate_k(int(np.isfinite(r).sum()), p, least_k) * _per_image(sigma, r.shape[1])
+
+
 def verdict(residuals: np.ndarray, sigma: np.ndarray, detections: np.ndarray,
-            shown: np.ndarray, extras: np.ndarray, free_axes: int, gate_k: float,
-            p: float, outliers: np.ndarray | None, gross_px: float = np.inf) -> Verdict:
+            shown: np.ndarray, extras: np.ndarray, free_axes: int, least_k: float,
+            p: float, outliers: np.ndarray | None, gross_px: float = np.inf,
+            fused: np.ndarray | None = None) -> Verdict:
     """:class:`Verdict` of one frame: ``residuals`` (n_views, n_markers) in px (NaN: no
-    detection to measure to), ``sigma`` (n_views,), and per view the ``detections`` shown,
-    the markers ``shown`` and the usual ``extras``. ``outliers`` (labelled keypoints, which
-    are measured to their own label, so a missing one is NaN): per view, the keypoints off
-    their label a frame may have; None for unlabelled detections. ``gross``
+    detection to measure to), ``sigma`` (n_views, n_markers; or per view), and per view the
+    ``detections`` shown, the markers ``shown``, the usual ``extras`` and the ``fused``
+    detections' extra markers (:func:`fused_markers`; None: none). ``outliers`` (labelled
+    keypoints, which are measured to their own label, so a missing one is NaN): per view, the
+    keypoints off their label a frame may have; None for unlabelled detections. ``gross``
     counts the unmatched beyond ``gross_px`` the same way (what the set-up check reads)."""
     r = np.asarray(residuals, float)
-    gate = gate_k * sigma[:, None]
+    sigma = _per_image(sigma, r.shape[1])
+    gate = gate_px(r, sigma, least_k, p)
     finite = np.isfinite(r)
     matched = finite & (r <= gate)
     off = (finite & ~matched).sum(axis=1)
-    excused = (np.asarray(outliers) if outliers is not None
-               else np.maximum(shown + extras - detections, 0))
+    missing = shown + extras - detections - (0 if fused is None else fused)
+    excused = np.asarray(outliers) if outliers is not None else np.maximum(missing, 0)
     unmatched = int(np.maximum(off - excused, 0).sum())
     far = (finite & ~(r <= np.maximum(gate, gross_px))).sum(axis=1)
     gross = int(np.maximum(far - excused, 0).sum())
     n = int(matched.sum())
-    stat = float(np.sum(np.where(matched, r / sigma[:, None], 0.0) ** 2))
+    stat = float(np.sum(np.where(matched, r / sigma, 0.0) ** 2))
     limit = chi2_limit(p, max(1, 2 * n - free_axes))
     return Verdict(unmatched == 0 and stat <= limit, unmatched, gross, int(finite.sum()), stat,
                    limit)
+
+
+def excuse_matters(residuals: np.ndarray, gate: np.ndarray, detections: np.ndarray,
+                   shown: np.ndarray, extras: np.ndarray) -> bool:
+    """Whether a view has a marker beyond ``gate`` that its missing detections excuse (only
+    then can :func:`fused_markers` change a verdict)."""
+    r = np.asarray(residuals, float)
+    off = (np.isfinite(r) & (r > gate)).sum(axis=1)
+    return bool(((off > 0) & (shown + extras - detections > 0)).any())
+
+
+def fused_markers(proj: np.ndarray, points: np.ndarray, view_off: np.ndarray,
+                  gate: np.ndarray, seen: np.ndarray) -> np.ndarray:
+    """Per view, the ``seen`` markers within ``gate`` (n_views, n_markers, px) of a
+    detection whose nearest detection is also another such marker's, less one per such
+    detection: a blob of k fused markers stands for k - 1 missing detections. ``proj``
+    (n_views, n_markers, 2) the projected markers, ``points`` the detections of all views,
+    ``view_off`` each view's first."""
+    out = np.zeros(proj.shape[0], np.int64)
+    for v in range(proj.shape[0]):
+        d = points[view_off[v]: view_off[v + 1], :2]
+        if len(d) == 0:
+            continue
+        dist = np.linalg.norm(proj[v][:, None, :] - d[None], axis=2)
+        near = dist.argmin(axis=1)
+        within = seen[v] & (dist[np.arange(len(near)), near] <= gate[v])
+        out[v] = int(within.sum()) - np.unique(near[within]).size
+    return out

@@ -222,8 +222,9 @@ class AnnealParams:
     noise_floor_px: float | None = setting(
         0.5, "The noise model: each view's detection noise σ is measured on the video's "
         "best-fitting frames (at least this, pixels), and a frame whose marker residuals "
-        "are not what σ allows is 'failed' however low its E: a marker image more than 4 σ "
-        "from its detection that no missing detection excuses, or residuals whose sum of "
+        "are not what σ allows is 'failed' however low its E: a marker image beyond the gate "
+        "(4-5 σ, wider with more marker images) from its detection that no missing detection "
+        "excuses, or residuals whose sum of "
         "squares in σ passes the χ² test (docs/concepts.md, 'What a status means'). None, "
         "written 0 in a project file: no noise test (the paper: E against the threshold "
         "only).", min=0.0, max=1e6, none=0.0)

@@ -92,9 +92,12 @@ class Tuning:
     #: a frame with at most this share of its markers on a detection is ambiguous
     #: (unlabelled: a free mouse seen by 3 of 6 markers was placed 22 mm off, "ok")
     few_matched_share: float = 0.5
-    #: a marker image this many σ from its detection is unmatched (Rayleigh tail 3e-4)
+    #: a marker image beyond the gate (σ) from its detection is unmatched; the gate is at
+    #: least this, wider as a frame has more images (noise.gate_k: 4 σ failed 6 % of a
+    #: fly's right frames, 180 images, on noise alone)
     noise_gate_k: float = 4.0
-    #: a frame's matched residuals fail above the χ² quantile 1 - this
+    #: a right frame fails a test with about this probability: its matched residuals' χ²
+    #: quantile, and the gate all its images fall within
     noise_p: float = 1e-3
     #: two views agree where this share more of the detections lie nearer the other's
     #: epipolar lines than chance puts them (a 70-ghost sweep: 0.07; swapped cameras: 0.00)

@@ -212,9 +212,10 @@ def test_export_results(tmp_path, suffix):
         np.testing.assert_allclose(motion.values[:5], res.angles_deg[:5])
 
 
-def test_results_keep_their_sd_through_the_csv_and_into_nwb(tmp_path):
-    """The ``.sd`` columns round-trip through the results CSV; an NWB export carries them
-    as ``JointAngleSD`` (a failed row's empty, as its angles)."""
+def test_results_keep_their_sd_through_the_csv_and_into_mot_and_nwb(tmp_path):
+    """The ``.sd`` columns round-trip through the results CSV; a ``.mot`` export carries them
+    as columns ``<axis>.sd``, an NWB export as ``JointAngleSD`` (a failed row's empty, as
+    its angles)."""
     from dataclasses import replace
 
     from videotrack.io.export import export_results
@@ -231,6 +232,12 @@ def test_results_keep_their_sd_through_the_csv_and_into_nwb(tmp_path):
     np.testing.assert_array_equal(frame_results(back, 0)[2].sd_deg, res.sd[2])
     older = replace(res, sd=None)  # a file without the columns reads as before
     assert read_results(write_results(tmp_path / "old.results.csv", older, {})).sd is None
+    from videotrack.io.mot import read_mot
+
+    motion = read_mot(export_results(res, tmp_path / "walk.mot"))  # .mot: columns of their own
+    assert motion.names == ("J0.phi", "J1.beta", "J0.phi.sd", "J1.beta.sd")
+    np.testing.assert_allclose(motion.values[:5, 3], res.sd[:5, 1], atol=1e-6)
+    assert np.isnan(motion.values[5, 3])  # a failed row's, as its angles
     pytest.importorskip("ndx_pose")
     import pynwb
 

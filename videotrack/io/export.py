@@ -48,8 +48,10 @@ def export_results(results, path: str | os.PathLike, *, units: str = "mm",
     if suffix == ".trc":
         from videotrack.io.trc import write_trc
         write_trc(path, names, points, frames, rate, units)
-    elif suffix == ".mot":
+    elif suffix == ".mot":  # each axis' sd as a column of its own (OpenSim ignores it)
         from videotrack.io.mot import write_mot
+        if sd is not None:
+            axes, angles = axes + [f"{a}.sd" for a in axes], np.hstack([angles, sd])
         write_mot(path, axes, angles, frames, rate)
     elif suffix == ".c3d":
         from videotrack.io.c3d import write_c3d

@@ -75,7 +75,8 @@ def fit_project(
         params = replace(params, match=match)
     fitter = model.fitter(params=params)
     if done and noise is not None:  # the rest judged by the noise that judged the frames kept
-        fitter.fixed_noise = NoiseModel.from_record(noise, len(model.view_names))
+        fitter.fixed_noise = NoiseModel.from_record(noise, len(model.view_names),
+                                                   len(model.body.marker_names))
     if done and resumed is not None:
         resumed(len(done), len(idx))
     for r in done.values():
