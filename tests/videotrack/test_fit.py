@@ -154,3 +154,18 @@ def test_frames_without_detections_get_nan_points(locust, tmp_path):
     with pytest.raises(VideoTrackError, match="not a VideoTrack results file"):
         (tmp_path / "x.csv").write_text("a,b\n1,2\n")
         read_results(tmp_path / "x.csv")
+
+
+def test_frames_beyond_the_detections_are_refused_or_said(project, tmp_path, capsys):
+    # 16 records: a range past them all is a one-line error (it was "internal error"), a
+    # range running past the end fits what there is and says so
+    code = main(["fit", str(project / "project.toml"), "--frames", "500:600",
+                 "--results", str(tmp_path / "x.csv")])
+    err = capsys.readouterr().err
+    assert code == 1 and "500:600 selects no record" in err and "16 records" in err
+    assert "internal error" not in err and not (tmp_path / "x.csv").exists()
+    code = main(["fit", str(project / "project.toml"), "--frames", "14:40", "--n-end", "500",
+                 "--results", str(tmp_path / "y.csv")])
+    err = capsys.readouterr().err
+    assert code == 0 and "frames 14:40: the detections have 16 records; fitting 14:16" in err
+    assert len(read_results(tmp_path / "y.csv")) == 2

@@ -291,6 +291,20 @@ def _set_threads(threads: int) -> None:
         numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
 
 
+def _selected(frames: slice, n: int, log) -> range:
+    """The records of ``frames`` among ``n``: refused where it selects none, said where it
+    runs past the end."""
+    idx = range(*frames.indices(n))
+    asked = f"{frames.start or 0}:{'' if frames.stop is None else frames.stop}"
+    if len(idx) == 0:
+        raise VideoTrackError(f"{asked} selects no record: the detections have {n} records "
+                              f"(0:{n})", field="frames")
+    if frames.stop is not None and frames.stop > n and log is not None:
+        log(f"frames {asked}: the detections have {n} records; fitting "
+            f"{idx.start}:{idx.stop}")
+    return idx
+
+
 def _fit(run: ProjectRun, model: ProjectModel, frames: slice | None, force: bool,
          threads: int, report, log, notes: Sequence[str] = (),
          stream: FitAlongside | None = None) -> ProjectRun:
@@ -301,7 +315,7 @@ def _fit(run: ProjectRun, model: ProjectModel, frames: slice | None, force: bool
     detections, out = run.detections, run.results_path
     check_detection_views(model, detections, run.detections_path)
     n = detections.n_records
-    idx = None if frames is None else range(*frames.indices(n))
+    idx = None if frames is None else _selected(frames, n, log)
     why = ("--force" if force else
            f"records {idx.start}:{idx.stop}" if idx is not None else
            results_stale_reason(model, _source(detections, run.detections_path), out, n))
