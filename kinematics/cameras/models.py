@@ -55,6 +55,10 @@ def _is_number_tree(value) -> bool:
     )
 
 
+#: The largest number a camera may hold (focal lengths in pixels, positions in µm: 1e7).
+MAX_NUMBER = 1e12
+
+
 def _as_float_array(value, shape: tuple[int, ...] | None, field: str, *, ravel=False):
     """Validate ``value`` as a finite float64 array of ``shape``; return it read-only.
 
@@ -75,6 +79,9 @@ def _as_float_array(value, shape: tuple[int, ...] | None, field: str, *, ravel=F
         raise KinematicsError(f"expected {want}, got shape {arr.shape}", field=field)
     if not np.all(np.isfinite(arr)):
         raise KinematicsError("must be finite (no NaN or inf)", field=field)
+    if arr.size and np.abs(arr).max() > MAX_NUMBER:  # a typo: a projection would overflow
+        raise KinematicsError(f"{np.abs(arr).max():g} is out of range (at most "
+                              f"{MAX_NUMBER:g} in size)", field=field)
     arr.setflags(write=False)
     return arr
 

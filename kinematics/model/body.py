@@ -257,6 +257,10 @@ def _mean_in_range(axis: Axis) -> float:
     return m + 360.0 * np.round((centre - m) / 360.0)
 
 
+#: The longest segment a body may have (a human in nanometres is 2e9).
+MAX_LENGTH = 1e12
+
+
 def validate_body(body: Body) -> None:
     """Raise :class:`KinematicsError` naming the element for the first rule broken.
 
@@ -313,6 +317,9 @@ def validate_body(body: Body) -> None:
             if not np.isfinite(seg.length) or seg.length < 0:
                 raise KinematicsError(f"length must be finite and >= 0, got {seg.length}",
                                       field=sw)
+            if seg.length > MAX_LENGTH:  # a typo: the kinematics' squares would overflow
+                raise KinematicsError(f"length {seg.length:g} is out of range (at most "
+                                      f"{MAX_LENGTH:g})", field=sw)
             _check_vec(seg.rotation_deg, f"{sw} rotation")
             for m in seg.markers:
                 unique("marker", m.name)

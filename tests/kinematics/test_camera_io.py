@@ -163,6 +163,10 @@ PIN = '[cameras.cam]\ntype = "pinhole"\nK = [[800.0, 0.0, 320.0], [0.0, 800.0, 2
         (SIDE.replace("orthographic", "fisheye"), 2, "cameras.side.type", "'fisheye'"),
         (SIDE.replace("scale = 2.0", "scale = nan"), 3, "cameras.side.scale", "finite"),
         (SIDE.replace("scale = 2.0", 'scale = "2"'), 3, "cameras.side.scale", "numbers"),
+        (SIDE.replace("scale = 2.0", "scale = 1e308"), 3, "cameras.side.scale",
+         "1e+308 is out of range"),
+        (PIN.replace("800.0, 0.0, 320.0", "8e300, 0.0, 320.0") + "rvec = [0, 0, 0]\n"
+         "t = [0, 0, 1]\n", 3, "cameras.cam.K", "out of range"),
         (SIDE.replace("scale = 2.0\n", ""), 1, "cameras.side.scale", "missing key 'scale'"),
         (SIDE.replace('"-y"', '"up"'), 4, "cameras.side.axes", "signed world axis"),
         (SIDE + "matrix = [[1.0, 0, 0, 0], [0, 1.0, 0, 0]]\n", 3, "cameras.side.scale",

@@ -152,6 +152,7 @@ BROKEN = {
     "inf": ('max="220"', 'max="INF"', "INF", "'INF' is not a finite number"),
     "-inf locked": ('locked="0"', 'locked="-INF"', "INF", "not a finite number"),
     "overflow": ('length="91"', 'length="1e400"', "1e400", "'1e400' is not a finite number"),
+    "huge": ('length="91"', 'length="1e308"', "1e308", "length 1e+308 is out of range"),
     "nan vector": ('orientation="0 0 180"', 'orientation="0 NaN 180"', "NaN", "finite"),
     "vector too short": ('position="0 0 0"', 'position="0 0"', "<root", "has 2 numbers, needs 3"),
     "min > max": ('min="-30" max="60"', 'min="60" max="-30"', 'min="60"', "greater than max"),

@@ -171,3 +171,15 @@ def test_dlt_refuses_a_camera_at_the_world_origin(tmp_path):
     with pytest.raises(KinematicsError, match=r"d.csv: cameras.ref: DLT-11 cannot describe"):
         save_dlt_csv(tmp_path / "d.csv", [cam])
     assert not (tmp_path / "d.csv").exists()
+
+
+def test_dlt_coefficients_that_are_not_numbers_are_named():
+    from videotrack.io.camera_formats import camera_from_dlt
+
+    good = np.r_[np.ones(7), 1.0, 0.001, 0.002, 0.003]
+    bad = good.copy()
+    bad[4] = np.nan
+    with pytest.raises(KinematicsError, match=r"DLT coefficient 5 of 11 is nan"):
+        camera_from_dlt("c", bad, origin="top-left")
+    with pytest.raises(KinematicsError, match=r"expected 11 DLT coefficients, got 10"):
+        camera_from_dlt("c", good[:10], origin="top-left")

@@ -149,8 +149,12 @@ def camera_from_dlt(name: str, coefficients, size=None, origin: str = "bottom-le
     warning when it is larger than 0.1 % of the focal length.
     """
     L = np.asarray(coefficients, dtype=np.float64)
-    if L.shape != (11,) or not np.all(np.isfinite(L)):
-        raise KinematicsError(f"expected 11 finite DLT coefficients, got {L.size}", field=field)
+    if L.shape != (11,):
+        raise KinematicsError(f"expected 11 DLT coefficients, got {L.size}", field=field)
+    if not np.all(np.isfinite(L)):
+        bad = int(np.flatnonzero(~np.isfinite(L))[0])
+        raise KinematicsError(f"DLT coefficient {bad + 1} of 11 is {L[bad]} (must be finite)",
+                              field=field)
     P = np.append(L, 1.0).reshape(3, 4)
     if origin == "bottom-left":
         if size is None:

@@ -18,10 +18,11 @@ from videotrack.errors import VideoTrackError
 
 
 def format_cell(v: float) -> str:
-    """A number as a CSV cell: shortest exact form, integers without a point, NaN empty."""
+    """A number as a CSV cell: shortest exact form, integers without a point, NaN empty,
+    infinities as ``inf``."""
     if v != v:  # NaN
         return ""
-    if v == int(v) and abs(v) < 1e15:
+    if abs(v) < 1e15 and v == int(v):
         return str(int(v))
     return repr(float(v))
 
