@@ -1,4 +1,5 @@
-"""Atomic file writing: every output of the project goes through :func:`atomic_write`.
+"""Atomic file writing: every output of the project goes through :func:`atomic_write`;
+and :func:`parse_toml`, which every TOML file is read by.
 
 A reader (or a resumed batch job) sees either the old file or the complete new one, never a
 half-written file: the data goes to a temporary file in the same folder, is flushed to disk,
@@ -10,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import os
 import tempfile
+import tomllib
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -60,3 +62,25 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
     with atomic_write(path, "wb") as fh:
         fh.write(data)
 
+
+
+def parse_toml(text: str) -> dict:
+    """``tomllib.loads``, where a document nested too deep for its recursion (arrays in
+    arrays a thousand deep) is a ``TOMLDecodeError`` at the line it nests deepest, as any
+    other syntax error, not a ``RecursionError``."""
+    try:
+        return tomllib.loads(text)
+    except RecursionError:
+        depth = best = 0
+        line = where = 1
+        for ch in text:
+            if ch == "\n":
+                line += 1
+            elif ch in "[{":
+                depth += 1
+                if depth > best:
+                    best, where = depth, line
+            elif ch in "]}":
+                depth -= 1
+        raise tomllib.TOMLDecodeError(
+            f"arrays or tables nested too deep (at line {where}, column 1)") from None

@@ -26,7 +26,7 @@ from kinematics.cameras import (
     PinholeCamera,
 )
 from kinematics.errors import KinematicsError
-from kinematics.fileio import atomic_write_text
+from kinematics.fileio import atomic_write_text, parse_toml
 
 __all__ = [
     "UNITS",
@@ -125,7 +125,7 @@ def _read_text(path) -> str:
 def _load_toml(path) -> tuple[dict, str]:
     text = _read_text(path)
     try:
-        return tomllib.loads(text), text
+        return parse_toml(text), text
     except tomllib.TOMLDecodeError as err:
         msg = str(err)
         m = re.search(r"\s*\(at line (\d+), column \d+\)$", msg)

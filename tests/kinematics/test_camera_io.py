@@ -182,6 +182,7 @@ PIN = '[cameras.cam]\ntype = "pinhole"\nK = [[800.0, 0.0, 320.0], [0.0, 800.0, 2
         (PIN + "rvec = [0, 0, 0]\nt = [0, 0, 1]\ndist = [0.1, 0.1]\n", 6, "cameras.cam.dist",
          "0, 4, 5 or 8"),
         (SIDE + "scale = 3.0\n", 5, None, "invalid TOML"),
+        (SIDE + "x = " + "[" * 1000 + "]" * 1000 + "\n", 5, None, "nested too deep"),
     ],
 )
 def test_load_errors_are_located(tmp_path, text, line, field, message):

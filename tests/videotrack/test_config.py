@@ -103,6 +103,8 @@ detections = "out/d.npz"
      "markers.max_area", "at least 1"),
     ("[video]\npath='a'\n[[filters.steps]]\ntype='otsu'\nviews='x'", "filters.steps[0].views",
      "unknown key"),
+    ("[video]\npath='a'\n[[filters.steps]]\ntype=[1]", "filters.steps[0].type",
+     r"unknown type \[1\]"),
 ])
 def test_errors_name_file_and_key(tmp_path, text, field, message):
     with pytest.raises(VideoTrackError, match=message) as err:
@@ -119,6 +121,11 @@ def test_toml_syntax_error_gives_the_line(tmp_path):
     assert err.value.line == 3 and str(err.value).startswith(f"{path}:3: ")
     with pytest.raises(VideoTrackError, match="no such config file"):
         load_config(tmp_path / "none.toml")
+    # nested past the parser's recursion: a syntax error at its line, no RecursionError
+    path.write_text("[video]\npath = 'a'\n\nx = " + "[" * 1000 + "]" * 1000 + "\n")
+    with pytest.raises(VideoTrackError, match="nested too deep") as err:
+        load_config(path)
+    assert err.value.line == 4
 
 
 def test_other_modules_can_add_sections(tmp_path):

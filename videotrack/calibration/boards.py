@@ -36,6 +36,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from kinematics.fileio import parse_toml
 from videotrack.errors import VideoTrackError
 
 __all__ = ["Board", "load_board"]
@@ -384,7 +385,7 @@ def load_board(path) -> Board:
     """Read a board config (see the module docstring); errors name the file and field."""
     path = Path(path)
     try:
-        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+        doc = parse_toml(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError) as err:
         raise VideoTrackError(f"cannot read the board config: {err}", file=path) from None
     except tomllib.TOMLDecodeError as err:

@@ -38,6 +38,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from kinematics.fileio import parse_toml
 from videotrack.errors import VideoTrackError
 from videotrack.project.schema import (  # noqa: F401  (the public names of the schema)
     REQUIRED,
@@ -160,7 +161,7 @@ def read_toml(path: str | os.PathLike) -> dict:
 def loads_toml(text: str, path: str | os.PathLike) -> dict:
     """:func:`read_toml` for text already read from ``path``."""
     try:
-        return tomllib.loads(text)
+        return parse_toml(text)
     except tomllib.TOMLDecodeError as err:
         msg = str(err)
         match = re.search(r"\(at line (\d+), column \d+\)", msg)

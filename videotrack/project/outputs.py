@@ -15,11 +15,11 @@ from __future__ import annotations
 
 import json
 import os
-import tomllib
 import zipfile
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 
+from kinematics.fileio import parse_toml
 from videotrack.errors import VideoTrackError
 
 #: Kinds of files the commands write, and how each is described in messages.
@@ -106,7 +106,7 @@ def is_kind(path: str | os.PathLike, kind: str) -> bool:
     if kind in ("sidecar", "toml"):
         try:
             text = path.read_text(encoding="utf-8")
-            data = json.loads(text) if kind == "sidecar" else tomllib.loads(text)
+            data = json.loads(text) if kind == "sidecar" else parse_toml(text)
         except (OSError, UnicodeDecodeError, ValueError):
             return False
         return isinstance(data, dict) and (kind == "toml" or "rows" in data)

@@ -144,7 +144,7 @@ class Variants:
                 f"missing {self.tag!r}; one of: {', '.join(self.sections)}", file=file, field=where
             )
         kind = table[self.tag]
-        if kind not in self.sections:
+        if not isinstance(kind, str) or kind not in self.sections:
             raise VideoTrackError(
                 f"unknown {self.tag} {kind!r}; one of: {', '.join(self.sections)}",
                 file=file,

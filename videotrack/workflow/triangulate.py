@@ -35,9 +35,10 @@ def load_any_cameras(path: Path) -> dict:
     import tomllib
 
     from kinematics.cameras.files import import_anipose_toml, load_cameras
+    from kinematics.fileio import parse_toml
 
     try:
-        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+        doc = parse_toml(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
         doc = None  # load_cameras says what is wrong, with the line
     if isinstance(doc, dict) and "cameras" not in doc:
