@@ -246,7 +246,7 @@ def _read_histogram(elem: safe_xml.Element, where: str) -> Histogram:
 def _edge_index(angle_deg: float, n_bins: int) -> int:
     """Index k of the bin edge ``-180 + k·360/n_bins`` at ``angle_deg``."""
     k = (angle_deg + 180.0) * n_bins / 360.0
-    index = round(k)
+    index = round(k) if -1.0 <= k <= n_bins + 1.0 else -1  # (1e308: no integer)
     if abs(k - index) > 1e-6 or not 0 <= index <= n_bins:
         raise KinematicsError(
             f"{angle_deg!r} is not a bin edge (edges lie at -180 + k·{360.0 / n_bins:g} "

@@ -172,6 +172,8 @@ def test_hand_written_runs_are_normalised():
 @pytest.mark.parametrize(("runs", "attrs", "line", "words"), [
     ('<run from="0.5" to="2" value="1"/>', "", 3, "not a bin edge"),
     ('<run from="0" to="400" value="1"/>', "", 3, "not a bin edge"),
+    ('<run from="-1e308" to="10" value="1"/>', "", 3, "-1e+308 is not a bin edge"),
+    ('<run from="0" to="1e308" value="1"/>', "", 3, "1e+308 is not a bin edge"),
     ('<run from="10" to="0" value="1"/>', "", 3, "from < to"),
     ('<run from="0" to="10" value="-1"/>', "", 3, "must be >= 0"),
     ('<run from="0" to="10" value="NaN"/>', "", 3, "not a finite number"),

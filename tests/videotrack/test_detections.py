@@ -111,6 +111,40 @@ def test_loading_bad_files(tmp_path, detections):
         load_detections(tmp_path / "cut.npz")
 
 
+META_DAMAGE = {  # metadata edited or damaged: a located error, never "internal error"
+    "a view name not a name": ({"view_names": [["left"], "right"]}, "view_names"),
+    "a frame rate in a list": ({"frame_rate": [50]}, "frame_rate must be a number"),
+    "an infinite frame": ({"frames": [0, float("inf")]}, "frames must be"),
+    "broken frames as lists": ({"broken": [[1, 2]]}, "broken must be"),
+    "warnings as one text": ({"warnings": "x"}, "warnings must be"),
+    "a video without its fps": ({"videos": [{"name": "v"}]}, "fps"),
+}
+
+
+@pytest.mark.parametrize("case", META_DAMAGE)
+def test_damaged_metadata_is_named(tmp_path, detections, case):
+    change, message = META_DAMAGE[case]
+    meta = dict(detections.metadata, **change)
+    arrays = {k: getattr(detections, k) for k in ("points", "areas", "offsets", "video_frames",
+                                                  "parities")}
+    np.savez(tmp_path / "d.npz", metadata=np.array(json.dumps(meta)), **arrays)
+    with pytest.raises(VideoTrackError, match=message) as err:
+        load_detections(tmp_path / "d.npz")
+    assert err.value.file == str(tmp_path / "d.npz") and err.value.field == "metadata"
+
+
+@pytest.mark.parametrize(("array", "value", "message"), [
+    ("video_frames", 2**62, "video_frames must be"), ("parities", 7, "parities must be"),
+    ("points", np.nan, "points must be finite")])
+def test_damaged_arrays_are_named(tmp_path, detections, array, value, message):
+    arrays = {k: getattr(detections, k).copy() for k in ("points", "areas", "offsets",
+                                                         "video_frames", "parities")}
+    arrays[array].flat[-1] = value
+    np.savez(tmp_path / "d.npz", metadata=np.array(json.dumps(detections.metadata)), **arrays)
+    with pytest.raises(VideoTrackError, match=message):
+        load_detections(tmp_path / "d.npz")
+
+
 def test_ragged_access(detections):
     counts = detections.counts()
     assert counts.shape == (12, 2) and counts.sum() == len(detections.points)

@@ -163,6 +163,50 @@ def _layout_problem(points, areas, offsets, video_frames, parities, n_views) -> 
                 f"{len(video_frames) * n_views + 1}")
     if offsets[0] != 0 or offsets[-1] != len(points) or np.any(np.diff(offsets) < 0):
         return "offsets must rise from 0 to the number of points"
+    if len(video_frames) and (video_frames.min() < 0 or video_frames.max() >= 2**53
+                              or np.any(np.diff(video_frames) < 0)):
+        return "video_frames must be frame numbers from 0 on, in order"
+    if np.any((parities < -1) | (parities > 1)):
+        return "parities must be -1 (a whole frame), 0 or 1 (a field)"
+    if not np.all(np.isfinite(points)):
+        return "points must be finite"
+    return None
+
+
+def _number(value, positive: bool = True) -> bool:
+    return (isinstance(value, int | float) and not isinstance(value, bool)
+            and np.isfinite(value) and (value > 0 or not positive))
+
+
+def _metadata_problem(meta: dict) -> str | None:
+    """What is wrong with the parts of a detections file's metadata that are read (a file
+    edited by hand or damaged), or None."""
+    names = meta.get("view_names")
+    if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+        return "view_names must be a list of names"
+    if not _number(meta.get("frame_rate")):
+        return f"frame_rate must be a number > 0, got {meta.get('frame_rate')!r}"
+    videos = meta.get("videos")
+    if (not isinstance(videos, list) or not videos
+            or not all(isinstance(v, dict) and _number(v.get("fps")) for v in videos)):
+        return "videos must be a list of tables, each with its fps (a number > 0)"
+    settings = meta.get("settings")
+    if not isinstance(settings, dict) or not isinstance(
+            (settings.get("deinterlace") or {}).get("field_order"), str):
+        return "settings must be a table with deinterlace.field_order"
+    broken = meta.get("broken") or []
+    if not isinstance(broken, list) or not all(
+            isinstance(b, dict) and isinstance(b.get("video"), str)
+            and isinstance(b.get("frame"), int) and isinstance(b.get("announced"), int)
+            and isinstance(b.get("file"), str | None) for b in broken):
+        return "broken must be a list of tables with video, frame, announced and file"
+    frames = meta.get("frames")
+    if not (isinstance(frames, list) and len(frames) == 2
+            and all(isinstance(f, int) and not isinstance(f, bool) for f in frames)):
+        return f"frames must be the first and the end frame, got {frames!r}"
+    warned = meta.get("warnings") or []
+    if not isinstance(warned, list) or not all(isinstance(w, str) for w in warned):
+        return "warnings must be a list of texts"
     return None
 
 
@@ -226,13 +270,18 @@ def load_detections(path: str | os.PathLike) -> Detections:
         metadata = json.loads(meta_text)
     except json.JSONDecodeError as err:
         raise VideoTrackError(f"metadata is not JSON: {err}", file=path) from None
-    if metadata.get("format") != FORMAT:
-        raise VideoTrackError(f"not a detections file (format {metadata.get('format')!r})",
+    if not isinstance(metadata, dict) or metadata.get("format") != FORMAT:
+        found = metadata.get("format") if isinstance(metadata, dict) else None
+        raise VideoTrackError(f"not a detections file (format {found!r})",
                               file=path)
     if metadata.get("version") != VERSION:
         raise VideoTrackError(
             f"detections format version {metadata.get('version')} is not supported "
             f"(this VideoTrack reads version {VERSION}); re-run 'videotrack detect'", file=path)
+    problem = _metadata_problem(metadata)
+    if problem:
+        raise VideoTrackError(f"damaged detections file: {problem}; re-run 'videotrack "
+                              "detect --force'", file=path, field="metadata")
     return Detections(**arrays, metadata=metadata, path=path)
 
 
