@@ -169,3 +169,25 @@ def test_frames_beyond_the_detections_are_refused_or_said(project, tmp_path, cap
     err = capsys.readouterr().err
     assert code == 0 and "frames 14:40: the detections have 16 records; fitting 14:16" in err
     assert len(read_results(tmp_path / "y.csv")) == 2
+
+
+def test_results_and_candidates_are_one_set(project, tmp_path, capsys):
+    # a candidates file lost (a full disk cut the writes) makes the set stale: fitted again,
+    # where the results alone used to read "up to date"
+    import shutil
+
+    folder = tmp_path / "p"
+    shutil.copytree(project, folder)
+    cfg = str(folder / "project.toml")
+    assert main(["fit", cfg, "--n-end", "7000", "--force"]) == 0
+    candidates = folder / "detections.results.candidates.csv"
+    assert candidates.exists() and read_sidecar(folder / "detections.results.csv")[
+        "candidates_sha256"]
+    capsys.readouterr()
+    assert main(["fit", cfg, "--n-end", "7000"]) == 0
+    assert "is up to date" in capsys.readouterr().out
+    candidates.unlink()
+    assert main(["fit", cfg, "--n-end", "7000"]) == 0
+    out = capsys.readouterr()
+    assert "is up to date" not in out.out and "candidates file does not match" in out.err
+    assert candidates.exists()

@@ -45,7 +45,6 @@ from videotrack.results.files import (
     read_results,
     read_sidecar,
     results_from_fit,
-    write_candidates,
 )
 from videotrack.results.files import write_results as _write_results
 from videotrack.workflow import (
@@ -235,9 +234,7 @@ def save_project_results(path: str | os.PathLike, model: ProjectModel, body: Bod
                "source": "videotrack gui"}
     if noise_px:
         sidecar["noise"] = {"sigma_px": [float(s) for s in noise_px], "source": "measured"}
-    written = _write_results(path, table, sidecar)
-    write_candidates(path, body, ordered)
-    return written
+    return _write_results(path, table, sidecar, candidates=(body, ordered))
 
 
 def recorded_noise(results_path: str | os.PathLike) -> list[float] | None:

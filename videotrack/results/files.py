@@ -194,18 +194,27 @@ def format_results(results: Results) -> str:
     return buf.getvalue()
 
 
-def write_results(path: str | os.PathLike, results: Results, sidecar: Mapping) -> Path:
-    """Write ``path`` (CSV) and ``path`` with suffix ``.json`` (the sidecar), atomically.
+def write_results(path: str | os.PathLike, results: Results, sidecar: Mapping,
+                  candidates: tuple[Body, Sequence] | None = None) -> Path:
+    """Write ``path`` (CSV) and ``path`` with suffix ``.json`` (the sidecar), atomically;
+    with ``candidates`` (the body and the fit results) the candidates file too, first
+    (:func:`write_candidates`).
 
     The CSV is written last, so a complete CSV always has a matching sidecar; the sidecar
     records the CSV's SHA-256 (``csv_sha256``), so a CSV left from an earlier run beside a
-    newer sidecar is recognised.
+    newer sidecar is recognised, and the candidates file's (``candidates_sha256``, None
+    for none), so a set cut by a failed write (a full disk) is seen as one
+    (:func:`videotrack.workflow.staleness.results_stale_reason`).
     """
     path = Path(path)
     side = sidecar_path(path)
     text = format_results(results)
+    extra = {}
+    if candidates is not None:
+        written = write_candidates(path, *candidates)
+        extra["candidates_sha256"] = None if written is None else file_sha256(written)
     # The CSV's hash tells a complete pair from one cut between the two writes.
-    meta = {"format": RESULTS_FORMAT, **sidecar, "rows": len(results),
+    meta = {"format": RESULTS_FORMAT, **sidecar, **extra, "rows": len(results),
             "csv_sha256": hashlib.sha256(text.encode("utf-8")).hexdigest()}
     atomic_write_text(side, json.dumps(meta, indent=2, sort_keys=True) + "\n")
     atomic_write_text(path, text)

@@ -30,7 +30,6 @@ from videotrack.results.files import (
     read_results,
     read_sidecar,
     results_from_fit,
-    write_candidates,
     write_results,
 )
 from videotrack.workflow.model import ProjectModel
@@ -59,10 +58,8 @@ def discard_checkpoint(results_path: Path) -> None:
 
 def _checkpoint(partial: Path, model: ProjectModel, results: dict, detections, sidecar):
     ordered = [results[k] for k in sorted(results)]
-    # candidates first: a checkpoint's results never go without them
-    write_candidates(partial, model.body, ordered)
     write_results(partial, results_from_fit(model.body, ordered, model.view_names, detections),
-                  {**sidecar, **threshold_entry(ordered)})
+                  {**sidecar, **threshold_entry(ordered)}, candidates=(model.body, ordered))
 
 
 def _resume(partial: Path, sidecar: dict

@@ -21,7 +21,7 @@ from kinematics.fit import FrameResult
 from kinematics.fit.noise import NoiseModel
 from videotrack.markerless.route import KeypointInput
 from videotrack.project.identity import relative_message
-from videotrack.results.files import Results, results_from_fit, write_candidates, write_results
+from videotrack.results.files import Results, results_from_fit, write_results
 from videotrack.workflow import checkpoint
 from videotrack.workflow.model import ProjectModel
 from videotrack.workflow.staleness import _source, results_sidecar, threshold_entry
@@ -114,8 +114,8 @@ def fit_project(
                                                  *fit_warnings(table, detections))]
     write_results(results_path, table, {**sidecar, **threshold_entry(ordered),
                                         **noise_entry(used),
-                                        "warnings": list(dict.fromkeys(found))})
-    write_candidates(results_path, model.body, ordered)
+                                        "warnings": list(dict.fromkeys(found))},
+                  candidates=(model.body, ordered))
     checkpoint.discard_checkpoint(results_path)
     return table
 

@@ -23,7 +23,7 @@ import numpy as np
 from videotrack.errors import VideoTrackError, VideoTrackWarning
 from videotrack.markerless.route import KeypointInput
 from videotrack.project.identity import relative_path
-from videotrack.results.files import file_sha256, read_sidecar
+from videotrack.results.files import candidates_path, file_sha256, read_sidecar
 from videotrack.workflow.model import ProjectModel, _jsonable
 
 #: Sidecar keys that decide whether results are up to date (inputs by content hash, and
@@ -90,6 +90,10 @@ def results_stale_reason(model: ProjectModel, detections_path: Path | KeypointIn
         return f"{meta.get('rows')} rows, {n_rows} wanted"
     if meta.get("csv_sha256") != file_sha256(results_path):
         return "the results file does not match its sidecar"
+    if "candidates_sha256" in meta:  # (sidecars of earlier versions do not record it)
+        found = candidates_path(results_path)
+        if meta["candidates_sha256"] != (file_sha256(found) if found.exists() else None):
+            return "the candidates file does not match the results"
     return None
 
 
