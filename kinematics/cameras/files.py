@@ -357,7 +357,13 @@ def _node_value(node):
     if node.isMap():
         keys = node.keys()
         if "dt" in keys:  # !!opencv-matrix
-            return node.mat()
+            try:
+                return node.mat()
+            except cv2.error:  # its data does not fill rows x cols
+                rows, cols = (n.string() if n.isString() else f"{n.real():g}"
+                              for n in (node.getNode(k) for k in ("rows", "cols")))
+                raise KinematicsError(f"an opencv-matrix of {rows} x {cols} holds "
+                                      f"{node.getNode('data').size()} numbers") from None
         if {"rows", "cols", "data"} <= set(keys):  # ROS camera_info YAML
             rows, cols = (int(node.getNode(k).real()) for k in ("rows", "cols"))
             data = _node_value(node.getNode("data"))
@@ -388,8 +394,14 @@ def _read_storage(path) -> dict:
     try:
         if not fs.isOpened():
             raise KinematicsError("cannot read as an OpenCV FileStorage file", file=path)
+        out = {}
         keys = fs.root().keys()  # a FileNode is not iterable
-        return {key: _node_value(fs.getNode(key)) for key in keys}
+        for key in keys:
+            try:
+                out[key] = _node_value(fs.getNode(key))
+            except KinematicsError as err:
+                raise err.located(file=path, field=key) from None
+        return out
     finally:
         fs.release()
 

@@ -232,6 +232,21 @@ def test_opencv_mono_calibration_sample(tmp_path):
     assert_projects_like_cv2(cam, np.zeros(3), np.zeros(3), K, dist, np.random.default_rng(0))
 
 
+@pytest.mark.parametrize(("rows", "data", "says"), [
+    (2, "800., 0., 320., 0., 800., 240., 0., 0., 1.", "of 2 x 3 holds 9 numbers"),
+    (3, "800., 0., 320., 0., 800.", "of 3 x 3 holds 5 numbers"),
+    ("abc", "800., 0., 320., 0., 800., 240., 0., 0., 1.", "of abc x 3 holds 9")])
+def test_opencv_matrix_that_does_not_hold_its_data_is_named(tmp_path, rows, data, says):
+    # OpenCV asserts on such a matrix ("internal error" before); a located one-line error now
+    path = tmp_path / "cam.yml"
+    path.write_text(f"%YAML:1.0\n---\nimage_width: 640\nimage_height: 480\ncamera_matrix: "
+                    f"!!opencv-matrix\n   rows: {rows}\n   cols: 3\n   dt: d\n"
+                    f"   data: [ {data} ]\n")
+    with pytest.raises(KinematicsError, match=says) as err:
+        import_opencv_yaml(path)
+    assert (err.value.file, err.value.field) == (str(path), "camera_matrix")
+
+
 @pytest.mark.parametrize("pose", ["R", "rvec", "R as Rodrigues"])
 def test_opencv_with_pose(tmp_path, pose):
     rvec, tvec = np.array([[0.3], [-0.2], [0.1]]), np.array([[5.0], [-3.0], [400.0]])
