@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import errno
 import io
 import os
 import platform
@@ -215,13 +216,21 @@ def nothing_ran(reports: Sequence[TrialReport]) -> bool:
         r.state == INCOMPLETE and not r.steps) for r in reports)
 
 
+#: Why a file cannot be written where the storage is read-only (a finished project on a
+#: read-only share can still be checked: nothing to do, nothing written).
+READ_ONLY = (errno.EROFS, errno.EACCES, errno.EPERM)
+
+
 class RunLog:
     """The log of one batch run: ``PROJECT/logs/batch-<date>-<time>.log``, written as the
-    run goes (so a killed run's log shows how far it got)."""
+    run goes (so a killed run's log shows how far it got). On read-only storage there is
+    none (:attr:`failed` says so): a run with work to do then fails in its trials, one that
+    finds every trial up to date writes nothing."""
 
     def __init__(self, project: Project) -> None:
         project.logs.mkdir(parents=True, exist_ok=True)
         stamp = time.strftime("%Y%m%d-%H%M%S")
+        self._fh = None
         for k in range(1000):
             self.path = project.logs / f"batch-{stamp}{'' if not k else f'-{k}'}.log"
             try:
@@ -230,6 +239,9 @@ class RunLog:
             except FileExistsError:
                 continue
             except OSError as err:
+                if err.errno in READ_ONLY:
+                    self.failed = f"not written: {err.strerror}"
+                    return
                 raise VideoTrackError(f"cannot write the log: {err.strerror}",
                                       file=self.path) from None
         self.write(f"videotrack batch, {time.strftime('%Y-%m-%d %H:%M:%S')}: python "
@@ -258,6 +270,8 @@ class RunLog:
             self.write("    " + line.replace("\n", "\n    "))
 
     def close(self) -> None:
+        if self._fh is None:
+            return
         try:
             self._fh.close()
         except OSError as err:
@@ -266,8 +280,9 @@ class RunLog:
     def discard(self) -> None:
         """Close and delete the log (a run that changed nothing leaves none)."""
         self.close()
-        with contextlib.suppress(OSError):
-            self.path.unlink()
+        if self._fh is not None:
+            with contextlib.suppress(OSError):
+                self.path.unlink()
 
 
 @contextlib.contextmanager

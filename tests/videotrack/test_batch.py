@@ -286,3 +286,25 @@ def test_bad_arguments_are_one_line(project, capsys, monkeypatch):
         assert code == 1 and needle in err and err.count("\n") == 1, err
     with pytest.raises(VideoTrackError):
         open_project(project / "session1")
+
+
+def test_a_finished_project_on_read_only_storage_can_be_checked(project, capsys):
+    # batch and fit find everything up to date and write nothing (they wrote a log and a
+    # checkpoint's removal before, and failed); needs a user the permissions bind (not root)
+    assert batch(capsys, project, "--jobs", "1")[0] == 0
+    before = {p: p.stat().st_mtime_ns for p in project.rglob("*")}
+    folders = [project, *(p for p in project.rglob("*") if p.is_dir())]
+    for folder in folders:
+        folder.chmod(0o555)
+    try:
+        if os.access(project, os.W_OK):
+            pytest.skip("this user can write to read-only folders (root)")
+        code, out, err = batch(capsys, project)
+        assert code == 0, err
+        assert "3 up to date; no summary (read-only storage); no log" in out
+        assert main(["fit", str(project), "--trial", "session1/trial01"]) == 0
+        assert "up to date" in capsys.readouterr().out
+    finally:
+        for folder in folders:
+            folder.chmod(0o755)
+    assert {p: p.stat().st_mtime_ns for p in project.rglob("*")} == before

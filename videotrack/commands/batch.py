@@ -4,6 +4,7 @@ a Dask cluster."""
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -161,7 +162,10 @@ def run(args) -> int:
                                     scheduler=args.scheduler, on_report=on_report,
                                     progress=on_frames)
             names = [t.name for t in project.trials]  # --trial: the others' rows stay
-            summary = write_summary(reports, project.summary_path, keep=names, order=names)
+            summary = None  # read-only storage and nothing to do: nothing written
+            if not (nothing_ran(reports) and not os.access(project.root, os.W_OK)):
+                summary = write_summary(reports, project.summary_path, keep=names,
+                                        order=names)
             log.write(f"finished: {count_states(reports)}; summary {summary}")
         except KeyboardInterrupt:
             log.write("interrupted: run the same command again to go on")
@@ -177,8 +181,9 @@ def run(args) -> int:
             log.close()
             where = f"log {log.path}"
     print(format_summary(reports))
-    print(f"{len(reports)} trials: {count_states(reports)}; wrote {summary}; {where}")
-    if log.failed is not None:
+    wrote = f"wrote {summary}" if summary is not None else "no summary (read-only storage)"
+    print(f"{len(reports)} trials: {count_states(reports)}; {wrote}; {where}")
+    if log.failed is not None and not nothing_ran(reports):
         print(f"videotrack: warning: {log.path}: the log is incomplete: {log.failed}",
               file=sys.stderr)
     if any(r.state == FAILED for r in reports):

@@ -50,10 +50,12 @@ def checkpoint_paths(results_path: Path) -> tuple[Path, ...]:
 
 
 def discard_checkpoint(results_path: Path) -> None:
-    """Remove the checkpoint of a fit whose results file is complete."""
+    """Remove the checkpoint of a fit whose results file is complete (nothing to do, and
+    nothing written, where there is none: a finished project on read-only storage)."""
     for p in checkpoint_paths(results_path):
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(p)
+        if p.exists():  # unlink on a read-only file system fails even for a missing file
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(p)
 
 
 def _checkpoint(partial: Path, model: ProjectModel, results: dict, detections, sidecar):
