@@ -154,11 +154,19 @@ def merge_archives(archives: Sequence[HistogramArchive]) -> HistogramArchive:
     """Combine archives of several experiments: per axis, the histograms weighted by their
     trial counts N (:func:`~kinematics.model.histograms.merge_histograms`).
 
-    An axis found in only some archives is merged from those. The body name is kept when all
-    archives that name one agree.
+    An axis found in only some archives is merged from those; an archive that shares no
+    chain with the first is refused (archives of different chains: their union would be a
+    body no experiment saw). The body name is kept when all archives that name one agree.
     """
     if not archives:
         raise KinematicsError("no archives to merge")
+    first = {k[0] for k in archives[0]}
+    for a in archives[1:]:
+        chains = {k[0] for k in a}
+        if chains and first and not chains & first:
+            raise KinematicsError(
+                f"holds chains {sorted(chains)}, the first archive {sorted(first)}: archives of "
+                "different chains cannot be merged", file=a.source)
     keys = list(dict.fromkeys(k for a in archives for k in a))
     merged = {}
     for key in keys:

@@ -128,6 +128,10 @@ def test_merge_errors_name_the_axis():
         merge_archives([a, b])
     with pytest.raises(KinematicsError):
         merge_archives([])
+    other = HistogramArchive({("frontleg", "J0", "phi"): Histogram(np.ones(4))},
+                             source="front.xml")  # another chain: no union of the two
+    with pytest.raises(KinematicsError, match=r"front.xml: holds chains \['frontleg'\]"):
+        merge_archives([a, other])
 
 
 def test_apply_archive_onto_a_body(locust):

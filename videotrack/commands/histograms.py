@@ -50,7 +50,8 @@ def add_parser(subparsers) -> None:
 
     mg = sub.add_parser("merge", help="combine archives weighted by their trial counts",
                         description="Merge histogram archives axis by axis: "
-                        "H = sum(N_i H_i) / sum(N_i).")
+                        "H = sum(N_i H_i) / sum(N_i). An axis found in only some archives is "
+                        "merged from those; archives of different chains are refused.")
     mg.add_argument("archives", type=Path, nargs="+", help="archive or chain XML files")
     mg.add_argument("-o", "--output", type=Path, required=True, help="archive to write")
     mg.add_argument("--force", action="store_true", help=FORCE_HELP)
