@@ -322,3 +322,23 @@ def test_real_openpose_pose2sim_demo():
     assert 0 < np.isnan(xy[..., 0]).mean() < 0.1
     first = json.loads((root / "cam01_json" / "cam01.0000.json").read_text())
     np.testing.assert_allclose(xy[0, 0, 0], first["people"][0]["pose_keypoints_2d"][:2])
+
+
+@pytest.mark.parametrize("writer", ["dlc", "sleap"])
+def test_damaged_h5_files_give_our_error(tmp_path, writer):
+    # a seeded mutator over h5 files: each damaged copy reads or is refused in one line (h5py
+    # raised RuntimeError on a damaged heap through the format sniffing: "internal error")
+    xy, score = planted_tracks()
+    good = (write_dlc_h5(tmp_path / "good.h5", xy, score) if writer == "dlc"
+            else write_analysis_h5(tmp_path / "good.h5", xy, score)).read_bytes()
+    rng = np.random.default_rng(7)
+    for k in range(60):
+        data = bytearray(good)
+        for pos in rng.integers(0, len(data), rng.integers(1, 8)):
+            data[pos] = int(rng.integers(0, 256))
+        path = tmp_path / f"m{k}.h5"
+        path.write_bytes(bytes(data))
+        try:
+            read_keypoints(path)
+        except VideoTrackError as err:
+            assert err.file == str(path) and "\n" not in str(err)

@@ -21,7 +21,7 @@ def is_analysis_h5(path: Path) -> bool:
     try:
         with h5py.File(path, "r") as f:
             return "tracks" in f and "node_names" in f
-    except OSError:
+    except (OSError, RuntimeError, ValueError, KeyError):  # HDF5's errors on a damaged file
         return False
 
 
