@@ -63,7 +63,6 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
         fh.write(data)
 
 
-
 def parse_toml(text: str) -> dict:
     """``tomllib.loads``, where a document nested too deep for its recursion (arrays in
     arrays a thousand deep) is a ``TOMLDecodeError`` at the line it nests deepest, as any

@@ -160,9 +160,8 @@ class ConfidenceMixin:
         args = (res, sigma, counts, shown, extras, len(self.problem.free_idx), t.noise_gate_k,
                 t.noise_p, self.noise.outliers, float(self.params.claim_gate_px))
         v = noise.verdict(*args)
-        gate = noise.gate_px(res, sigma, t.noise_gate_k, t.noise_p)
-        if (v.passed and not obs.labelled
-                and noise.excuse_matters(res, gate, counts, shown, extras)):
+        if v.passed and v.excused and not obs.labelled:  # excused by a fused blob's gap?
+            gate = noise.gate_px(res, sigma, t.noise_gate_k, t.noise_p)
             v = noise.verdict(*args, fused=self._fused(obs, position, r, gate))
         if not v.passed and r.status in JUDGED:
             r = replace(r, status=Status.FAILED)

@@ -204,6 +204,7 @@ class Verdict(NamedTuple):
     measured: int  # marker images with a residual
     chi2: float  # Σ (r/σ)² of the matched residuals
     limit: float  # its χ² limit
+    excused: int = 0  # marker images beyond the gate that missing detections excused
 
 
 def _per_image(sigma: np.ndarray, n_markers: int) -> np.ndarray:
@@ -238,29 +239,22 @@ def verdict(residuals: np.ndarray, sigma: np.ndarray, detections: np.ndarray,
     missing = shown + extras - detections - (0 if fused is None else fused)
     excused = np.asarray(outliers) if outliers is not None else np.maximum(missing, 0)
     unmatched = int(np.maximum(off - excused, 0).sum())
+    excused_off = int(np.minimum(off, excused).sum())
     far = (finite & ~(r <= np.maximum(gate, gross_px))).sum(axis=1)
     gross = int(np.maximum(far - excused, 0).sum())
     n = int(matched.sum())
     stat = float(np.sum(np.where(matched, r / sigma, 0.0) ** 2))
     limit = chi2_limit(p, max(1, 2 * n - free_axes))
     return Verdict(unmatched == 0 and stat <= limit, unmatched, gross, int(finite.sum()), stat,
-                   limit)
-
-
-def excuse_matters(residuals: np.ndarray, gate: np.ndarray, detections: np.ndarray,
-                   shown: np.ndarray, extras: np.ndarray) -> bool:
-    """Whether a view has a marker beyond ``gate`` that its missing detections excuse (only
-    then can :func:`fused_markers` change a verdict)."""
-    r = np.asarray(residuals, float)
-    off = (np.isfinite(r) & (r > gate)).sum(axis=1)
-    return bool(((off > 0) & (shown + extras - detections > 0)).any())
+                   limit, excused_off)
 
 
 def fused_markers(proj: np.ndarray, points: np.ndarray, view_off: np.ndarray,
                   gate: np.ndarray, seen: np.ndarray) -> np.ndarray:
     """Per view, the ``seen`` markers within ``gate`` (n_views, n_markers, px) of a
     detection whose nearest detection is also another such marker's, less one per such
-    detection: a blob of k fused markers stands for k - 1 missing detections. ``proj``
+    detection: a blob of k fused markers stands for k - 1 missing detections (only a
+    :class:`Verdict` with ``excused`` images can change with them). ``proj``
     (n_views, n_markers, 2) the projected markers, ``points`` the detections of all views,
     ``view_off`` each view's first."""
     out = np.zeros(proj.shape[0], np.int64)

@@ -168,14 +168,13 @@ def _layout_problem(points, areas, offsets, video_frames, parities, n_views) -> 
         return "video_frames must be frame numbers from 0 on, in order"
     if np.any((parities < -1) | (parities > 1)):
         return "parities must be -1 (a whole frame), 0 or 1 (a field)"
-    if not np.all(np.isfinite(points)):
-        return "points must be finite"
-    return None
+    return None  # (non-finite points are a warning of the fit: fit_warnings)
 
 
-def _number(value, positive: bool = True) -> bool:
+def _positive(value) -> bool:
+    """Whether ``value`` (read from JSON) is a finite number > 0."""
     return (isinstance(value, int | float) and not isinstance(value, bool)
-            and np.isfinite(value) and (value > 0 or not positive))
+            and np.isfinite(value) and value > 0)
 
 
 def _metadata_problem(meta: dict) -> str | None:
@@ -184,11 +183,11 @@ def _metadata_problem(meta: dict) -> str | None:
     names = meta.get("view_names")
     if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
         return "view_names must be a list of names"
-    if not _number(meta.get("frame_rate")):
+    if not _positive(meta.get("frame_rate")):
         return f"frame_rate must be a number > 0, got {meta.get('frame_rate')!r}"
     videos = meta.get("videos")
     if (not isinstance(videos, list) or not videos
-            or not all(isinstance(v, dict) and _number(v.get("fps")) for v in videos)):
+            or not all(isinstance(v, dict) and _positive(v.get("fps")) for v in videos)):
         return "videos must be a list of tables, each with its fps (a number > 0)"
     settings = meta.get("settings")
     if not isinstance(settings, dict) or not isinstance(
