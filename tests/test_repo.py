@@ -142,3 +142,49 @@ def test_the_import_check_finds_test_modules_and_conftests(source):
 ])
 def test_the_import_check_lets_fixtures_and_others_pass(source):
     assert imports_of_test_modules(source) == []
+
+
+def _kernel_functions():
+    """(module path, name, parameter count) of every numba function of the packages."""
+    found = []
+    for path in [*sorted((REPO / "kinematics" / "_kernels").glob("*.py")),
+                 REPO / "videotrack" / "detect" / "_kernels.py"]:
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.FunctionDef) and any(
+                    "jit" in ast.unparse(d) for d in node.decorator_list):
+                found.append((path, node.name, len(node.args.args) + bool(node.args.vararg)))
+    return found
+
+
+def _called_from_outside_the_kernels() -> set[str]:
+    """Names the library's other modules take from a kernel module (its entry points):
+    imported from one, or read as an attribute of a kernel module imported under a name."""
+    names = set()
+    for path in [*REPO.glob("kinematics/**/*.py"), *REPO.glob("videotrack/**/*.py"),
+                 *REPO.glob("ui/**/*.py")]:
+        if "_kernels" in path.parts or path.name == "_kernels.py":
+            continue
+        modules = set()
+        tree = ast.parse(path.read_text())
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom) and node.module and "_kernels" in node.module:
+                for alias in node.names:
+                    if node.module.endswith("_kernels"):  # a kernel module under a name
+                        modules.add(alias.asname or alias.name)
+                    else:
+                        names.add(alias.name)
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and \
+                    node.value.id in modules:
+                names.add(node.attr)
+    return names
+
+
+def test_kernels_take_records_not_long_argument_lists():
+    """At most 24 parameters for a numba function, 16 for an entry point (called from
+    outside the kernel modules): the rest travels in named records."""
+    entry = _called_from_outside_the_kernels()
+    assert {"fit_frames", "fit_frames_lanes", "refine_frames"} <= entry
+    long = [f"{path.name}:{name} ({n})" for path, name, n in _kernel_functions()
+            if n > (16 if name in entry else 24)]
+    assert not long, long

@@ -15,6 +15,7 @@ from kinematics._kernels.error3d import claim_cloud, cloud_error_once, unclaimed
 from kinematics._kernels.fastmath import GOLDEN, log_unit, mix64, next_uniform, sincos
 from kinematics._kernels.objective import evaluate, partition_error
 from kinematics._kernels.posture import drawn_views, has_pinhole, project_cs, project_posture
+from kinematics._kernels.records import FrameObs
 from kinematics._kernels.refine import refine_posture
 
 
@@ -35,15 +36,9 @@ def hist_at(hist, nbins, i, x):
 
 # -- simulated annealing (Sect. 2.3, Eq. 6) ----------------------------------------------
 @njit(cache=True, nogil=True)
-def anneal_chain(start, free_idx, step, hist, nbins, th, dof_kind, lo, hi, max_redraws,
-                 n_end, n_l, n_tau, tau0, l0, c_l, c_tau, eps, state,
-                 root_pos, root_rot, parent, chain, pre_rot, pre_trans, post_trans, elem_axis,
-                 elem_index, joint_flags, marker_joint, marker_local, slide_index, kind, P, K,
-                 dist, R, t,
-                 objective, points, conf, view_off, obs3, bidirectional, weight, cap,
-                 penalty_cap, one, j0, j1, m0, m1, claimed,
-                 cur, cand, best, cs, sn, rot, pos, mk, proj, per_view, nearest, d2):
-    """One annealing run from ``start``; the best posture seen is left in ``best``.
+def anneal_chain(start, free_idx, counts, state, root_pos, root_rot, body, cams, dofs,
+                 schedule, error, obs, span, claimed, scratch, d2):
+    """One annealing run from ``start``; the best posture seen is left in ``scratch.best``.
 
     Each iteration draws ``j' = j + l·v`` with ``v_i = s(H_i)·r_i``, ``r_i ~ U[-1, 1]``
     (Eq. 6) for the free axes ``free_idx`` in order (histogram entries first, then range
@@ -59,29 +54,46 @@ def anneal_chain(start, free_idx, step, hist, nbins, th, dof_kind, lo, hi, max_r
     Parameters
     ----------
     start : (n_axes,) radians; locked axes hold their value and are never changed.
-    free_idx : (n_free,) int64; step : (n_axes,) s(H_i) in radians.
-    hist : (n_axes, n_bins_max), nbins : (n_axes,) int64 histogram tables.
+    free_idx : (n_free,) int64, the entries moved (``dofs.free_idx`` or a partition's).
+    counts : (n_end, n_l, n_tau), the schedule's counts for this run (a partition's share).
     state : uint64 start state of the random stream (:func:`stream_state`).
-    j0, j1, m0, m1 : the joints and markers the moved entries reach (a partition's subtree;
-        ``0, nj, 0, nm`` for the whole body). With a partition, E is :func:`partition_error`
-        of its markers ``m0:m1`` (detections ``claimed`` by other partitions excluded), and
-        ``rot``, ``pos``, ``mk``, ``proj`` must hold the current posture of the rest.
-    cur, cand, best, cs, sn : (n_axes,) scratch; rot (nj, 3, 3), pos (nj, 3), mk (nm, 3),
-    proj (n_views, n_markers, 2), per_view (n_views,), nearest (n_markers,) int64 scratch;
-    d2 (n_markers + cloud rows,) float scratch of :func:`cloud_error_once` for a cloud
-    (shorter, e.g. empty: :func:`cloud_error` instead).
+    root_pos, root_rot : the frame's root positions and seed rotations.
+    body : FoldedBody; cams : CameraArrays; dofs : DofArrays (step, histogram tables, kinds,
+        ranges); schedule : Schedule (th, max_redraws, tau0, l0, c_l, c_tau, eps); error :
+        ErrorArgs; obs : FrameObs (:mod:`kinematics._kernels.records`).
+    span : (j0, j1, m0, m1), the joints and markers the moved entries reach (a partition's
+        subtree; ``0, nj, 0, nm`` for the whole body). With a partition, E is
+        :func:`partition_error` of its markers ``m0:m1`` (detections ``claimed`` by other
+        partitions excluded), and ``scratch.rot``, ``.pos``, ``.mk``, ``.proj`` must hold
+        the current posture of the rest.
+    scratch : Scratch; d2 (n_markers + cloud rows,) float scratch of
+        :func:`cloud_error_once` for a cloud (shorter, e.g. empty: :func:`cloud_error`).
 
     Returns
     -------
     best_error : float
     iterations : int
     """
+    # the records unpacked once: the loop passes plain arrays
+    n_end, n_l, n_tau = counts
+    j0, j1, m0, m1 = span
+    step, hist, nbins, lo, hi = dofs.step, dofs.hist, dofs.nbins, dofs.lo, dofs.hi
+    dof_kind = dofs.dof_kind
+    th, max_redraws, eps = schedule.th, schedule.max_redraws, schedule.eps
+    tau0, l0, c_l, c_tau = schedule.tau0, schedule.l0, schedule.c_l, schedule.c_tau
+    bidirectional, weight, cap = error.bidirectional, error.weight, error.cap
+    penalty_cap, one = error.penalty_cap, error.one_to_one
+    objective, points, conf, view_off, obs3 = (obs.objective, obs.points, obs.conf,
+                                               obs.view_off, obs.obs3)
+    cur, cand, best, cs, sn = scratch.cur, scratch.cand, scratch.best, scratch.cs, scratch.sn
+    rot, pos, mk, proj = scratch.rot, scratch.pos, scratch.mk, scratch.proj
+    per_view, nearest = scratch.per_view, scratch.nearest
     n_free = free_idx.shape[0]
     n_hist = 0  # free_idx holds the DOF_HISTOGRAM entries first
     while n_hist < n_free and dof_kind[free_idx[n_hist]] == DOF_HISTOGRAM:
         n_hist += 1
-    kind = drawn_views(kind, objective)
-    any_pinhole = has_pinhole(kind)
+    views = drawn_views(cams.kind, objective)
+    any_pinhole = has_pinhole(views)
     marks = obs3  # hidden marks not projected (3D objectives read no projection)
     rs = np.uint64(state)  # the stream state; int64 arithmetic with uint64 would be float
     for k in range(start.shape[0]):
@@ -89,8 +101,8 @@ def anneal_chain(start, free_idx, step, hist, nbins, th, dof_kind, lo, hi, max_r
         cand[k] = start[k]
         best[k] = start[k]
         sn[k], cs[k] = sincos(start[k])
-    whole = j0 == 0 and j1 == parent.shape[0] and m0 == 0 and m1 == marker_joint.shape[0]
-    span = (j0, j1, m0, m1)
+    whole = j0 == 0 and j1 == body.parent.shape[0] and m0 == 0 and \
+        m1 == body.marker_joint.shape[0]
     unexplained = weight if bidirectional else 0.0  # the partition's unexplained-blob weight
     # a cloud with nothing claimed (a partition's comes without the claimed points): each
     # distance computed once (cloud_error_once), the same E
@@ -98,10 +110,8 @@ def anneal_chain(start, free_idx, step, hist, nbins, th, dof_kind, lo, hi, max_r
         d2.shape[0] >= mk.shape[0] + obs3.shape[0]
     marker_d2 = d2[:mk.shape[0]]
     point_d2 = d2[mk.shape[0]:]
-    project_cs(cand, cs, sn, root_pos, root_rot, parent, chain, pre_rot, pre_trans,
-                post_trans, elem_axis, elem_index, joint_flags, marker_joint, marker_local,
-                slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj, any_pinhole, span,
-                marks)
+    project_cs(cand, cs, sn, root_pos, root_rot, body, cams, views, rot, pos, mk, proj,
+               any_pinhole, span, marks)
     if not whole:
         e_cur = partition_error(objective, proj, mk, points, conf, view_off, obs3, cap, m0,
                                 m1, claimed, unexplained, penalty_cap, one, nearest)
@@ -151,10 +161,8 @@ def anneal_chain(start, free_idx, step, hist, nbins, th, dof_kind, lo, hi, max_r
             x = x if ok else cur[i]
             cand[i] = x
             sn[i], cs[i] = sincos(x)
-        project_cs(cand, cs, sn, root_pos, root_rot, parent, chain, pre_rot, pre_trans,
-                    post_trans, elem_axis, elem_index, joint_flags, marker_joint, marker_local,
-                    slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj, any_pinhole, span,
-                    marks)
+        project_cs(cand, cs, sn, root_pos, root_rot, body, cams, views, rot, pos, mk,
+                   proj, any_pinhole, span, marks)
         if once:
             e = cloud_error_once(mk, obs3, m0, m1, unexplained, cap, penalty_cap, nearest,
                                  marker_d2, point_d2)
@@ -193,30 +201,37 @@ BEAM = 32
 
 
 @njit(cache=True, nogil=True)
-def beam_start(work, s0, s1, stage_dof_off, stage_dofs, stage_mark, stage_joint, n_samples,
-               state, hist,
-               nbins, th, dof_kind, lo, hi, rp, rr, parent, chain, pre_rot, pre_trans,
-               post_trans, elem_axis, elem_index, joint_flags, marker_joint, marker_local,
-               slide_index, kind, P, K, dist, R, t, objective, points, conf, view_off, obs3,
-               cap, j0, j1, m0, m1, claimed, penalty_cap, one, refine_steps, refine_gate, cs,
-               sn, rot, pos, mk, proj, nearest):
+def beam_start(work, s0, s1, parts, state, rp, rr, body, cams, dofs, schedule, error, obs,
+               span, claimed, scratch):
     """A partition's start posture by a beam search along its joints, into ``work``.
 
-    Stage ``s`` (``s0:s1``, one joint's entries, root first) draws ``BEAM · n_samples``
-    values for its entries, spread over the postures kept so far — each entry uniform in
-    ``[lo, hi]``, a histogram angle redrawn (at most 16 times) while implausible — and keeps
-    the ``BEAM`` postures with the lowest :func:`partition_error` of the markers the stage
-    places (``m0:stage_mark[s]``, at most ``m1``; detections ``claimed`` by other partitions
-    left out), each kept posture's undrawn values counting too. Joint by joint the search
-    follows the limb outward along its own markers, so annealing starts in the right basin
-    where the start posture lies nearer another limb's markers. ``rot`` … ``proj`` must
-    hold the current posture of the rest of the body. With ``refine_steps`` the best
-    posture is polished by Levenberg-Marquardt at the end. Returns the E of the partition's
-    markers at the best posture before that polish."""
+    Stage ``s`` (``s0:s1`` of ``parts``' stages, one joint's entries, root first) draws
+    ``BEAM · parts.samples`` values for its entries, spread over the postures kept so far —
+    each entry uniform in ``[lo, hi]``, a histogram angle redrawn (at most 16 times) while
+    implausible — and keeps the ``BEAM`` postures with the lowest :func:`partition_error` of
+    the markers the stage places (``m0:stage_mark[s]``, at most ``m1`` of ``span``;
+    detections ``claimed`` by other partitions left out), each kept posture's undrawn
+    values counting too. Joint by joint the search follows the limb outward along its own
+    markers, so annealing starts in the right basin where the start posture lies nearer
+    another limb's markers. ``scratch``'s ``rot`` … ``proj`` must hold the current posture
+    of the rest of the body. With ``schedule.refine_steps`` the best posture is polished by
+    Levenberg-Marquardt at the end. Returns the E of the partition's markers at the best
+    posture before that polish."""
+    j0, j1, m0, m1 = span
+    stage_dof_off, stage_dofs = parts.stage_dof_off, parts.stage_dofs
+    stage_mark, stage_joint, n_samples = parts.stage_mark, parts.stage_joint, parts.samples
+    hist, nbins, dof_kind, lo, hi = dofs.hist, dofs.nbins, dofs.dof_kind, dofs.lo, dofs.hi
+    th = schedule.th
+    cap, penalty_cap, one = error.cap, error.penalty_cap, error.one_to_one
+    objective, points, conf, view_off, obs3 = (obs.objective, obs.points, obs.conf,
+                                               obs.view_off, obs.obs3)
+    cs, sn, rot, pos, mk = scratch.cs, scratch.sn, scratch.rot, scratch.pos, scratch.mk
+    proj, nearest = scratch.proj, scratch.nearest
+    marker_joint = body.marker_joint
     ns = work.shape[0]
     e_first = np.inf
-    kind = drawn_views(kind, objective)
-    any_pinhole = has_pinhole(kind)
+    views = drawn_views(cams.kind, objective)
+    any_pinhole = has_pinhole(views)
     marks = obs3  # hidden marks not projected (3D objectives read no projection)
     cloud, free = obs3, claimed  # what the draws are scored against
     if objective == OBJ_CLOUD:
@@ -241,7 +256,7 @@ def beam_start(work, s0, s1, stage_dof_off, stage_dofs, stage_mark, stage_joint,
         je = jf  # one past the last joint that carries a marker the stage places
         for m in range(ms, m_end):
             je = max(je, marker_joint[m] + 1)
-        span = (j0, j1, m0, ms)
+        span_old = (j0, j1, m0, ms)
         span_new = (jf, je, ms, m_end)
         draws = (BEAM * n_samples) // nb
         nc = 0
@@ -250,10 +265,8 @@ def beam_start(work, s0, s1, stage_dof_off, stage_dofs, stage_mark, stage_joint,
                 sn[k], cs[k] = sincos(beams[b, k])
             # The beam's posture (the joints before the stage's first stay so for its
             # draws) and the E of the markers earlier stages placed
-            project_cs(beams[b], cs, sn, rp, rr, parent, chain, pre_rot, pre_trans,
-                        post_trans, elem_axis, elem_index, joint_flags, marker_joint,
-                        marker_local, slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj,
-                        any_pinhole, span, marks)
+            project_cs(beams[b], cs, sn, rp, rr, body, cams, views, rot, pos, mk, proj,
+                       any_pinhole, span_old, marks)
             e_beam = 0.0
             if ms > m0:
                 e_beam = partition_error(objective, proj, mk, points, conf, view_off, cloud,
@@ -275,10 +288,8 @@ def beam_start(work, s0, s1, stage_dof_off, stage_dofs, stage_mark, stage_joint,
                 for q in range(d0, d1):
                     i = stage_dofs[q]
                     sn[i], cs[i] = sincos(cands[nc, i])
-                project_cs(cands[nc], cs, sn, rp, rr, parent, chain, pre_rot, pre_trans,
-                            post_trans, elem_axis, elem_index, joint_flags, marker_joint,
-                            marker_local, slide_index, kind, P, K, dist, R, t, rot, pos, mk,
-                            proj, any_pinhole, span_new, marks)
+                project_cs(cands[nc], cs, sn, rp, rr, body, cams, views, rot, pos, mk, proj,
+                           any_pinhole, span_new, marks)
                 cand_e[nc] = e_beam + partition_error(objective, proj, mk, points, conf,
                                                       view_off, cloud, cap, ms, m_end, free,
                                                       0.0, penalty_cap, one, nearest)
@@ -294,20 +305,17 @@ def beam_start(work, s0, s1, stage_dof_off, stage_dofs, stage_mark, stage_joint,
             beams[b, :] = cands[order[b]]
     # Only the best is polished: polishing every kept posture after each stage (32 per joint)
     # was half of a fly run's cost besides annealing, and measured no better (docs/benchmarks.md)
-    if refine_steps > 0 and s1 > s0:
-        refine_posture(beams[0], stage_dofs[stage_dof_off[s0]:stage_dof_off[s1]], lo, hi,
-                           dof_kind, refine_steps, refine_gate, rp, rr, parent, chain,
-                           pre_rot, pre_trans, post_trans, elem_axis, elem_index, joint_flags,
-                           marker_joint, marker_local, slide_index, kind, P, K, dist, R, t,
-                           objective, points, conf, view_off, obs3)
+    if schedule.refine_steps > 0 and s1 > s0:
+        refine_posture(beams[0], stage_dofs[stage_dof_off[s0]:stage_dof_off[s1]], dofs,
+                       schedule.refine_steps, schedule.refine_gate, rp, rr, body, cams,
+                       views, obs)
     work[:] = beams[0]
     return e_first
 
 
 @njit(cache=True, nogil=True)
-def anneal_partitions(origin, state, rp, rr, body, cams, dofs, schedule, error, objective,
-                      points, conf, view_off, obs3, parts, claimed, work, cur, cand, best, cs,
-                      sn, rot, pos, mk, proj, per_view, nearest):
+def anneal_partitions(origin, state, rp, rr, body, cams, dofs, schedule, error, obs, parts,
+                      claimed, work, scratch):
     """One annealing run over partitions, each in turn (partitioned sampling): partition p
     moves only its own entries, with its share of ``schedule`` (N_end, N_l and N_tau times
     its share of the free entries, at least 1: a round anneals about N_end), scored by
@@ -318,22 +326,23 @@ def anneal_partitions(origin, state, rp, rr, body, cams, dofs, schedule, error, 
     so limbs do not share or take each other's markers. With ``samples`` > 0 each partition
     of the first round starts from a beam search along its joints (:func:`beam_start`) and
     may not use the detections that the partitions fitted before it explain. Leaves the
-    result in ``best``.
+    result in ``scratch.best``.
 
     Returns
     -------
     error : float, E of the whole posture (:func:`evaluate`)
     iterations : int, summed over partitions and rounds
     """
-    (parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index, joint_flags,
-     marker_joint, marker_local, slide_index) = body
-    kind, P, K, dist, R, t = cams
-    _, step, hist, nbins, dof_kind, lo, hi = dofs
-    (th, max_redraws, n_end, n_l, n_tau, tau0, l0, c_l, c_tau, eps, _, _, _, _, _, _,
-     _, _) = schedule
-    bidirectional, weight, cap, penalty_cap, one = error
-    (bounds, part_off, part_dofs, rounds, claim_gate, samples, stage_off, stage_dof_off,
-     stage_dofs, stage_mark, stage_joint, _) = parts
+    n_end, n_l, n_tau = schedule.n_end, schedule.n_l, schedule.n_tau
+    bounds, part_off, part_dofs = parts.bounds, parts.dof_off, parts.dofs
+    rounds, claim_gate, samples, stage_off = (parts.rounds, parts.claim_gate, parts.samples,
+                                              parts.stage_off)
+    objective, points, view_off, obs3 = obs.objective, obs.points, obs.view_off, obs.obs3
+    cur, best, rot, pos, mk, proj = (scratch.cur, scratch.best, scratch.rot, scratch.pos,
+                                     scratch.mk, scratch.proj)
+    cs, sn = scratch.cs, scratch.sn
+    cap, penalty_cap, one = error.cap, error.penalty_cap, error.one_to_one
+    marker_joint = body.marker_joint
     work[:] = origin
     its = 0
     rs = np.uint64(state)
@@ -350,32 +359,23 @@ def anneal_partitions(origin, state, rp, rr, body, cams, dofs, schedule, error, 
         # Limbs on roots of their own (no trunk to fit first): each searches its start
         # without claims, and the clearest (lowest E per marker) go first and claim their
         # points, so a limb that happens to come first cannot take a clearer one's.
-        project_posture(work, rp, rr, parent, chain, pre_rot, pre_trans, post_trans,
-                        elem_axis, elem_index, joint_flags, marker_joint, marker_local,
-                        slide_index, kind, P, K, dist, R, t, cs, sn, rot, pos, mk, proj)
+        project_posture(work, rp, rr, body, cams, cs, sn, rot, pos, mk, proj)
         claimed[:] = False
         clear = np.empty(n_parts)
         for p in range(n_parts):
             cur[:] = work
             rs, _ = next_uniform(rs)
             clear[p] = beam_start(
-                cur, stage_off[p], stage_off[p + 1], stage_dof_off, stage_dofs, stage_mark,
-                stage_joint,
-                samples, mix64(rs ^ GOLDEN), hist, nbins, th, dof_kind, lo, hi, rp, rr,
-                parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index,
-                joint_flags, marker_joint, marker_local, slide_index, kind, P, K, dist, R, t,
-                objective, points, conf, view_off, obs3, cap, bounds[p, 0], bounds[p, 1],
-                bounds[p, 2], bounds[p, 3], claimed, penalty_cap, one, schedule[13],
-                schedule[14], cs, sn, rot, pos, mk, proj, nearest) / max(
-                    1, bounds[p, 3] - bounds[p, 2])
+                cur, stage_off[p], stage_off[p + 1], parts, mix64(rs ^ GOLDEN), rp, rr, body,
+                cams, dofs, schedule, error, obs,
+                (bounds[p, 0], bounds[p, 1], bounds[p, 2], bounds[p, 3]), claimed,
+                scratch) / max(1, bounds[p, 3] - bounds[p, 2])
             found[p, :] = cur
         order = np.argsort(clear)
     for r in range(rounds):
         for k in range(n_parts):
             p = order[k] if r == 0 else k
-            project_posture(work, rp, rr, parent, chain, pre_rot, pre_trans, post_trans,
-                            elem_axis, elem_index, joint_flags, marker_joint, marker_local,
-                            slide_index, kind, P, K, dist, R, t, cs, sn, rot, pos, mk, proj)
+            project_posture(work, rp, rr, body, cams, cs, sn, rot, pos, mk, proj)
             j0, j1, m0, m1 = bounds[p, 0], bounds[p, 1], bounds[p, 2], bounds[p, 3]
             if r == 0 and bounds[p, 4] > m0:
                 m1 = bounds[p, 4]  # a trunk before its limbs are fitted: its own markers
@@ -400,45 +400,31 @@ def anneal_partitions(origin, state, rp, rr, body, cams, dofs, schedule, error, 
                 # the limb's own search stands unless a clearer limb claimed its points
                 for q in range(dofs_p.shape[0]):
                     work[dofs_p[q]] = found[p, dofs_p[q]]
-                project_posture(work, rp, rr, parent, chain, pre_rot, pre_trans, post_trans,
-                                elem_axis, elem_index, joint_flags, marker_joint, marker_local,
-                                slide_index, kind, P, K, dist, R, t, cs, sn, rot, pos, mk, proj)
+                project_posture(work, rp, rr, body, cams, cs, sn, rot, pos, mk, proj)
                 searched = partition_error(
-                    objective, proj, mk, points, conf, view_off, obs3, cap, m0, m1, claimed,
-                    0.0, penalty_cap, one, nearest) == partition_error(
-                    objective, proj, mk, points, conf, view_off, obs3, cap, m0, m1, unclaimed,
-                    0.0, penalty_cap, one, nearest)
+                    objective, proj, mk, points, obs.conf, view_off, obs3, cap, m0, m1,
+                    claimed, 0.0, penalty_cap, one, scratch.nearest) == partition_error(
+                    objective, proj, mk, points, obs.conf, view_off, obs3, cap, m0, m1,
+                    unclaimed, 0.0, penalty_cap, one, scratch.nearest)
             if r == 0 and samples > 0 and not searched:
-                beam_start(work, stage_off[p], stage_off[p + 1], stage_dof_off, stage_dofs,
-                           stage_mark, stage_joint, samples, mix64(rs ^ GOLDEN), hist,
-                           nbins, th,
-                           dof_kind, lo, hi, rp, rr, parent, chain, pre_rot, pre_trans,
-                           post_trans, elem_axis, elem_index, joint_flags, marker_joint,
-                           marker_local, slide_index, kind, P, K, dist, R, t, objective,
-                           points, conf, view_off, obs3, cap, j0, j1, m0, m1, claimed,
-                           penalty_cap, one, schedule[13], schedule[14], cs, sn, rot, pos, mk,
-                           proj, nearest)
+                beam_start(work, stage_off[p], stage_off[p + 1], parts, mix64(rs ^ GOLDEN), rp,
+                           rr, body, cams, dofs, schedule, error, obs, (j0, j1, m0, m1),
+                           claimed, scratch)
             cloud, free = obs3, claimed
             if objective == OBJ_CLOUD:  # the same E, without the claimed points
                 cloud, free = unclaimed_cloud(obs3, claimed)
             # the run's schedule shared by axes: a round anneals about N_end in all
             share = dofs_p.shape[0] / max(1, part_dofs.shape[0])
-            _, n = anneal_chain(work, dofs_p, step, hist,
-                                nbins, th, dof_kind, lo, hi, max_redraws,
-                                max(1, round(n_end * share)), max(1, round(n_l * share)),
-                                max(1, round(n_tau * share)),
-                                tau0, l0, c_l, c_tau, eps, mix64(rs), rp, rr, parent, chain,
-                                pre_rot, pre_trans, post_trans, elem_axis, elem_index,
-                                joint_flags, marker_joint, marker_local, slide_index, kind, P,
-                                K, dist, R, t, objective, points, conf, view_off, cloud,
-                                bidirectional, weight, cap, penalty_cap, one, j0, j1, m0,
-                                m1, free, cur, cand, best, cs, sn, rot, pos, mk, proj,
-                                per_view, nearest, np.empty(mk.shape[0] + cloud.shape[0]))
+            counts = (max(1, round(n_end * share)), max(1, round(n_l * share)),
+                      max(1, round(n_tau * share)))
+            _, n = anneal_chain(work, dofs_p, counts, mix64(rs), rp, rr, body, cams, dofs,
+                                schedule, error, FrameObs(objective, points, obs.conf,
+                                                          view_off, cloud),
+                                (j0, j1, m0, m1), free, scratch,
+                                np.empty(mk.shape[0] + cloud.shape[0]))
             its += n
             work[:] = best
-    project_posture(work, rp, rr, parent, chain, pre_rot, pre_trans, post_trans, elem_axis,
-                    elem_index, joint_flags, marker_joint, marker_local, slide_index, kind, P,
-                    K, dist, R, t, cs, sn, rot, pos, mk, proj)
+    project_posture(work, rp, rr, body, cams, cs, sn, rot, pos, mk, proj)
     best[:] = work
-    return evaluate(objective, proj, mk, points, conf, view_off, obs3, bidirectional, weight,
-                    cap, penalty_cap, one, per_view, nearest), its
+    return evaluate(objective, proj, mk, points, obs.conf, view_off, obs3, error.bidirectional,
+                    error.weight, cap, penalty_cap, one, scratch.per_view, scratch.nearest), its

@@ -23,8 +23,8 @@ start 'mean').
 from __future__ import annotations
 
 import functools
-import inspect
 import threading
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit, prange
@@ -33,6 +33,7 @@ from kinematics._kernels.anneal import anneal_chain
 from kinematics._kernels.fastmath import stream_state
 from kinematics._kernels.frames import clear_frame, finish_run, take_runs, wants_run, write_frame
 from kinematics._kernels.objective import observed
+from kinematics._kernels.records import Scratch, frame_obs, new_scratch
 
 #: Threads per block of the annealing kernel (each thread one run).
 THREADS = 128
@@ -41,6 +42,38 @@ THREADS = 128
 #: this). The locust's paper protocol on an H100 (bench/bench_cuda.py): one launch of
 #: 16 384 runs 11 500 frames/s, launches of 32 768 runs 15 800.
 GPU_RUNS = 16384
+
+class Tasks(NamedTuple):
+    """A round's runs: task r anneals run ``run[r]`` of frame ``frame[r]``."""
+
+    frame: np.ndarray  # (n_tasks,) int64
+    run: np.ndarray  # (n_tasks,) int64
+
+
+class RunInputs(NamedTuple):
+    """What every task reads (the arguments of ``fit_frames`` it needs; on the GPU, device
+    arrays)."""
+
+    frame_ids: np.ndarray
+    root_pos: np.ndarray
+    root_rot: np.ndarray
+    start: np.ndarray
+    body: tuple  # FoldedBody
+    cams: tuple  # CameraArrays
+    dofs: tuple  # DofArrays
+    schedule: tuple  # Schedule
+    error: tuple  # ErrorArgs
+    obs: tuple  # ObservationArrays
+    claimed: np.ndarray  # no claims: all false
+
+
+class RunOutputs(NamedTuple):
+    """Each task's annealed posture, its E and its iterations."""
+
+    best: np.ndarray  # (n_tasks, n_state)
+    e: np.ndarray  # (n_tasks,)
+    iterations: np.ndarray  # (n_tasks,) int64
+
 
 class GpuFailed(RuntimeError):
     """The GPU could not compile or run the kernel (the reason in the message)."""
@@ -64,42 +97,48 @@ def available() -> bool:
 
 
 @njit(cache=True, nogil=True)
-def run_task(r, task_frame, task_run, frame_ids, root_pos, root_rot, start, free_idx, step,
-             hist, nbins, dof_kind, lo, hi, max_redraws, n_end, n_l, n_tau, th, tau0, l0, c_l,
-             c_tau, eps, seed, parent, chain, pre_rot, pre_trans, post_trans, elem_axis,
-             elem_index, joint_flags, marker_joint, marker_local, slide_index, kind, P, K,
-             dist, R, t, objective, points, conf, det_off, obs3, bidirectional, weight, cap,
-             penalty_cap, claimed, best_out, e_out, it_out, cur, cand, best, cs, sn, rot, pos,
-             mk, proj, per_view, nearest):
-    """Task ``r``'s run (frame ``task_frame[r]``, run ``task_run[r]``) annealed from
-    ``start`` into ``best_out[r]``, ``e_out[r]``, ``it_out[r]``: what one GPU thread does,
-    and its CPU twin (:func:`anneal_tasks_cpu`) per task."""
-    f = task_frame[r]
-    nv = kind.shape[0]
+def run_task(r, tasks, inputs, outs, scratch):
+    """Task ``r``'s run (frame ``tasks.frame[r]``, run ``tasks.run[r]``) annealed from
+    ``inputs.start`` into ``outs.best[r]``, ``outs.e[r]``, ``outs.iterations[r]``: what one
+    GPU thread does, and its CPU twin (:func:`anneal_tasks_cpu`) per task."""
+    f = tasks.frame[r]
+    schedule, body = inputs.schedule, inputs.body
+    nv = inputs.cams.kind.shape[0]
+    counts = (schedule.n_end, schedule.n_l, schedule.n_tau)
     e, its = anneal_chain(
-        start, free_idx, step, hist, nbins, th, dof_kind, lo, hi, max_redraws, n_end, n_l,
-        n_tau, tau0, l0, c_l, c_tau, eps, stream_state(seed, frame_ids[f], task_run[r]),
-        root_pos[f], root_rot[f], parent, chain, pre_rot, pre_trans, post_trans, elem_axis,
-        elem_index, joint_flags, marker_joint, marker_local, slide_index, kind, P, K, dist, R,
-        t, objective, points, conf, det_off[f * nv: f * nv + nv + 1], obs3[f], bidirectional,
-        weight, cap, penalty_cap, False, 0, parent.shape[0], 0, marker_joint.shape[0],
-        claimed, cur, cand, best, cs, sn, rot, pos, mk, proj, per_view, nearest,
-        per_view[:0])  # no cloud on the GPU: no scratch for cloud_error_once
-    for k in range(start.shape[0]):
-        best_out[r, k] = best[k]
-    e_out[r] = e
-    it_out[r] = its
+        inputs.start, inputs.dofs.free_idx, counts,
+        stream_state(schedule.seed, inputs.frame_ids[f], tasks.run[r]), inputs.root_pos[f],
+        inputs.root_rot[f], body, inputs.cams, inputs.dofs, schedule, inputs.error,
+        frame_obs(inputs.obs, f, nv), (0, body.parent.shape[0], 0, body.marker_joint.shape[0]),
+        inputs.claimed, scratch,
+        scratch.per_view[:0])  # no cloud on the GPU: no scratch for cloud_error_once
+    for k in range(inputs.start.shape[0]):
+        outs.best[r, k] = scratch.best[k]
+    outs.e[r] = e
+    outs.iterations[r] = its
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def anneal_tasks_cpu(na, nj, nm, nv, *args):
-    """:func:`run_task` for every task (``args``: its parameters after ``r`` and before the
-    scratch) on the CPU's threads, with scratch for ``na`` state entries, ``nj`` joints,
-    ``nm`` markers and ``nv`` views: the GPU kernel's twin (the rounds' test oracle)."""
-    for r in prange(args[0].shape[0]):
-        run_task(r, *args, np.empty(na), np.empty(na), np.empty(na), np.empty(na),
-                 np.empty(na), np.empty((nj, 3, 3)), np.empty((nj, 3)), np.empty((nm, 3)),
-                 np.empty((nv, nm, 2)), np.empty(nv), np.empty(nm, np.int64))
+def anneal_tasks_cpu(tasks, frame_ids, root_pos, root_rot, start, body, cams, dofs, schedule,
+                     error, obs, claimed, outs):
+    """:func:`run_task` for every task on the CPU's threads, each with its own scratch: the
+    GPU kernel's twin (the rounds' test oracle). The fields of :class:`RunInputs` come one
+    by one: numba's parallel loop takes flat records only, so it is rebuilt per task."""
+    na, nv = start.shape[0], cams.kind.shape[0]
+    nj, nm = body.parent.shape[0], body.marker_joint.shape[0]
+    for r in prange(tasks.frame.shape[0]):
+        run_task(r, tasks, _run_inputs(frame_ids, root_pos, root_rot, start, body, cams, dofs,
+                                       schedule, error, obs, claimed), outs,
+                 new_scratch(na, nj, nm, nv))
+
+
+@njit(cache=True, nogil=True)
+def _run_inputs(frame_ids, root_pos, root_rot, start, body, cams, dofs, schedule, error, obs,
+                claimed):
+    """A :class:`RunInputs` built in a function of its own (a parallel loop's body cannot
+    build a namedtuple)."""
+    return RunInputs(frame_ids, root_pos, root_rot, start, body, cams, dofs, schedule, error,
+                     obs, claimed)
 
 
 def _kernel(na: int, nj: int, nm: int, nv: int):
@@ -114,24 +153,22 @@ def _kernel(na: int, nj: int, nm: int, nv: int):
         from numba import cuda, float64, int64
         na1, nm1, nv1 = max(na, 1), max(nm, 1), max(nv, 1)
 
-        # numba's CUDA kernels take no *args: the kernel is written out with run_task's
-        # parameters (all but r and the scratch, which are the thread's local arrays)
-        names = ", ".join(list(inspect.signature(run_task.py_func).parameters)[1:-11])
-        scratch = ", ".join(f"cuda.local.array({shape}, {dtype})[{cut}]" for shape, dtype, cut in (
-            (na1, "float64", ":na"),) * 5 + (
-            ((nj, 3, 3), "float64", ":"), ((nj, 3), "float64", ":"),
-            ((nm1, 3), "float64", ":nm"), ((nv1, nm1, 2), "float64", ":nv, :nm"),
-            (nv1, "float64", ":nv"), (nm1, "int64", ":nm")))
-        source = (f"def anneal_tasks({names}):\n"
-                  "    r = cuda.grid(1)\n"
-                  "    if r < task_frame.shape[0]:\n"
-                  f"        run_task(r, {names}, {scratch})\n")
-        space = {"cuda": cuda, "run_task": run_task, "float64": float64, "int64": int64,
-                 "na": na, "nm": nm, "nv": nv}
-        exec(compile(source, f"<cuda kernel {key}>", "exec"), space)
-        anneal_tasks = cuda.jit(fastmath=False)(space["anneal_tasks"])
-        _kernels[key] = anneal_tasks
-        return anneal_tasks
+        def anneal_tasks(tasks, inputs, outs):
+            # the scratch in the thread's local memory (shapes are compile-time constants)
+            r = cuda.grid(1)
+            if r < tasks.frame.shape[0]:
+                scratch = Scratch(
+                    cuda.local.array(na1, float64)[:na], cuda.local.array(na1, float64)[:na],
+                    cuda.local.array(na1, float64)[:na], cuda.local.array(na1, float64)[:na],
+                    cuda.local.array(na1, float64)[:na],
+                    cuda.local.array((nj, 3, 3), float64), cuda.local.array((nj, 3), float64),
+                    cuda.local.array((nm1, 3), float64)[:nm],
+                    cuda.local.array((nv1, nm1, 2), float64)[:nv, :nm],
+                    cuda.local.array(nv1, float64)[:nv], cuda.local.array(nm1, int64)[:nm])
+                run_task(r, tasks, inputs, outs, scratch)
+
+        _kernels[key] = cuda.jit(fastmath=False)(anneal_tasks)
+        return _kernels[key]
 
 
 # -- the frame procedure, on the CPU --------------------------------------------------------
@@ -158,10 +195,9 @@ def finish_tasks(task_frame, task_run, best, e, root_pos, root_rot, body, cams, 
                  schedule, error, obs, claim_gate, out, run_u, run_pairs):
     """Refine and score each annealed run (``finish_run``, in parallel) into the frame's run
     outputs."""
-    objective, det_points, det_conf, det_off, obs3 = obs
-    nv = cams[0].shape[0]
-    nj = body[0].shape[0]
-    nm = body[8].shape[0]
+    nv = cams.kind.shape[0]
+    nj = body.parent.shape[0]
+    nm = body.marker_joint.shape[0]
     na = best.shape[1]
     # the arrays taken out of the namedtuple first: stores through ``out.run_angles`` in a
     # prange were lost
@@ -170,12 +206,9 @@ def finish_tasks(task_frame, task_run, best, e, root_pos, root_rot, body, cams, 
         f = task_frame[r]
         run = task_run[r]
         state = best[r].copy()
-        e_run, pairs, u = finish_run(
-            state, e[r], root_pos[f], root_rot[f], body, cams, dofs, schedule, error,
-            objective, det_points, det_conf, det_off[f * nv: f * nv + nv + 1], obs3[f],
-            claim_gate, np.empty(na), np.empty(na), np.empty(na), np.empty((nj, 3, 3)),
-            np.empty((nj, 3)), np.empty((nm, 3)), np.empty((nv, nm, 2)), np.empty(nv),
-            np.empty(nm, np.int64))
+        e_run, pairs, u = finish_run(state, e[r], root_pos[f], root_rot[f], body, cams, dofs,
+                                     schedule, error, frame_obs(obs, f, nv), claim_gate,
+                                     np.empty(na), new_scratch(na, nj, nm, nv))
         run_angles[f, run, :] = state
         run_error[f, run] = e_run
         run_u[f, run] = u
@@ -188,17 +221,14 @@ def next_tasks(task_frame, task_run, its, root_pos, root_rot, body, cams, schedu
     """After a round: each frame's runs so far taken in run order (the kept run, as the
     scalar kernel keeps it), then the frame's next run if its E asks for one, else its
     outputs. Returns the next round's (frames, runs); a frame's tasks are consecutive."""
-    objective, det_points, det_conf, det_off, obs3 = obs
-    min_runs, max_runs, threshold = schedule[17], schedule[12], schedule[11]
-    max_unexplained = schedule[16]
-    nv = cams[0].shape[0]
-    nj = body[0].shape[0]
-    nm = body[8].shape[0]
+    min_runs, max_runs = schedule.min_runs, schedule.max_runs
+    threshold, max_unexplained = schedule.reanalysis_threshold, schedule.max_unexplained
+    nv = cams.kind.shape[0]
+    nj = body.parent.shape[0]
+    nm = body.marker_joint.shape[0]
     na = out.angles.shape[1]
-    cs, sn, keep = np.empty(na), np.empty(na), np.empty(na)
-    rot, pos = np.empty((nj, 3, 3)), np.empty((nj, 3))
-    mk, proj = np.empty((nm, 3)), np.empty((nv, nm, 2))
-    per_view, near = np.empty(nv), np.empty(nm, np.int64)
+    keep = np.empty(na)
+    scratch = new_scratch(na, nj, nm, nv)
     n_tasks = task_frame.shape[0]
     frames = np.empty(n_tasks, np.int64)
     runs = np.empty(n_tasks, np.int64)
@@ -218,8 +248,7 @@ def next_tasks(task_frame, task_run, its, root_pos, root_rot, body, cams, schedu
         else:
             keep[:] = out.run_angles[f, kept, :]
             write_frame(out, f, keep, issued, root_pos[f], root_rot[f], body, cams, error,
-                        objective, det_points, det_conf, det_off[f * nv: f * nv + nv + 1],
-                        obs3[f], cs, sn, rot, pos, mk, proj, per_view, near)
+                        frame_obs(obs, f, nv), scratch)
     return frames[:k], runs[:k]
 
 
@@ -228,35 +257,30 @@ def fit_frames_rounds(frame_ids, root_pos, root_rot, start, body, cams, dofs, sc
     """The scalar ``fit_frames`` for independent frames (one partition, every run from
     ``start``; the same arguments and outputs), each round's runs annealed at once: on the
     GPU, or with ``gpu`` false by the kernel's CPU twin."""
-    objective, points, conf, det_off, obs3 = obs
-    nv = cams[0].shape[0]
-    na, nj, nm = start.shape[0], body[0].shape[0], body[8].shape[0]
+    nv = cams.kind.shape[0]
+    na, nj, nm = start.shape[0], body.parent.shape[0], body.marker_joint.shape[0]
     first = min(max(schedule.min_runs, 1), schedule.max_runs)
-    frames, runs = first_tasks(objective, det_off, obs3, nv, first, out)
+    frames, runs = first_tasks(obs.objective, obs.offsets, obs.points3d, nv, first, out)
     if not frames.size:
         return
     n = out.runs.shape[0]
     run_u = np.zeros((n, schedule.max_runs), np.int64)
     run_pairs = np.zeros((n, schedule.max_runs), np.int64)
-    bidirectional, weight, cap, penalty_cap, _ = error
-    inputs = (frame_ids, np.ascontiguousarray(root_pos), np.ascontiguousarray(root_rot), start,
-              *dofs, schedule.max_redraws, schedule.n_end, schedule.n_l,
-              schedule.n_tau, schedule.th, schedule.tau0, schedule.l0, schedule.c_l,
-              schedule.c_tau, schedule.eps, schedule.seed, *body, *cams, objective, points,
-              conf, det_off, obs3, bidirectional, weight, cap, penalty_cap,
-              np.zeros(max(points.shape[0], obs3.shape[1], 1), np.bool_))
+    inputs = RunInputs(frame_ids, np.ascontiguousarray(root_pos), np.ascontiguousarray(root_rot),
+                       start, body, cams, dofs, schedule, error, obs,
+                       np.zeros(max(obs.points.shape[0], obs.points3d.shape[1], 1), np.bool_))
     if gpu:
         inputs = _on_gpu(inputs)
     while frames.size:
         t = frames.size
-        best, e, its = np.empty((t, na)), np.empty(t), np.empty(t, np.int64)
+        outs = RunOutputs(np.empty((t, na)), np.empty(t), np.empty(t, np.int64))
         if gpu:
-            _launch(_kernel(na, nj, nm, nv), frames, runs, inputs, best, e, its)
+            _launch(_kernel(na, nj, nm, nv), Tasks(frames, runs), inputs, outs)
         else:
-            anneal_tasks_cpu(na, nj, nm, nv, frames, runs, *inputs, best, e, its)
-        finish_tasks(frames, runs, best, e, root_pos, root_rot, body, cams, dofs, schedule,
-                     error, obs, claim_gate, out, run_u, run_pairs)
-        frames, runs = next_tasks(frames, runs, its, root_pos, root_rot, body, cams,
+            anneal_tasks_cpu(Tasks(frames, runs), *inputs, outs)
+        finish_tasks(frames, runs, outs.best, outs.e, root_pos, root_rot, body, cams, dofs,
+                     schedule, error, obs, claim_gate, out, run_u, run_pairs)
+        frames, runs = next_tasks(frames, runs, outs.iterations, root_pos, root_rot, body, cams,
                                   schedule, error, obs, out, run_u, run_pairs)
 
 
@@ -267,26 +291,31 @@ def _reason(what: str, exc: Exception) -> GpuFailed:
     return GpuFailed(f"{what} ({type(exc).__name__}: {lines[0] if lines else 'no message'})")
 
 
-def _on_gpu(inputs: tuple) -> tuple:
-    """The kernel's inputs with every array copied to the GPU."""
+def _on_gpu(record):
+    """The record with every array in it (records nested) copied to the GPU."""
     from numba import cuda
     try:
-        return tuple(cuda.to_device(a) if isinstance(a, np.ndarray) else a for a in inputs)
+        return _mapped(record, cuda.to_device)
     except Exception as exc:  # numba raises many kinds; the reason is in the message
         raise _reason("copying to the GPU failed", exc) from exc
 
 
-def _launch(kernel, frames, runs, inputs, best, e, its) -> None:
-    """One launch of ``kernel`` over the tasks (``frames``, ``runs``); its outputs into
-    ``best``, ``e``, ``its``."""
+def _mapped(record, to_device):
+    if isinstance(record, np.ndarray):
+        return to_device(record)
+    if isinstance(record, tuple):
+        values = [_mapped(v, to_device) for v in record]
+        return type(record)(*values) if hasattr(record, "_fields") else tuple(values)
+    return record
+
+
+def _launch(kernel, tasks, inputs, outs) -> None:
+    """One launch of ``kernel`` over ``tasks``; its outputs into ``outs``."""
     from numba import cuda
     try:
-        d_best, d_e, d_its = (cuda.device_array_like(best), cuda.device_array_like(e),
-                              cuda.device_array_like(its))
-        kernel[-(-frames.size // THREADS), THREADS](
-            cuda.to_device(frames), cuda.to_device(runs), *inputs, d_best, d_e, d_its)
-        d_best.copy_to_host(best)
-        d_e.copy_to_host(e)
-        d_its.copy_to_host(its)
+        d_outs = RunOutputs(*(cuda.device_array_like(a) for a in outs))
+        kernel[-(-tasks.frame.size // THREADS), THREADS](_on_gpu(tasks), inputs, d_outs)
+        for d, a in zip(d_outs, outs, strict=True):
+            d.copy_to_host(a)
     except Exception as exc:  # compiling (the first launch) or running
         raise _reason("the GPU kernel failed", exc) from exc

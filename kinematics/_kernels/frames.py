@@ -15,6 +15,7 @@ from kinematics._kernels.error3d import count_unexplained_cloud
 from kinematics._kernels.fastmath import stream_state
 from kinematics._kernels.objective import evaluate, observed
 from kinematics._kernels.posture import drawn_views, project_posture
+from kinematics._kernels.records import frame_obs, new_scratch
 from kinematics._kernels.refine import refine_posture
 
 
@@ -80,33 +81,28 @@ def same_markers(a, b, tol):
 
 
 @njit(cache=True, nogil=True)
-def finish_run(best, e, rp, rr, body, cams, dofs, schedule, error, objective, points, conf,
-               view_off, obs3, claim_gate, annealed, cs, sn, rot, pos, mk, proj, per_view,
-               nearest):
+def finish_run(best, e, rp, rr, body, cams, dofs, schedule, error, obs, claim_gate, annealed,
+               scratch):
     """After a run's annealing (best posture ``best``, its E ``e``): refinement, kept only if
-    E did not grow, and the count of unexplained detections. Updates ``best`` in place;
+    E did not grow, and the count of unexplained detections (``obs``: the frame's FrameObs;
+    ``scratch``: a Scratch whose ``cs`` … ``nearest`` it uses). Updates ``best`` in place;
     returns (E, refinement pairs, unexplained)."""
-    (parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index, joint_flags,
-     marker_joint, marker_local, slide_index) = body
-    kind, P, K, dist, R, t = cams
-    free_idx, _, _, _, dof_kind, lo, hi = dofs
-    refine_steps, refine_gate, max_unexplained = schedule[13], schedule[14], schedule[16]
-    bidirectional, weight, cap, penalty_cap, one = error
+    objective, obs3 = obs.objective, obs.obs3
+    cs, sn, rot, pos = scratch.cs, scratch.sn, scratch.rot, scratch.pos
+    mk, proj = scratch.mk, scratch.proj
+    max_unexplained = schedule.max_unexplained
     pairs = 0
-    if refine_steps > 0:
+    if schedule.refine_steps > 0:
         # Refinement minimises squared pair residuals, not E: keep its result only if E
         # did not grow (it never makes a fit worse).
         annealed[:] = best
-        _, pairs = refine_posture(
-            best, free_idx, lo, hi, dof_kind, refine_steps, refine_gate, rp, rr, parent, chain,
-            pre_rot, pre_trans, post_trans, elem_axis, elem_index, joint_flags, marker_joint,
-            marker_local, slide_index, drawn_views(kind, objective), P, K, dist, R, t,
-            objective, points, conf, view_off, obs3)
-        project_posture(best, rp, rr, parent, chain, pre_rot, pre_trans, post_trans,
-                        elem_axis, elem_index, joint_flags, marker_joint, marker_local,
-                        slide_index, kind, P, K, dist, R, t, cs, sn, rot, pos, mk, proj)
-        e_refined = evaluate(objective, proj, mk, points, conf, view_off, obs3, bidirectional,
-                             weight, cap, penalty_cap, one, per_view, nearest)
+        _, pairs = refine_posture(best, dofs.free_idx, dofs, schedule.refine_steps,
+                                  schedule.refine_gate, rp, rr, body, cams,
+                                  drawn_views(cams.kind, objective), obs)
+        project_posture(best, rp, rr, body, cams, cs, sn, rot, pos, mk, proj)
+        e_refined = evaluate(objective, proj, mk, obs.points, obs.conf, obs.view_off, obs3,
+                             error.bidirectional, error.weight, error.cap, error.penalty_cap,
+                             error.one_to_one, scratch.per_view, scratch.nearest)
         if e_refined <= e:
             e = e_refined
         else:
@@ -116,32 +112,25 @@ def finish_run(best, e, rp, rr, body, cams, dofs, schedule, error, objective, po
     if max_unexplained >= 0 and objective == OBJ_NEAREST:
         # Detections far from every model marker: a limb on another's blobs leaves its own
         # unexplained, a fused blob does not.
-        project_posture(best, rp, rr, parent, chain, pre_rot, pre_trans, post_trans,
-                        elem_axis, elem_index, joint_flags, marker_joint, marker_local,
-                        slide_index, kind, P, K, dist, R, t, cs, sn, rot, pos, mk, proj)
-        u = count_unexplained(proj, points, view_off, obs3, claim_gate)
+        project_posture(best, rp, rr, body, cams, cs, sn, rot, pos, mk, proj)
+        u = count_unexplained(proj, obs.points, obs.view_off, obs3, claim_gate)
     elif max_unexplained >= 0 and objective == OBJ_CLOUD:
-        project_posture(best, rp, rr, parent, chain, pre_rot, pre_trans, post_trans,
-                        elem_axis, elem_index, joint_flags, marker_joint, marker_local,
-                        slide_index, kind, P, K, dist, R, t, cs, sn, rot, pos, mk, proj)
+        project_posture(best, rp, rr, body, cams, cs, sn, rot, pos, mk, proj)
         u = count_unexplained_cloud(mk, obs3, claim_gate)
     return e, pairs, u
 
 
 @njit(cache=True, nogil=True)
-def write_frame(out, f, keep, runs, rp, rr, body, cams, error, objective, points, conf,
-                view_off, obs3, cs, sn, rot, pos, mk, proj, per_view, nearest):
-    """Frame ``f``'s outputs from its kept posture ``keep`` after ``runs`` runs."""
-    (parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index, joint_flags,
-     marker_joint, marker_local, slide_index) = body
-    kind, P, K, dist, R, t = cams
-    bidirectional, weight, cap, penalty_cap, one = error
-    project_posture(keep, rp, rr, parent, chain, pre_rot, pre_trans, post_trans, elem_axis,
-                    elem_index, joint_flags, marker_joint, marker_local, slide_index, kind, P,
-                    K, dist, R, t, cs, sn, rot, pos, mk, proj)
-    out.error[f] = evaluate(objective, proj, mk, points, conf, view_off, obs3, bidirectional,
-                            weight, cap, penalty_cap, one, per_view, nearest)
-    out.view_error[f, :] = per_view
+def write_frame(out, f, keep, runs, rp, rr, body, cams, error, obs, scratch):
+    """Frame ``f``'s outputs from its kept posture ``keep`` after ``runs`` runs (``obs``: the
+    frame's FrameObs; ``scratch``: a Scratch)."""
+    project_posture(keep, rp, rr, body, cams, scratch.cs, scratch.sn, scratch.rot,
+                    scratch.pos, scratch.mk, scratch.proj)
+    out.error[f] = evaluate(obs.objective, scratch.proj, scratch.mk, obs.points, obs.conf,
+                            obs.view_off, obs.obs3, error.bidirectional, error.weight,
+                            error.cap, error.penalty_cap, error.one_to_one, scratch.per_view,
+                            scratch.nearest)
+    out.view_error[f, :] = scratch.per_view
     out.angles[f, :] = keep
     out.runs[f] = runs
 
@@ -185,49 +174,38 @@ def fit_frames(seg_off, frame_ids, root_pos, root_rot, start, body, cams, dofs, 
         made; R >= max_runs), the candidate postures of :mod:`kinematics.fit.temporal`. At least
         ``min_runs`` runs are made on frames with observations.
     """
-    # Unpacked once here; the loops below pass plain arrays (a tuple passed to a
-    # non-inlined call costs reference counting on every call).
-    (parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index, joint_flags,
-     marker_joint, marker_local, slide_index) = body
-    kind, P, K, dist, R, t = cams
-    free_idx, step, hist, nbins, dof_kind, lo, hi = dofs
-    (th, max_redraws, n_end, n_l, n_tau, tau0, l0, c_l, c_tau, eps, seed,
-     reanalysis_threshold, max_runs, _, _, start_previous, max_unexplained, min_runs) = schedule
-    claim_gate = parts[4]
-    partitioned = parts[0].shape[0] > 1 or parts[5] > 0
-    confirm = parts[11]
-    bidirectional, weight, cap, penalty_cap, one = error
-    objective, det_points, det_conf, det_off, obs3 = obs
-    out_iterations, out_pairs, out_run_angles, out_run_error = out[4:]
-    nv = kind.shape[0]
-    nj = parent.shape[0]
-    nm = marker_joint.shape[0]
+    free_idx = dofs.free_idx
+    seed, reanalysis_threshold = schedule.seed, schedule.reanalysis_threshold
+    max_runs, min_runs = schedule.max_runs, schedule.min_runs
+    start_previous, max_unexplained = schedule.start_previous, schedule.max_unexplained
+    counts = (schedule.n_end, schedule.n_l, schedule.n_tau)
+    claim_gate, confirm = parts.claim_gate, parts.confirm
+    partitioned = parts.bounds.shape[0] > 1 or parts.samples > 0
+    objective, det_points, obs3 = obs.objective, obs.points, obs.points3d
+    out_iterations, out_pairs = out.iterations, out.pairs
+    out_run_angles, out_run_error = out.run_angles, out.run_error
+    nv = cams.kind.shape[0]
+    nj = body.parent.shape[0]
+    nm = body.marker_joint.shape[0]
     na = start.shape[0]
+    whole = (0, nj, 0, nm)
     for s in prange(seg_off.shape[0] - 1):
-        rot = np.empty((nj, 3, 3))
-        pos = np.empty((nj, 3))
-        mk = np.empty((nm, 3))
-        proj = np.empty((nv, nm, 2))
-        cs = np.empty(na)
-        sn = np.empty(na)
-        per_view = np.empty(nv)
-        nearest = np.empty(nm, np.int64)
+        scratch = new_scratch(na, nj, nm, nv)
+        mk = scratch.mk
+        best = scratch.best
         claimed = np.zeros(max(det_points.shape[0], obs3.shape[1]), np.bool_)
         d2 = np.empty(nm + obs3.shape[1] if objective == OBJ_CLOUD else 0)
         work = np.empty(na)
-        cur = np.empty(na)
-        cand = np.empty(na)
-        best = np.empty(na)
         keep = np.empty(na)
         keep_mk = np.empty((nm, 3))
         annealed = np.empty(na)
         first = start.copy()
         for f in range(seg_off[s], seg_off[s + 1]):
-            vo = det_off[f * nv: f * nv + nv + 1]
+            fo = frame_obs(obs, f, nv)
             rp = root_pos[f]
             rr = root_rot[f]
             clear_frame(out, f)
-            if observed(objective, vo, obs3[f]):  # else nothing to fit
+            if observed(objective, fo.view_off, fo.obs3):  # else nothing to fit
                 e_keep = np.inf
                 run = 0
                 u_keep = 1 << 30  # with max_unexplained < 0 only E decides (u stays 0)
@@ -238,35 +216,21 @@ def fit_frames(seg_off, frame_ids, root_pos, root_rot, start, body, cams, dofs, 
                     origin = first if run == 0 else start
                     if partitioned:
                         e, its = anneal_partitions(origin, state, rp, rr, body, cams, dofs,
-                                                   schedule, error, objective, det_points,
-                                                   det_conf, vo, obs3[f], parts, claimed,
-                                                   work, cur, cand, best, cs, sn, rot, pos,
-                                                   mk, proj, per_view, nearest)
+                                                   schedule, error, fo, parts, claimed, work,
+                                                   scratch)
                     else:
-                        e, its = anneal_chain(origin, free_idx, step, hist, nbins, th,
-                                              dof_kind, lo, hi, max_redraws, n_end, n_l,
-                                              n_tau, tau0, l0, c_l, c_tau, eps, state, rp, rr,
-                                              parent, chain, pre_rot, pre_trans, post_trans,
-                                              elem_axis, elem_index, joint_flags,
-                                              marker_joint, marker_local, slide_index, kind,
-                                              P, K, dist, R, t, objective, det_points,
-                                              det_conf, vo, obs3[f], bidirectional, weight,
-                                              cap, penalty_cap, one, 0, nj, 0, nm, claimed, cur,
-                                              cand, best, cs, sn, rot, pos, mk, proj,
-                                              per_view, nearest, d2)
+                        e, its = anneal_chain(origin, free_idx, counts, state, rp, rr, body,
+                                              cams, dofs, schedule, error, fo, whole, claimed,
+                                              scratch, d2)
                     out_iterations[f] += its
                     e, pairs, u = finish_run(best, e, rp, rr, body, cams, dofs, schedule,
-                                             error, objective, det_points, det_conf, vo,
-                                             obs3[f], claim_gate, annealed, cs, sn, rot, pos,
-                                             mk, proj, per_view, nearest)
+                                             error, fo, claim_gate, annealed, scratch)
                     out_run_angles[f, run, :] = best
                     out_run_error[f, run] = e
                     better = keeps(e, u, e_keep, u_keep, max_unexplained)
                     if confirm > 0.0:
-                        project_posture(best, rp, rr, parent, chain, pre_rot, pre_trans,
-                                        post_trans, elem_axis, elem_index, joint_flags,
-                                        marker_joint, marker_local, slide_index, kind, P, K,
-                                        dist, R, t, cs, sn, rot, pos, mk, proj)
+                        project_posture(best, rp, rr, body, cams, scratch.cs, scratch.sn,
+                                        scratch.rot, scratch.pos, mk, scratch.proj)
                         if run > 0 and same_markers(mk, keep_mk, confirm):
                             confirmed = True  # the best run and this one agree
                         elif better:
@@ -279,8 +243,6 @@ def fit_frames(seg_off, frame_ids, root_pos, root_rot, start, body, cams, dofs, 
                         keep[:] = best
                         out_pairs[f] = pairs
                     run += 1
-                write_frame(out, f, keep, run, rp, rr, body, cams, error, objective,
-                            det_points, det_conf, vo, obs3[f], cs, sn, rot, pos, mk, proj,
-                            per_view, nearest)
+                write_frame(out, f, keep, run, rp, rr, body, cams, error, fo, scratch)
                 if start_previous:
                     first[:] = keep

@@ -5,6 +5,8 @@ lane's candidate for each objective, the histogram's allowed runs, and the itera
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
@@ -343,22 +345,81 @@ def allowed_runs(hist, nbins, th):
     return runs, n_runs
 
 
+class LaneState(NamedTuple):
+    """Each lane's annealing state (a column per lane): whether it runs, its random stream,
+    iterations, temperature, step length, countdowns, current and best E, and the state's
+    current, candidate and best values with their cosines and sines (n_state, n_lanes)."""
+
+    active: np.ndarray
+    rs: np.ndarray
+    it: np.ndarray
+    tau: np.ndarray
+    length: np.ndarray
+    to_tau: np.ndarray
+    to_l: np.ndarray
+    e_cur: np.ndarray
+    e_best: np.ndarray
+    cur: np.ndarray
+    cand: np.ndarray
+    best: np.ndarray
+    cs: np.ndarray
+    sn: np.ndarray
+
+
+class LaneObs(NamedTuple):
+    """Each lane's detections: ``dx``, ``dy`` (n_views, c_cap, n_lanes) padded, their count
+    ``ndet`` (n_views, n_lanes) and most ``cmax`` (n_views,); keypoint weights ``dw``; 3D
+    points ``o3`` (n_markers, 4, n_lanes)."""
+
+    dx: np.ndarray
+    dy: np.ndarray
+    ndet: np.ndarray
+    cmax: np.ndarray
+    dw: np.ndarray
+    o3: np.ndarray
+
+
+class LaneFrames(NamedTuple):
+    """Each lane's posture scratch: joint frames ``rot``, ``pos``, markers ``mk``, their
+    projections ``proj``, ``nearest`` and the candidates' E ``e`` (n_lanes,)."""
+
+    rot: np.ndarray
+    pos: np.ndarray
+    mk: np.ndarray
+    proj: np.ndarray
+    nearest: np.ndarray
+    e: np.ndarray
+
+
 @njit(**LANE_OPTS)
-def iterate_lanes(n_iter, free_idx, n_hist, step, hist, nbins, th, runs, n_runs, dof_kind, lo, hi,
-                  max_redraws, n_end, n_l, n_tau, c_l, c_tau, eps, active, rs, it, tau,
-                  length, to_tau, to_l, e_cur, e_best, cur, cand, best, cs, sn, body, cams, dx,
-                  dy, ndet, cmax, bidirectional, weight, cap, penalty_cap, rot, pos, mk, proj,
-                  nearest, e, fused, use_fused, single, labelled, dw, points3d, o3):
+def iterate_lanes(n_iter, n_hist, runs, n_runs, dofs, schedule, lanes, body, cams, lobs, error,
+                  frames, fused, use_fused, single, labelled, points3d):
     """Anneal every lane (scalar ``anneal_chain``'s iteration, per lane) until an active lane
     has finished (``it >= n_end`` or best E below ``eps``) or ``n_iter`` iterations passed.
-    Inactive lanes compute but change nothing that is read back. With ``use_fused`` the
+    Inactive lanes compute but change nothing that is read back. ``lanes``: LaneState;
+    ``lobs``: LaneObs; ``frames``: LaneFrames; ``dofs``, ``schedule``, ``error``: the scalar
+    kernel's records. With ``use_fused`` the
     candidates' E comes from ``fused``, a kernel generated for the body
     (:mod:`kinematics._kernels.lane_codegen`), instead of the general loops; ``single``: that
     kernel computes in float32 and reads the detections' float32 copies. ``labelled``:
-    the detections are labelled keypoints of weights ``dw`` (:func:`labelled_lanes`);
-    ``points3d``: E is against each lane's 3D points ``o3`` (:func:`points3d_lanes`)."""
+    the detections are labelled keypoints of weights ``lobs.dw`` (:func:`labelled_lanes`);
+    ``points3d``: E is against each lane's 3D points ``lobs.o3`` (:func:`points3d_lanes`)."""
+    # the records unpacked once: the loops read plain arrays
+    free_idx, step, hist, nbins = dofs.free_idx, dofs.step, dofs.hist, dofs.nbins
+    lo, hi = dofs.lo, dofs.hi
+    th, max_redraws, eps = schedule.th, schedule.max_redraws, schedule.eps
+    n_end, n_l, n_tau = schedule.n_end, schedule.n_l, schedule.n_tau
+    c_l, c_tau = schedule.c_l, schedule.c_tau
+    active, rs, it, tau, length = lanes.active, lanes.rs, lanes.it, lanes.tau, lanes.length
+    to_tau, to_l, e_cur, e_best = lanes.to_tau, lanes.to_l, lanes.e_cur, lanes.e_best
+    cur, cand, best, cs, sn = lanes.cur, lanes.cand, lanes.best, lanes.cs, lanes.sn
+    dx, dy, ndet, cmax, dw, o3 = lobs.dx, lobs.dy, lobs.ndet, lobs.cmax, lobs.dw, lobs.o3
+    bidirectional, weight, cap, penalty_cap = (error.bidirectional, error.weight, error.cap,
+                                               error.penalty_cap)
+    rot, pos, mk, proj, nearest, e = (frames.rot, frames.pos, frames.mk, frames.proj,
+                                      frames.nearest, frames.e)
     (parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index, joint_flags,
-     marker_joint, marker_local, slide_index) = body
+     marker_joint, marker_local, slide_index) = body  # project_lanes' arguments, in order
     kind, P, K, dist, R, t = cams
     n_free = free_idx.shape[0]
     nl = e.shape[0]

@@ -56,9 +56,17 @@ from numba import cfunc, njit, prange, types
 from kinematics._kernels.codes import OBJ_LABELLED, OBJ_POINTS3D, ROOT_POSE
 from kinematics._kernels.fastmath import sincos, stream_state
 from kinematics._kernels.frames import clear_frame, finish_run, take_runs, wants_run, write_frame
-from kinematics._kernels.lane_iterations import LANE_OPTS, allowed_runs, iterate_lanes
+from kinematics._kernels.lane_iterations import (
+    LANE_OPTS,
+    LaneFrames,
+    LaneObs,
+    LaneState,
+    allowed_runs,
+    iterate_lanes,
+)
 from kinematics._kernels.objective import evaluate, observed
 from kinematics._kernels.posture import project_posture
+from kinematics._kernels.records import frame_obs, new_scratch
 
 #: Runs annealed together per thread: eight 512-bit registers of float64. More lanes spread
 #: each loop's fixed cost (bench/bench_lanes.py: 32 and 128 were slower); fewer than 16
@@ -177,16 +185,18 @@ def _kept_lanes(active, queue_empty):
 # -- the frame procedure (fit_frames' runs, re-analysis and candidates) ----------------------
 @njit(parallel=True, **LANE_OPTS)
 def fit_frames_lanes(group_off, frame_ids, root_pos, root_rot, start, body, cams, dofs,
-                     schedule, error, obs, claim_gate, n_lanes, fused, n_fused, single, out):
+                     schedule, error, obs, claim_gate, fused, setup, out):
     """Fit many frames, their runs packed into lanes: the scalar ``fit_frames`` for
     independent frames (``start_previous`` false, one partition, unlabelled points, labelled
     2D keypoints or 3D points), with the same outputs to the last bit. Frames
     ``group_off[g]:group_off[g + 1]`` are fitted by one thread (``prange`` over groups) with
     ``n_lanes`` lanes; ``claim_gate`` is the partitions' (detections farther from every
     marker are unexplained); every other argument is ``fit_frames``'. ``fused`` is the body's
-    generated kernel (:func:`iterate_lanes`) and ``n_fused`` the detections per view it scans
-    (at least every frame's; 1 for labelled keypoints, whose rows are the markers'), or
-    ``no_fused`` and 0 for the general loops; ``single``: the kernel is float32."""
+    generated kernel (:func:`iterate_lanes`), or ``no_fused`` for the general loops;
+    ``setup = (n_lanes, n_fused, single)``: ``n_fused`` the detections per view the kernel
+    scans (at least every frame's; 1 for labelled keypoints, whose rows are the markers'; 0
+    for the general loops), ``single``: the kernel is float32."""
+    n_lanes, n_fused, single = setup
     for g in prange(group_off.shape[0] - 1):
         _fit_group(group_off[g], group_off[g + 1], frame_ids, root_pos, root_rot, start, body,
                    cams, dofs, schedule, error, obs, claim_gate, n_lanes, fused, n_fused, single,
@@ -196,17 +206,17 @@ def fit_frames_lanes(group_off, frame_ids, root_pos, root_rot, start, body, cams
 @njit(**LANE_OPTS)
 def _fit_group(f0, f1, frame_ids, root_pos, root_rot, start, body, cams, dofs, schedule,
                error, obs, claim_gate, nl, fused, n_fused, single, out):
-    (parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index, joint_flags,
-     marker_joint, marker_local, slide_index) = body
-    kind, P, K, dist, R, t = cams
-    free_idx, step, hist, nbins, dof_kind, lo, hi = dofs
-    (th, max_redraws, n_end, n_l, n_tau, tau0, l0, c_l, c_tau, eps, seed,
-     reanalysis_threshold, max_runs, _, _, _, max_unexplained, min_runs) = schedule
-    bidirectional, weight, cap, penalty_cap, one = error
-    objective, det_points, det_conf, det_off, obs3 = obs
-    nv = kind.shape[0]
+    parent, chain, joint_flags = body.parent, body.chain, body.joint_flags
+    free_idx, hist, nbins, dof_kind = dofs.free_idx, dofs.hist, dofs.nbins, dofs.dof_kind
+    th, n_end, n_l, n_tau = schedule.th, schedule.n_end, schedule.n_l, schedule.n_tau
+    tau0, l0, eps, seed = schedule.tau0, schedule.l0, schedule.eps, schedule.seed
+    reanalysis_threshold, max_runs = schedule.reanalysis_threshold, schedule.max_runs
+    max_unexplained, min_runs = schedule.max_unexplained, schedule.min_runs
+    objective, det_points, det_conf, det_off, obs3 = (obs.objective, obs.points, obs.conf,
+                                                      obs.offsets, obs.points3d)
+    nv = cams.kind.shape[0]
     nj = parent.shape[0]
-    nm = marker_joint.shape[0]
+    nm = body.marker_joint.shape[0]
     na = start.shape[0]
     nc = root_pos.shape[1]
     n = f1 - f0
@@ -257,14 +267,7 @@ def _fit_group(f0, f1, frame_ids, root_pos, root_rot, start, body, cams, dofs, s
     # scalar scratch (loading, refinement, scoring)
     s_state = np.empty(na)
     s_annealed = np.empty(na)
-    s_cs = np.empty(na)
-    s_sn = np.empty(na)
-    s_rot = np.empty((nj, 3, 3))
-    s_pos = np.empty((nj, 3))
-    s_mk = np.empty((nm, 3))
-    s_proj = np.empty((nv, nm, 2))
-    s_view = np.empty(nv)
-    s_near = np.empty(nm, np.int64)
+    scratch = new_scratch(na, nj, nm, nv)
     # per-frame bookkeeping (local index f - f0)
     issued = np.zeros(n, np.int64)
     finished = np.zeros(n, np.int64)
@@ -322,12 +325,13 @@ def _fit_group(f0, f1, frame_ids, root_pos, root_rot, start, body, cams, dofs, s
                     cand[k, ln] = start[k]
                     best[k, ln] = start[k]
                     sn[k, ln], cs[k, ln] = sincos(start[k])
-                project_posture(start, root_pos[f], root_rot[f], parent, chain, pre_rot,
-                                pre_trans, post_trans, elem_axis, elem_index, joint_flags,
-                                marker_joint, marker_local, slide_index, kind, P, K, dist, R,
-                                t, s_cs, s_sn, s_rot, s_pos, s_mk, s_proj)
-                e0 = evaluate(objective, s_proj, s_mk, det_points, det_conf, vo, obs3[f],
-                              bidirectional, weight, cap, penalty_cap, one, s_view, s_near)
+                fo = frame_obs(obs, f, nv)
+                project_posture(start, root_pos[f], root_rot[f], body, cams, scratch.cs,
+                                scratch.sn, scratch.rot, scratch.pos, scratch.mk, scratch.proj)
+                e0 = evaluate(objective, scratch.proj, scratch.mk, det_points, det_conf, vo,
+                              fo.obs3, error.bidirectional, error.weight, error.cap,
+                              error.penalty_cap, error.one_to_one, scratch.per_view,
+                              scratch.nearest)
                 e_cur[ln] = e0
                 e_best[ln] = e0
                 tau[ln] = tau0
@@ -363,10 +367,9 @@ def _fit_group(f0, f1, frame_ids, root_pos, root_rot, start, body, cams, dofs, s
                     s_state[k] = best[k, ln]
                 out.iterations[f] += it[ln]
                 e_run, pairs, u = finish_run(s_state, e_best[ln], root_pos[f], root_rot[f],
-                                             body, cams, dofs, schedule, error, objective,
-                                             det_points, det_conf, vo, obs3[f], claim_gate,
-                                             s_annealed, s_cs, s_sn, s_rot, s_pos, s_mk,
-                                             s_proj, s_view, s_near)
+                                             body, cams, dofs, schedule, error,
+                                             frame_obs(obs, f, nv), claim_gate, s_annealed,
+                                             scratch)
                 out.run_angles[f, run, :] = s_state
                 out.run_error[f, run] = e_run
                 run_u[fl, run] = u
@@ -386,9 +389,7 @@ def _fit_group(f0, f1, frame_ids, root_pos, root_rot, start, body, cams, dofs, s
                     else:
                         s_state[:] = out.run_angles[f, keep_run[fl], :]
                         write_frame(out, f, s_state, issued[fl], root_pos[f], root_rot[f],
-                                    body, cams, error, objective, det_points, det_conf, vo,
-                                    obs3[f], s_cs, s_sn, s_rot, s_pos, s_mk, s_proj, s_view,
-                                    s_near)
+                                    body, cams, error, frame_obs(obs, f, nv), scratch)
         if any_done:
             continue  # refill the freed lanes first
         keep = _kept_lanes(active, head == tail)
@@ -406,9 +407,9 @@ def _fit_group(f0, f1, frame_ids, root_pos, root_rot, start, body, cams, dofs, s
             e_cur, e_best = _take1(e_cur, keep), _take1(e_best, keep)
             lane_frame, lane_run = _take1(lane_frame, keep), _take1(lane_run, keep)
             nl = keep.shape[0]
-        iterate_lanes(1 << 30, free_idx, n_hist, step, hist, nbins, th, runs, n_runs, dof_kind,
-                      lo, hi, max_redraws, n_end, n_l, n_tau, c_l, c_tau, eps, active, rs, it, tau,
-                      length, to_tau, to_l, e_cur, e_best, cur, cand, best, cs, sn, body,
-                      cams, dx, dy, ndet, cmax, bidirectional, weight, cap,
-                      penalty_cap, rot, pos, mk, proj, nearest, e, fused, n_fused > 0, single,
-                      labelled, dw, points3d, o3)
+        iterate_lanes(1 << 30, n_hist, runs, n_runs, dofs, schedule,
+                      LaneState(active, rs, it, tau, length, to_tau, to_l, e_cur, e_best, cur,
+                                cand, best, cs, sn), body, cams,
+                      LaneObs(dx, dy, ndet, cmax, dw, o3), error,
+                      LaneFrames(rot, pos, mk, proj, nearest, e), fused, n_fused > 0, single,
+                      labelled, points3d)

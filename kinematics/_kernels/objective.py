@@ -38,20 +38,16 @@ def block_residuals(states, ran, root_pos, root_rot, body, cams, points, offsets
     nearest detection of its view written into ``out[k]`` (n_views, n_markers), the
     detections farther than ``gate`` from every marker counted into ``unexplained[k]``.
     ``offsets`` (n_frames * n_views + 1) index ``points``; every marker is seen."""
-    (parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index, joint_flags,
-     marker_joint, marker_local, slide_index) = body
-    kind, P, K, dist, R, t = cams
-    nv, nm, na, nj = kind.shape[0], marker_joint.shape[0], states.shape[1], parent.shape[0]
+    nv, nm = cams.kind.shape[0], body.marker_joint.shape[0]
+    na, nj = states.shape[1], body.parent.shape[0]
     seen = np.ones((nv, nm), np.bool_)
     cs, sn = np.empty(na), np.empty(na)
     rot, pos = np.empty((nj, 3, 3)), np.empty((nj, 3))
     mk, proj = np.empty((nm, 3)), np.empty((nv, nm, 2))
     for k in range(states.shape[0]):
         if ran[k]:
-            project_posture(states[k], root_pos[k], root_rot[k], parent, chain, pre_rot,
-                            pre_trans, post_trans, elem_axis, elem_index, joint_flags,
-                            marker_joint, marker_local, slide_index, kind, P, K, dist, R, t,
-                            cs, sn, rot, pos, mk, proj)
+            project_posture(states[k], root_pos[k], root_rot[k], body, cams, cs, sn, rot, pos,
+                            mk, proj)
             unexplained[k] = nearest_residuals(proj, points, offsets[k * nv: (k + 1) * nv + 1],
                                                seen, gate, out[k])
 
@@ -164,25 +160,22 @@ def partition_error(objective, proj, mk, points, conf, view_off, obs3, cap, m0, 
 
 
 @njit(cache=True, nogil=True)
-def posture_error(angles, root_pos, root_rot, parent, chain, pre_rot, pre_trans, post_trans,
-                  elem_axis, elem_index, joint_flags, marker_joint, marker_local, slide_index,
-                  kind, P, K, dist, R, t, objective, points, conf, view_off, obs3,
-                  bidirectional, weight, cap, penalty_cap, one, per_view):
+def posture_error(angles, root_pos, root_rot, body, cams, obs, error, per_view):
     """E (Eq. 5, a variant or another objective, :func:`evaluate`) of one posture ``angles``
-    (n_state,); fills ``per_view`` (n_views,). Allocates its scratch: for single evaluations,
-    not for loops."""
+    (n_state,) of the folded ``body`` seen by ``cams``; ``obs`` a FrameObs, ``error`` the
+    ErrorArgs. Fills ``per_view`` (n_views,). Allocates its scratch: for single
+    evaluations, not for loops."""
     na = angles.shape[0]
-    nj = parent.shape[0]
-    nm = marker_joint.shape[0]
+    nj = body.parent.shape[0]
+    nm = body.marker_joint.shape[0]
     cs = np.empty(na)
     sn = np.empty(na)
     rot = np.empty((nj, 3, 3))
     pos = np.empty((nj, 3))
     mk = np.empty((nm, 3))
-    proj = np.empty((kind.shape[0], nm, 2))
+    proj = np.empty((cams.kind.shape[0], nm, 2))
     nearest = np.empty(nm, np.int64)
-    project_posture(angles, root_pos, root_rot, parent, chain, pre_rot, pre_trans, post_trans,
-                    elem_axis, elem_index, joint_flags, marker_joint, marker_local, slide_index,
-                    kind, P, K, dist, R, t, cs, sn, rot, pos, mk, proj)
-    return evaluate(objective, proj, mk, points, conf, view_off, obs3, bidirectional, weight,
-                    cap, penalty_cap, one, per_view, nearest)
+    project_posture(angles, root_pos, root_rot, body, cams, cs, sn, rot, pos, mk, proj)
+    return evaluate(obs.objective, proj, mk, obs.points, obs.conf, obs.view_off, obs.obs3,
+                    error.bidirectional, error.weight, error.cap, error.penalty_cap,
+                    error.one_to_one, per_view, nearest)

@@ -27,22 +27,26 @@ def mul33(q00, q01, q02, q10, q11, q12, q20, q21, q22, m00, m01, m02, m10, m11, 
 
 
 @njit(cache=True, nogil=True, inline="always")
-def project_cs(values, cs, sn, root_pos, root_rot, parent, chain, pre_rot, pre_trans,
-                post_trans, elem_axis, elem_index, joint_flags, marker_joint, marker_local,
-                slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj, any_pinhole, span,
-                marks):
-    """Markers of the posture with cosines ``cs`` and sines ``sn`` (n_axes,) projected into
-    every view: fills ``proj`` (n_views, n_markers, 2); ``rot`` (nj, 3, 3), ``pos`` (nj, 3)
-    and ``mk`` (nm, 3) receive A'_j, the joint centres and the 3D markers.
-    ``any_pinhole`` says whether ``kind`` has a pinhole view. A marker hidden in a pinhole
+def project_cs(values, cs, sn, root_pos, root_rot, body, cams, views, rot, pos, mk, proj,
+               any_pinhole, span, marks):
+    """Markers of the posture with cosines ``cs`` and sines ``sn`` (n_axes,) of the folded
+    ``body`` projected into the first ``views.shape[0]`` cameras of ``cams`` (``views``:
+    ``cams.kind`` or a slice of it; :func:`drawn_views`): fills ``proj`` (n_views,
+    n_markers, 2); ``rot`` (nj, 3, 3), ``pos`` (nj, 3) and ``mk`` (nm, 3) receive A'_j, the
+    joint centres and the 3D markers. ``any_pinhole`` says whether ``views`` has a pinhole
+    view. A marker hidden in a pinhole
     view by ``marks`` (a frame's hidden marks, :func:`hidden_in`; an empty array for none)
     is not projected there: every reader skips it, and with one view per camera and marker
     colour most markers are hidden in most views. ``span = (j0, j1, m0, m1)``:
     only joints ``j0:j1`` and markers ``m0:m1`` are computed (a partition's subtree; its
-    parents' ``rot``, ``pos`` must be current); ``(0, nj, 0, nm)`` computes everything. (One
-    tuple, not four numbers: a call with more than 30 arguments compiles to a star-args call,
-    which numba cannot inline.)"""
+    parents' ``rot``, ``pos`` must be current); ``(0, nj, 0, nm)`` computes everything.
+    Inlined: the records cost nothing per call."""
     j0, j1, m0, m1 = span
+    parent, chain, pre_rot, pre_trans = body.parent, body.chain, body.pre_rot, body.pre_trans
+    post_trans, elem_axis, elem_index = body.post_trans, body.elem_axis, body.elem_index
+    joint_flags, slide_index = body.joint_flags, body.slide_index
+    marker_joint, marker_local = body.marker_joint, body.marker_local
+    P = cams.P
     for j in range(j0, j1):
         p = parent[j]
         if p < 0:
@@ -121,11 +125,11 @@ def project_cs(values, cs, sn, root_pos, root_rot, parent, chain, pre_rot, pre_t
         # Every view as orthographic (project_point's first case, inlined); pinhole views
         # are overwritten below. A call to project_point inside this loop, even untaken,
         # cost ~10 % of an iteration.
-        for v in range(kind.shape[0]):
+        for v in range(views.shape[0]):
             proj[v, m, 0] = P[v, 0, 0] * x + P[v, 0, 1] * y + P[v, 0, 2] * z + P[v, 0, 3]
             proj[v, m, 1] = P[v, 1, 0] * x + P[v, 1, 1] * y + P[v, 1, 2] * z + P[v, 1, 3]
     if any_pinhole:
-        project_pinhole(kind, P, K, dist, R, t, mk, proj, m0, m1, marks)
+        project_pinhole(views, P, cams.K, cams.dist, cams.R, cams.t, mk, proj, m0, m1, marks)
 
 
 @njit(cache=True, nogil=True)
@@ -159,19 +163,18 @@ def drawn_views(kind, objective):
 
 
 @njit(cache=True, nogil=True)
-def project_posture(angles, root_pos, root_rot, parent, chain, pre_rot, pre_trans, post_trans,
-                    elem_axis, elem_index, joint_flags, marker_joint, marker_local, slide_index,
-                    kind, P, K, dist, R, t, cs, sn, rot, pos, mk, proj):
+def project_posture(angles, root_pos, root_rot, body, cams, cs, sn, rot, pos, mk, proj):
     """Forward kinematics (Eq. 1, 2) and projection (Eq. 3) of every marker of posture
-    ``angles`` (n_axes,) radians into every view: fills ``proj`` (n_views, n_markers, 2);
+    ``angles`` (n_axes,) radians of the folded ``body`` into every view of ``cams``
+    (as many as ``proj`` has): fills ``proj`` (n_views, n_markers, 2);
     ``cs``, ``sn`` (n_axes,), ``rot`` (nj, 3, 3), ``pos`` (nj, 3), ``mk`` (nm, 3) are
     scratch (holding the joint centres and 3D markers afterwards)."""
     for k in range(angles.shape[0]):
         sn[k], cs[k] = sincos(angles[k])
-    project_cs(angles, cs, sn, root_pos, root_rot, parent, chain, pre_rot, pre_trans,
-                post_trans, elem_axis, elem_index, joint_flags, marker_joint, marker_local,
-                slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj, has_pinhole(kind),
-                (0, parent.shape[0], 0, marker_joint.shape[0]), mk[:0])
+    views = cams.kind[:proj.shape[0]]
+    project_cs(angles, cs, sn, root_pos, root_rot, body, cams, views, rot, pos, mk, proj,
+               has_pinhole(views), (0, body.parent.shape[0], 0, body.marker_joint.shape[0]),
+               mk[:0])
 
 
 @njit(cache=True, nogil=True, inline="always")

@@ -30,6 +30,7 @@ from kinematics._kernels.error2d import one_to_one, point_of
 from kinematics._kernels.error3d import cloud_nearest
 from kinematics._kernels.fastmath import sincos, solve_spd
 from kinematics._kernels.posture import has_pinhole, hidden_in, project_cs, project_posture
+from kinematics._kernels.records import frame_obs
 
 #: Forward-difference step of the Jacobian, radians.
 FD_STEP = 1e-7
@@ -307,14 +308,15 @@ def packed_index(rows, n_rows, pk):
 
 
 @njit(cache=True, nogil=True)
-def jacobian(angles, free_idx, span, root_pos, root_rot, parent, chain, pre_rot, pre_trans,
-             post_trans, elem_axis, elem_index, joint_flags, marker_joint, marker_local,
-             slide_index, kind, P, K, dist, R, t, objective, points, conf, obs3, pair, rows,
-             pk, res, res1, cs, sn, rot, pos, mk, proj, rot0, pos0, mk0, proj0, pinhole, jac):
+def jacobian(angles, free_idx, span, root_pos, root_rot, body, cams, views, obs, pair, rows,
+             pk, res, res1, cs, sn, rot, pos, mk, proj, saved, pinhole, jac):
     """The Jacobian of the used residual ``rows`` (packed: ``pk``) by forward differences,
     one column per free entry from its subtree ``span`` only, into ``jac``. ``res`` holds
     the residuals at ``angles``; ``rot``, ``pos``, ``mk``, ``proj``, ``cs`` and ``sn`` its
-    posture, which they hold again on return (each column's subtree is put back)."""
+    posture, which they hold again on return (each column's subtree is put back from
+    ``saved``: scratch like ``rot``, ``pos``, ``mk``, ``proj``). ``obs``: a FrameObs."""
+    objective, points, conf, obs3 = obs.objective, obs.points, obs.conf, obs.obs3
+    rot0, pos0, mk0, proj0 = saved
     nv = proj.shape[0]
     nm = mk.shape[0]
     nb = nv + 1  # row blocks of a marker range at most (:func:`_row_block`)
@@ -325,10 +327,8 @@ def jacobian(angles, free_idx, span, root_pos, root_rot, parent, chain, pre_rot,
         x, s0, c0 = angles[i], sn[i], cs[i]
         angles[i] = x + FD_STEP
         sn[i], cs[i] = sincos(angles[i])
-        project_cs(angles, cs, sn, root_pos, root_rot, parent, chain, pre_rot, pre_trans,
-                   post_trans, elem_axis, elem_index, joint_flags, marker_joint, marker_local,
-                   slide_index, kind, P, K, dist, R, t, rot, pos, mk, proj, pinhole,
-                   (j0, j1, m0, m1), mk[:0])
+        project_cs(angles, cs, sn, root_pos, root_rot, body, cams, views, rot, pos, mk, proj,
+                   pinhole, (j0, j1, m0, m1), mk[:0])
         angles[i], sn[i], cs[i] = x, s0, c0
         fill_rows(objective, proj, mk, points, conf, obs3, pair, res1, m0, m1)
         for b in range(nb):  # the Jacobian's rows of the pairs, packed
@@ -366,10 +366,8 @@ def normal_equations(objective, nv, nm, span, pk, jac, packed, jtj, jtr):
 
 
 @njit(cache=True, nogil=True)
-def refine_posture(angles, free_idx, lo, hi, dof_kind, n_steps, gate, root_pos, root_rot,
-                   parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index,
-                   joint_flags, marker_joint, marker_local, slide_index, kind, P, K, dist, R,
-                   t, objective, points, conf, view_off, obs3):
+def refine_posture(angles, free_idx, dofs, n_steps, gate, root_pos, root_rot, body, cams,
+                   views, obs):
     """Levenberg-Marquardt refinement of the state ``angles`` (n_state,), in place.
 
     Minimises the sum of squared pair residuals (:func:`assign_pairs`: marker/detection
@@ -384,8 +382,15 @@ def refine_posture(angles, free_idx, lo, hi, dof_kind, n_steps, gate, root_pos, 
         Final sum of squared pair residuals (pixels², or squared length units for 3D).
     n_pairs : int
         Pairs used at the end (0: state unchanged).
+
+    ``dofs``: DofArrays (ranges, kinds); ``body``, ``cams``: the folded body and cameras,
+    projected into ``views`` (``cams.kind``, or none for a 3D objective); ``obs``: FrameObs.
     """
-    nv = kind.shape[0]
+    lo, hi, dof_kind = dofs.lo, dofs.hi, dofs.dof_kind
+    objective, points, conf, view_off, obs3 = (obs.objective, obs.points, obs.conf,
+                                               obs.view_off, obs.obs3)
+    parent, marker_joint = body.parent, body.marker_joint
+    nv = views.shape[0]
     nm = marker_joint.shape[0]
     nj = parent.shape[0]
     na = angles.shape[0]
@@ -413,14 +418,12 @@ def refine_posture(angles, free_idx, lo, hi, dof_kind, n_steps, gate, root_pos, 
     # that subtree's joints and markers and is zero elsewhere, and J^T J sums only the rows
     # two columns share (a fly's six legs: a sixth of the work; the sums' order, and so
     # every bit of the result, as over all rows)
-    span = entry_spans(free_idx, parent, elem_axis, elem_index, slide_index, marker_joint)
-    pinhole = has_pinhole(kind)
-    rot0, pos0, mk0, proj0 = np.empty_like(rot), np.empty_like(pos), np.empty_like(mk), \
-        np.empty_like(proj)
+    span = entry_spans(free_idx, parent, body.elem_axis, body.elem_index, body.slide_index,
+                       marker_joint)
+    pinhole = has_pinhole(views)
+    saved = np.empty_like(rot), np.empty_like(pos), np.empty_like(mk), np.empty_like(proj)
     pk = np.empty(nr + 1, np.int64)  # pk[row]: the used rows before original row ``row``
-    project_posture(angles, root_pos, root_rot, parent, chain, pre_rot, pre_trans, post_trans,
-                    elem_axis, elem_index, joint_flags, marker_joint, marker_local, slide_index,
-                    kind, P, K, dist, R, t, cs, sn, rot, pos, mk, proj)
+    project_posture(angles, root_pos, root_rot, body, cams, cs, sn, rot, pos, mk, proj)
     n_pairs = assign_pairs(objective, proj, mk, points, conf, view_off, obs3, gate, pair)
     cost = fill_residuals(objective, proj, mk, points, conf, obs3, pair, res)
     # The rows used: for OBJ_CLOUD_VIEWS those of the pairs (most rows are a view's of a
@@ -435,11 +438,8 @@ def refine_posture(angles, free_idx, lo, hi, dof_kind, n_steps, gate, root_pos, 
     step = 0
     while step < n_steps and n_pairs > 0 and cost > 0.0:
         packed_index(rows, n_rows, pk)
-        jacobian(angles, free_idx, span, root_pos, root_rot, parent, chain, pre_rot,
-                 pre_trans, post_trans, elem_axis, elem_index, joint_flags, marker_joint,
-                 marker_local, slide_index, kind, P, K, dist, R, t, objective, points, conf,
-                 obs3, pair, rows, pk, res, res1, cs, sn, rot, pos, mk, proj, rot0, pos0, mk0,
-                 proj0, pinhole, jac)
+        jacobian(angles, free_idx, span, root_pos, root_rot, body, cams, views, obs, pair, rows,
+                 pk, res, res1, cs, sn, rot, pos, mk, proj, saved, pinhole, jac)
         for kk in range(n_rows):
             packed[kk] = res[rows[kk]]
         normal_equations(objective, nv, nm, span, pk, jac, packed, jtj, jtr)
@@ -458,10 +458,7 @@ def refine_posture(angles, free_idx, lo, hi, dof_kind, n_steps, gate, root_pos, 
                 x = angles[i] + g[q]
                 trial[i] = (_wrap_clip(x, lo[i], hi[i]) if dof_kind[i] == DOF_HISTOGRAM
                             else min(max(x, lo[i]), hi[i]))
-            project_posture(trial, root_pos, root_rot, parent, chain, pre_rot, pre_trans,
-                            post_trans, elem_axis, elem_index, joint_flags, marker_joint,
-                            marker_local, slide_index, kind, P, K, dist, R, t, cs, sn, rot, pos,
-                            mk, proj)
+            project_posture(trial, root_pos, root_rot, body, cams, cs, sn, rot, pos, mk, proj)
             c_trial = fill_residuals(objective, proj, mk, points, conf, obs3, pair, res1)
             improved = c_trial < cost
             lam = max(lam / 3.0, 1e-9) if improved else lam * 4.0
@@ -488,19 +485,11 @@ def refine_frames(angles, root_pos, root_rot, body, cams, dofs, n_steps, gate, o
     ``root_pos`` (n, n_chains, 3), ``root_rot`` (n, n_chains, 3, 3); ``body``, ``cams``,
     ``dofs`` and ``obs`` the namedtuples of ``fit_frames``. Rows holding NaN are skipped.
     Writes ``out_sse`` (n,) and ``out_pairs`` (n,) int64."""
-    (parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index, joint_flags,
-     marker_joint, marker_local, slide_index) = body
-    kind, P, K, dist, R, t = cams
-    free_idx, _, _, _, dof_kind, lo, hi = dofs
-    objective, det_points, det_conf, det_off, obs3 = obs
-    nv = kind.shape[0]
+    nv = cams.kind.shape[0]
     for f in prange(angles.shape[0]):
         out_sse[f] = np.nan
         out_pairs[f] = 0
         if np.isfinite(angles[f, 0]):
-            vo = det_off[f * nv: f * nv + nv + 1]
             out_sse[f], out_pairs[f] = refine_posture(
-                angles[f], free_idx, lo, hi, dof_kind, n_steps, gate, root_pos[f], root_rot[f],
-                parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index,
-                joint_flags, marker_joint, marker_local, slide_index, kind, P, K, dist, R, t,
-                objective, det_points, det_conf, vo, obs3[f])
+                angles[f], dofs.free_idx, dofs, n_steps, gate, root_pos[f], root_rot[f], body,
+                cams, cams.kind, frame_obs(obs, f, nv))

@@ -449,8 +449,7 @@ def linear_kernel(mats, u, v, w, kind, P, K, dist, R, t, xyz, err, ncams):
 
 
 @njit(cache=True, nogil=True)
-def ransac_kernel(mats, u, v, w, kind, P, K, dist, R, t, min_cams, good_px, max_px,
-                  inlier_px, xyz, err, used):
+def ransac_kernel(mats, u, v, w, cams, min_cams, good_px, max_px, inlier_px, xyz, err, used):
     """RANSAC over camera subsets, aniposelib's ``triangulate_ransac`` semantics: every
     subset of the cameras that see the point (at least ``min_cams`` of them, or all when
     fewer see it) is triangulated in aniposelib's order (all cameras first, then dropping
@@ -459,7 +458,8 @@ def ransac_kernel(mats, u, v, w, kind, P, K, dist, R, t, min_cams, good_px, max_
     ``inlier_px`` > 0 every other camera within ``inlier_px`` of the winner's projection is
     added and the point re-solved over those inliers. ``u``, ``v`` (C, N) pixels, ``w``
     (C, N); writes ``xyz`` (N, 3), ``err`` (N,) and ``used`` (C, N) the cameras of the
-    result."""
+    result. ``cams``: CameraArrays."""
+    kind, P, K, dist, R, t = cams.kind, cams.P, cams.K, cams.dist, cams.R, cams.t
     n_cam = u.shape[0]
     lx, ly = linearise_all(kind, K, dist, u, v)
     avail = np.empty(n_cam, np.int64)

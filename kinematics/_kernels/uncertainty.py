@@ -11,6 +11,7 @@ from numba import njit, prange
 
 from kinematics._kernels.codes import OBJ_CLOUD_VIEWS
 from kinematics._kernels.posture import has_pinhole, project_posture
+from kinematics._kernels.records import frame_obs
 from kinematics._kernels.refine import (
     assign_pairs,
     entry_spans,
@@ -24,14 +25,17 @@ from kinematics._kernels.refine import (
 
 
 @njit(cache=True, nogil=True)
-def posture_information(angles, free_idx, gate, root_pos, root_rot, parent, chain, pre_rot,
-                        pre_trans, post_trans, elem_axis, elem_index, joint_flags,
-                        marker_joint, marker_local, slide_index, kind, P, K, dist, R, t,
-                        objective, points, conf, view_off, obs3, row_scale, info):
+def posture_information(angles, free_idx, gate, root_pos, root_rot, body, cams, obs,
+                        row_scale, info):
     """``info`` (n_free, n_free) = J^T W J at the state ``angles`` over the pairs within
     ``gate`` (:func:`kinematics._kernels.refine.assign_pairs`), each residual row scaled by
-    ``row_scale`` (1/σ of its view; entry ``n_views`` for the 3D rows); returns the pairs."""
-    nv = kind.shape[0]
+    ``row_scale`` (1/σ of its view; entry ``n_views`` for the 3D rows); returns the pairs.
+    ``body``, ``cams``: the folded body and cameras; ``obs``: a FrameObs."""
+    objective, points, conf, view_off, obs3 = (obs.objective, obs.points, obs.conf,
+                                               obs.view_off, obs.obs3)
+    parent, marker_joint = body.parent, body.marker_joint
+    views = cams.kind
+    nv = views.shape[0]
     nm = marker_joint.shape[0]
     nj = parent.shape[0]
     na = angles.shape[0]
@@ -52,12 +56,10 @@ def posture_information(angles, free_idx, gate, root_pos, root_rot, parent, chai
     mk = np.empty((nm, 3))
     jtr = np.empty(nf)
     pk = np.empty(nr + 1, np.int64)
-    span = entry_spans(free_idx, parent, elem_axis, elem_index, slide_index, marker_joint)
-    rot0, pos0, mk0, proj0 = np.empty_like(rot), np.empty_like(pos), np.empty_like(mk), \
-        np.empty_like(proj)
-    project_posture(angles, root_pos, root_rot, parent, chain, pre_rot, pre_trans, post_trans,
-                    elem_axis, elem_index, joint_flags, marker_joint, marker_local, slide_index,
-                    kind, P, K, dist, R, t, cs, sn, rot, pos, mk, proj)
+    span = entry_spans(free_idx, parent, body.elem_axis, body.elem_index, body.slide_index,
+                       marker_joint)
+    saved = np.empty_like(rot), np.empty_like(pos), np.empty_like(mk), np.empty_like(proj)
+    project_posture(angles, root_pos, root_rot, body, cams, cs, sn, rot, pos, mk, proj)
     n_pairs = assign_pairs(objective, proj, mk, points, conf, view_off, obs3, gate, pair)
     info[:, :] = 0.0
     if n_pairs == 0:
@@ -65,11 +67,8 @@ def posture_information(angles, free_idx, gate, root_pos, root_rot, parent, chai
     fill_residuals(objective, proj, mk, points, conf, obs3, pair, res)
     n_rows = pair_rows(objective, pair, nv, nm, rows)
     packed_index(rows, n_rows, pk)
-    jacobian(angles, free_idx, span, root_pos, root_rot, parent, chain, pre_rot, pre_trans,
-             post_trans, elem_axis, elem_index, joint_flags, marker_joint, marker_local,
-             slide_index, kind, P, K, dist, R, t, objective, points, conf, obs3, pair, rows,
-             pk, res, res1, cs, sn, rot, pos, mk, proj, rot0, pos0, mk0, proj0,
-             has_pinhole(kind), jac)
+    jacobian(angles, free_idx, span, root_pos, root_rot, body, cams, views, obs, pair, rows, pk,
+             res, res1, cs, sn, rot, pos, mk, proj, saved, has_pinhole(views), jac)
     for kk in range(n_rows):  # rows in units of their σ
         w = row_scale[row_view(objective, nv, nm, rows[kk])]
         for q in range(nf):
@@ -85,19 +84,12 @@ def information_frames(angles, root_pos, root_rot, body, cams, free_idx, gate, o
     ``root_pos`` (n, n_chains, 3), ``root_rot`` (n, n_chains, 3, 3), ``body``, ``cams``
     and ``obs`` the namedtuples of ``fit_frames``; ``out_info`` (n, n_free, n_free),
     ``out_pairs`` (n,). Rows holding NaN get no pairs and zero information."""
-    (parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index, joint_flags,
-     marker_joint, marker_local, slide_index) = body
-    kind, P, K, dist, R, t = cams
-    objective, det_points, det_conf, det_off, obs3 = obs
-    nv = kind.shape[0]
+    nv = cams.kind.shape[0]
     for f in prange(angles.shape[0]):
         out_pairs[f] = 0
         if np.isfinite(angles[f, 0]):
-            vo = det_off[f * nv: f * nv + nv + 1]
             out_pairs[f] = posture_information(
-                angles[f], free_idx, gate, root_pos[f], root_rot[f], parent, chain, pre_rot,
-                pre_trans, post_trans, elem_axis, elem_index, joint_flags, marker_joint,
-                marker_local, slide_index, kind, P, K, dist, R, t, objective, det_points,
-                det_conf, vo, obs3[f], row_scale, out_info[f])
+                angles[f], free_idx, gate, root_pos[f], root_rot[f], body, cams,
+                frame_obs(obs, f, nv), row_scale, out_info[f])
         else:
             out_info[f] = 0.0

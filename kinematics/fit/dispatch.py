@@ -16,6 +16,7 @@ from kinematics._kernels import frames as _frames
 from kinematics._kernels import lane_codegen as _codegen
 from kinematics._kernels import lanes as _lk
 from kinematics._kernels import objective as _objective
+from kinematics._kernels.records import FrameObs
 from kinematics.cameras import CameraArrays
 from kinematics.errors import KinematicsError
 from kinematics.fit.partitions import partitions_of
@@ -79,7 +80,8 @@ class DispatchMixin:
             fused, n_fused = self._fused_kernel(arrays, error, single)
             _lk.fit_frames_lanes(groups, frame_ids, roots, rots, start, pr.folded, pr.cams,
                                  pr.dofs, schedule_of(p), error, arrays,
-                                 float(p.claim_gate_px), _lk.LANES, fused, n_fused, single, out)
+                                 float(p.claim_gate_px), fused, (_lk.LANES, n_fused, single),
+                                 out)
         else:
             _frames.fit_frames(seg_off, frame_ids, roots, rots, start, pr.folded, cams,
                            pr.dofs, schedule_of(p), self._error_args(p, arrays.objective),
@@ -209,10 +211,11 @@ class DispatchMixin:
         per_view = np.empty(self.n_views)
         obs3 = (arrays.points3d[0] if arrays.points3d.shape[1]
                 else np.zeros((self.problem.folded.marker_joint.size, 4)))
-        e = _objective.posture_error(np.ascontiguousarray(state), root_pos, root_rot,
-                              *self.problem.folded, *self.problem.cams, arrays.objective,
-                              arrays.points, arrays.conf, arrays.offsets, obs3,
-                              *self._error_args(p, arrays.objective), per_view)
+        e = _objective.posture_error(
+            np.ascontiguousarray(state), root_pos, root_rot, self.problem.folded,
+            self.problem.cams, FrameObs(arrays.objective, arrays.points, arrays.conf,
+                                        arrays.offsets, obs3),
+            self._error_args(p, arrays.objective), per_view)
         return float(e), per_view
 
     def _error_args(self, p: AnnealParams, objective: int) -> ErrorArgs:

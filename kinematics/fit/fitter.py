@@ -55,6 +55,7 @@ import numpy as np
 from kinematics._kernels import codes as _codes
 from kinematics._kernels import objective as _objective
 from kinematics._kernels import posture as _posture
+from kinematics._kernels.records import FrameObs
 from kinematics.errors import KinematicsError
 from kinematics.fit import tuning as _tuning
 from kinematics.fit.candidates import CandidatesMixin
@@ -274,8 +275,9 @@ class Fitter(MatchMixin, RootsMixin, DispatchMixin, StatusMixin, PolishMixin, Ca
         nj, nm, ns = f.parent.size, f.marker_joint.size, state.size
         proj = np.empty((self.n_views, nm, 2))
         mk = np.empty((nm, 3))
-        _posture.project_posture(state, root_pos, root_rot, *f, *self.problem.cams, np.empty(ns),
-                            np.empty(ns), np.empty((nj, 3, 3)), np.empty((nj, 3)), mk, proj)
+        _posture.project_posture(state, root_pos, root_rot, f, self.problem.cams, np.empty(ns),
+                                 np.empty(ns), np.empty((nj, 3, 3)), np.empty((nj, 3)), mk,
+                                 proj)
         return (proj, mk) if markers else proj
 
     def error(self, angles_deg, detections_frame, root_positions=None, hidden=None
@@ -320,9 +322,10 @@ class Fitter(MatchMixin, RootsMixin, DispatchMixin, StatusMixin, PolishMixin, Ca
         opts = self.params.error
         state, pos, rot = self.state(angles_deg, root_positions)
         nm = self.problem.folded.marker_joint.size
-        e = _objective.posture_error(state, pos, rot, *self.problem.folded, *self.problem.cams,
-                              _codes.OBJ_NEAREST, frame.points, np.ones(len(frame.points)),
-                              frame.offsets, np.zeros((nm, 4)), *error_args(opts), per_view)
+        obs = FrameObs(_codes.OBJ_NEAREST, frame.points, np.ones(len(frame.points)),
+                       frame.offsets, np.zeros((nm, 4)))
+        e = _objective.posture_error(state, pos, rot, self.problem.folded, self.problem.cams,
+                                     obs, error_args(opts), per_view)
         return float(e), per_view
 
     @staticmethod

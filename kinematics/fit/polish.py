@@ -11,6 +11,7 @@ import numpy as np
 
 from kinematics._kernels import codes as _codes
 from kinematics._kernels import refine as _rk
+from kinematics._kernels.records import FrameObs
 from kinematics.fit.result import WITHIN, Candidate, FrameResult, Status
 from kinematics.fit.settings import AnnealParams
 from kinematics.observe.cloud import SUPPORT_PX
@@ -93,10 +94,9 @@ class PolishMixin:
                 objective, cams = _codes.OBJ_CLOUD_ONE, self._kernel_inputs(arrays)[0]
             else:
                 objective, cams = _codes.OBJ_CLOUD_VIEWS, pr.cams
-            _rk.refine_posture(state, moved, pr.lo, pr.hi, pr.dof_kind,
-                               self.tuning.polish_steps, gate,
-                               pos, rot, *folded, *cams, objective, arrays.points, gates,
-                               arrays.offsets, cloud)
+            _rk.refine_posture(state, moved, pr.dofs, self.tuning.polish_steps, gate, pos,
+                               rot, folded, cams, cams.kind,
+                               FrameObs(objective, arrays.points, gates, arrays.offsets, cloud))
             if placed.size == 0:
                 break
             ok = _placed(self._project_state(state, pos, rot)[:, placed], arrays.points,

@@ -24,6 +24,7 @@ from scipy.optimize import least_squares
 
 from kinematics._kernels import codes as _codes
 from kinematics._kernels import refine as _rk
+from kinematics._kernels.records import FrameObs
 from kinematics.errors import KinematicsError
 from kinematics.fit import Fitter
 from kinematics.fit.inputs import as_ragged
@@ -94,11 +95,10 @@ def refine(fitter: Fitter, angles_deg, detections_frame, root_positions=None, *,
 
     def run(n_steps: int, start_deg, start_roots):
         state, pos, rot = fitter.state(start_deg, start_roots)
-        sse, n_pairs = _rk.refine_posture(state, pr.free_idx, pr.lo, pr.hi, pr.dof_kind,
-                                          n_steps, gate, pos, rot, *pr.folded, *pr.cams,
-                                          _codes.OBJ_NEAREST, rag.points,
-                                          np.ones(len(rag.points)), rag.offsets,
-                                          fitter.unseen_marks)
+        obs = FrameObs(_codes.OBJ_NEAREST, rag.points, np.ones(len(rag.points)), rag.offsets,
+                       fitter.unseen_marks)
+        sse, n_pairs = _rk.refine_posture(state, pr.free_idx, pr.dofs, n_steps, gate, pos, rot,
+                                          pr.folded, pr.cams, pr.cams.kind, obs)
         angles, roots = pr.posture(state, pos, rot)
         out = fitter._to_range_deg(angles)
         error, per_view = fitter.error(out, detections_frame, roots)

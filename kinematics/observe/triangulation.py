@@ -236,7 +236,7 @@ def triangulate_ransac(cameras, xy, score=None, *, min_score: float = 0.0,
     u, v, w = _planar(xy, w)
     n = u.shape[1]
     xyz, err, used = np.empty((n, 3)), np.empty(n), np.zeros((c, n), bool)
-    _k.ransac_kernel(_matrices(cams), u, v, w, *pack_cameras(cams), int(min_cams),
+    _k.ransac_kernel(_matrices(cams), u, v, w, pack_cameras(cams), int(min_cams),
                      float(good_px), float(max_px), float(inlier_px), xyz, err, used)
     return _result(xyz, err, used, score, (f, j))
 

@@ -11,10 +11,11 @@ import pytest
 
 from kinematics._kernels import anneal as ak
 from kinematics._kernels import fastmath as _fastmath
+from kinematics._kernels.records import FrameObs, new_scratch
 from kinematics.errors import KinematicsError
 from kinematics.fit import AnnealParams, Fitter, SplitMix64, anneal_reference
 from kinematics.fit.error_function import ErrorOptions
-from kinematics.fit.problem import histogram_tables
+from kinematics.fit.problem import ErrorArgs, Schedule, histogram_tables
 from kinematics.model import Body, Chain
 from kinematics.model.histograms import Histogram
 from tests.fixtures.cameras import stick_cameras
@@ -413,17 +414,16 @@ def test_annealing_loop_allocates_nothing(locust):
     pts = np.ascontiguousarray(np.concatenate(frame))
     off = np.array([0, len(frame[0]), len(pts)], np.int64)
     na, nj, nm = locust.n_axes, 3, 4
-    scratch = [np.empty(na) for _ in range(5)] + [
-        np.empty((nj, 3, 3)), np.empty((nj, 3)), np.empty((nm, 3)), np.empty((2, nm, 2)),
-        np.empty(2), np.empty(nm, np.int64), np.empty(0)]
+    scratch = new_scratch(na, nj, nm, 2)
     fresh = numba.njit(ak.anneal_chain.py_func)
     pr = fitter.problem
-    _, its = fresh(pr.start, pr.free_idx, pr.step, pr.hist, pr.nbins, 1e-300, pr.dof_kind,
-                   pr.lo, pr.hi, 16, 500, 100, 100, 200.0, 1.0, 0.75, 0.75, 0.0,
-                   _fastmath.stream_state(0, 0, 0), np.zeros((1, 3)), pr.identity_rotations(),
-                   *pr.folded, *pr.cams, 0, pts, np.ones(len(pts)), off, np.zeros((nm, 4)),
-                   False, 1.0, np.inf, np.inf, False, 0, nj, 0, nm, np.zeros(len(pts), np.bool_),
-                   *scratch)
+    schedule = Schedule(1e-300, 16, 500, 100, 100, 200.0, 1.0, 0.75, 0.75, 0.0, 0, 0.0, 1, 0,
+                        0.0, False, -1, 1)
+    _, its = fresh(pr.start, pr.free_idx, (500, 100, 100), _fastmath.stream_state(0, 0, 0),
+                   np.zeros((1, 3)), pr.identity_rotations(), pr.folded, pr.cams, pr.dofs,
+                   schedule, ErrorArgs(False, 1.0, np.inf, np.inf, False),
+                   FrameObs(0, pts, np.ones(len(pts)), off, np.zeros((nm, 4))), (0, nj, 0, nm),
+                   np.zeros(len(pts), np.bool_), scratch, np.empty(0))
     assert its == 500
     ir = fresh.inspect_llvm(fresh.signatures[0])
     assert not re.search(r"NRT_MemInfo_alloc|NRT_Allocate", ir)

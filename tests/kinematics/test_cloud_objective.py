@@ -16,10 +16,12 @@ from kinematics._kernels import fastmath as _fastmath
 from kinematics._kernels import objective as _objective
 from kinematics._kernels import posture as _posture
 from kinematics._kernels import refine as rk
+from kinematics._kernels.records import FrameObs, new_scratch
 from kinematics.errors import KinematicsError
 from kinematics.fit import AnnealParams, Candidate, Fitter, FrameResult
 from kinematics.fit.error_function import cloud_error
 from kinematics.fit.polish import held_limb
+from kinematics.fit.problem import ErrorArgs, Schedule
 from kinematics.fit.settings import ErrorOptions
 from kinematics.model.fk import forward_kinematics_reference
 from kinematics.observe.observations import Observations
@@ -472,28 +474,29 @@ def test_the_start_search_scores_a_draw_from_its_beam(match):
     assert parts.samples > 0 and parts.bounds.shape[0] == 4  # the trunk and three legs
     obs3 = arrays.points3d[0]
     claimed = np.zeros(max(len(arrays.points), len(obs3)), np.bool_)
-    _, _, hist, nbins, dof_kind, lo, hi = pr.dofs
     nj, nm, ns, nv = pr.folded.parent.size, pr.folded.marker_joint.size, pr.n_state, len(
         cams_k.kind)
-    rot, pos, mk, proj = (np.empty((nj, 3, 3)), np.empty((nj, 3)), np.empty((nm, 3)),
-                          np.empty((nv, nm, 2)))
-    cs, sn, nearest = np.empty(ns), np.empty(ns), np.empty(nm, np.int64)
-    args = (*pr.folded, *cams_k)
+    scratch = new_scratch(ns, nj, nm, nv)
+    cs, sn, rot, pos, mk, proj = (scratch.cs, scratch.sn, scratch.rot, scratch.pos, scratch.mk,
+                                  scratch.proj)
+    schedule = Schedule(1e-300, 16, 1, 1, 1, 1.0, 1.0, 1.0, 1.0, 0.0, 0, 0.0, 1, 0, 0.0, False,
+                        -1, 1)
+    parts16 = parts._replace(samples=16)
+    obs = FrameObs(arrays.objective, arrays.points, arrays.conf, arrays.offsets, obs3)
     for p in range(1, 4):  # each leg (trunk at the start posture)
         work = pr.start.copy()
-        _posture.project_posture(work, roots[0], rots[0], *args, cs, sn, rot, pos, mk, proj)
+        _posture.project_posture(work, roots[0], rots[0], pr.folded, cams_k, cs, sn, rot, pos,
+                                 mk, proj)
         j0, j1, m0, m1 = parts.bounds[p, :4]
-        e = ak.beam_start(work, parts.stage_off[p], parts.stage_off[p + 1],
-                          parts.stage_dof_off, parts.stage_dofs, parts.stage_mark,
-                          parts.stage_joint, 16,
-                          np.uint64(_fastmath.stream_state(0, p, 0)), hist, nbins, 1e-300, dof_kind,
-                          lo, hi,
-                          roots[0], rots[0], *args, arrays.objective, arrays.points,
-                          arrays.conf, arrays.offsets, obs3, 10.0, j0, j1, m0, m1, claimed,
-                          np.inf, False, 0, 0.0, cs, sn, rot, pos, mk, proj, nearest)
-        _posture.project_posture(work, roots[0], rots[0], *args, cs, sn, rot, pos, mk, proj)
+        e = ak.beam_start(work, parts.stage_off[p], parts.stage_off[p + 1], parts16,
+                          np.uint64(_fastmath.stream_state(0, p, 0)), roots[0], rots[0],
+                          pr.folded, cams_k, pr.dofs, schedule,
+                          ErrorArgs(False, 0.0, 10.0, np.inf, False), obs, (j0, j1, m0, m1),
+                          claimed, scratch)
+        _posture.project_posture(work, roots[0], rots[0], pr.folded, cams_k, cs, sn, rot, pos,
+                                 mk, proj)
         whole = _objective.partition_error(arrays.objective, proj, mk, arrays.points, arrays.conf,
                                    arrays.offsets, obs3, 10.0, m0, m1, claimed, 0.0, np.inf,
-                                   False, nearest)
+                                   False, scratch.nearest)
         assert np.isfinite(e) and e == pytest.approx(whole, rel=1e-9, abs=1e-9)
         assert (work != pr.start).any()

@@ -18,7 +18,9 @@ from kinematics._kernels import lanes as _lk
 from kinematics._kernels import objective as _objective
 from kinematics._kernels import posture as _posture
 from kinematics._kernels.lanes import PAD
+from kinematics._kernels.records import FrameObs
 from kinematics.fit import AnnealParams, Fitter
+from kinematics.fit.problem import ErrorArgs
 from kinematics.model.chain_xml import load_body
 from kinematics.model.rotations import euler_yxz
 from tests.fixtures.bodies import mouse_like
@@ -71,7 +73,7 @@ def _lanes(pr, n_lanes, c_cap, rng):
         pos[nj:, :, ln] = root_pos
         mk = np.empty((folded.marker_joint.size, 3))
         proj = np.empty((nv, folded.marker_joint.size, 2))
-        _posture.project_posture(cand[:, ln].copy(), root_pos, root_rot, *folded, *cams,
+        _posture.project_posture(cand[:, ln].copy(), root_pos, root_rot, folded, cams,
                             np.empty(cand.shape[0]), np.empty(cand.shape[0]),
                             np.empty((nj, 3, 3)), np.empty((nj, 3)), mk, proj)
         points, off = [], [0]
@@ -108,10 +110,11 @@ def test_generated_error_equals_the_scalar_kernel(kind, error, c_cap):
     _lk.call_fused(cg.fused_kernel(pr.folded, pr.cams, c_cap, error), *args, e)
     bidirectional, weight, cap, penalty_cap = error
     for ln, (root_pos, root_rot, points, off) in enumerate(scalar):
-        ref = _objective.posture_error(args[0][:, ln].copy(), root_pos, root_rot, *pr.folded,
-                                *pr.cams, _codes.OBJ_NEAREST, points, np.empty(0), off,
-                                _codes.NO_HIDDEN, bidirectional, weight, cap, penalty_cap, False,
-                                np.empty(len(pr.cams.kind)))
+        ref = _objective.posture_error(
+            args[0][:, ln].copy(), root_pos, root_rot, pr.folded, pr.cams,
+            FrameObs(_codes.OBJ_NEAREST, points, np.empty(0), off, _codes.NO_HIDDEN),
+            ErrorArgs(bidirectional, weight, cap, penalty_cap, False),
+            np.empty(len(pr.cams.kind)))
         assert e[ln] == ref, f"lane {ln}"
 
 
@@ -130,7 +133,7 @@ def test_generated_labelled_error_equals_the_scalar_kernel(kind, cap):
     refs = []
     for ln, (root_pos, root_rot, _, _) in enumerate(scalar):
         mk, proj = np.empty((nm, 3)), np.empty((nv, nm, 2))
-        _posture.project_posture(cand[:, ln].copy(), root_pos, root_rot, *pr.folded, *pr.cams,
+        _posture.project_posture(cand[:, ln].copy(), root_pos, root_rot, pr.folded, pr.cams,
                             np.empty(cand.shape[0]), np.empty(cand.shape[0]),
                             np.empty((pr.folded.parent.size, 3, 3)),
                             np.empty((pr.folded.parent.size, 3)), mk, proj)
@@ -178,7 +181,7 @@ def test_generated_3d_point_error_equals_the_scalar_kernel():
         root_rot = np.stack([euler_yxz(*rng.uniform(-0.5, 0.5, 3)) for _ in range(nc)])
         rot[nj:, :, ln], pos[nj:, :, ln] = root_rot.reshape(nc, 9), root_pos
         mk = np.empty((nm, 3))
-        _posture.project_posture(cand[:, ln].copy(), root_pos, root_rot, *pr.folded, *pr.cams,
+        _posture.project_posture(cand[:, ln].copy(), root_pos, root_rot, pr.folded, pr.cams,
                             np.empty(cand.shape[0]), np.empty(cand.shape[0]),
                             np.empty((nj, 3, 3)), np.empty((nj, 3)), mk,
                             np.empty((0, nm, 2)))

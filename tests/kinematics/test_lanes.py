@@ -188,7 +188,7 @@ def _kernel_outputs(fitter, dets, n_lanes, groups, generated=True, single=False)
         (_lk.no_fused, 0)
     _lk.fit_frames_lanes(np.asarray(groups, np.int64), idx, roots, rots, pr.start, pr.folded,
                          pr.cams, pr.dofs, schedule_of(p), error, arrays,
-                         float(p.claim_gate_px), n_lanes, fused, n_fused, single, out)
+                         float(p.claim_gate_px), fused, (n_lanes, n_fused, single), out)
     return out
 
 

@@ -11,7 +11,9 @@ import pytest
 
 from kinematics._kernels import anneal as ak
 from kinematics._kernels import fastmath as _fastmath
+from kinematics._kernels.records import FrameObs, new_scratch
 from kinematics.fit import AnnealParams, Fitter
+from kinematics.fit.problem import ErrorArgs, Schedule
 from tests.fixtures.planted import planted_detections
 from videotrack.synth.motion import smooth_random_motion
 from videotrack.synth.paper_setup import locust_cameras
@@ -46,18 +48,18 @@ def test_main_thread_runs_while_one_annealing_run_goes_on(locust):
     off = np.array([0, len(frame[0]), len(pts)], np.int64)
     pr = Fitter(locust, cams).problem
     na, nj, nm = pr.n_state, 3, 4
-    scratch = [np.empty(na) for _ in range(5)] + [
-        np.empty((nj, 3, 3)), np.empty((nj, 3)), np.empty((nm, 3)), np.empty((2, nm, 2)),
-        np.empty(2), np.empty(nm, np.int64), np.empty(0)]
+    scratch = new_scratch(na, nj, nm, 2)
+    schedule = Schedule(1e-300, 16, 1, 1, 1, 200.0, 1.0, 0.75, 0.75, 0.0, 0, 0.0, 1, 0, 0.0,
+                        False, -1, 1)
+    obs = FrameObs(0, pts, np.ones(len(pts)), off, np.zeros((nm, 4)))
 
     def run(n_end):
-        return ak.anneal_chain(pr.start, pr.free_idx, pr.step, pr.hist, pr.nbins, 1e-300,
-                               pr.dof_kind, pr.lo, pr.hi, 16, n_end, n_end, n_end, 200.0,
-                               1.0, 0.75, 0.75, 0.0, _fastmath.stream_state(0, 0, 0),
-                               np.zeros((1, 3)), pr.identity_rotations(), *pr.folded,
-                               *pr.cams, 0, pts, np.ones(len(pts)), off, np.zeros((nm, 4)),
-                               False, 1.0, np.inf, np.inf, False, 0, nj, 0, nm,
-                               np.zeros(len(pts), np.bool_), *scratch)
+        return ak.anneal_chain(pr.start, pr.free_idx, (n_end, n_end, n_end),
+                               _fastmath.stream_state(0, 0, 0), np.zeros((1, 3)),
+                               pr.identity_rotations(), pr.folded, pr.cams, pr.dofs, schedule,
+                               ErrorArgs(False, 1.0, np.inf, np.inf, False), obs,
+                               (0, nj, 0, nm), np.zeros(len(pts), np.bool_), scratch,
+                               np.empty(0))
 
     run(10)  # compile outside the measurement
     gap, duration = longest_stall(lambda: run(3_000_000))
