@@ -96,6 +96,15 @@ class Problem:
     def residuals(self, full: np.ndarray, rows: np.ndarray) -> np.ndarray:
         return self.evaluate(full, rows, jacobian=False)[0]
 
+    def prior(self, full: np.ndarray, jacobian: bool = True):
+        """Residuals of priors on the parameters, in their standard deviations, and with
+        ``jacobian`` their sparse Jacobian over the free parameters; None: no prior."""
+        return None
+
+    def prior_cost(self, full: np.ndarray) -> float:
+        p = self.prior(full, jacobian=False)
+        return 0.0 if p is None else 0.5 * float(p[0] @ p[0])
+
     def errors(self, full: np.ndarray) -> np.ndarray:
         r = self.residuals(full, np.arange(len(self.cam))).reshape(-1, 2)
         return np.hypot(r[:, 0], r[:, 1])
@@ -150,7 +159,7 @@ class Problem:
             return float(np.sum(np.sqrt(1.0 + e2) - 1.0))
 
         r, jc, jv = self.evaluate(x, rows)
-        c0 = cost(r)
+        c0 = cost(r) + self.prior_cost(x)
         lam = 1e-4
         for _ in range(max_iter):
             J = self.jacobian(jc, jv, rows)
@@ -158,6 +167,11 @@ class Problem:
             w = np.repeat(1.0 / np.sqrt(1.0 + e2), 2)  # IRLS weight of soft-L1
             H = (J.T @ J.multiply(w[:, None])).tocsr()
             g = J.T @ (w * r)
+            prior = self.prior(x)
+            if prior is not None:  # 0.5 |r_p|^2 in cost units, f_scale^2 times in H's
+                rp, Jp = prior
+                H = (H + (Jp.T @ Jp) * f_scale**2).tocsr()
+                g = g + (Jp.T @ rp) * f_scale**2
             diag = np.maximum(H.diagonal(), 1e-12)
             dense = H.shape[0] <= _DENSE_MAX
             H = H.toarray() if dense else self._blocks(H)
@@ -172,7 +186,8 @@ class Problem:
                     trial = x.copy()
                     trial[mask] += step
                     r_new = self.evaluate(trial, rows, jacobian=False)[0]
-                    c_new = cost(r_new) if np.all(np.isfinite(r_new)) else np.inf
+                    c_new = (cost(r_new) + self.prior_cost(trial)
+                             if np.all(np.isfinite(r_new)) else np.inf)
                     if c_new < c0:
                         break
                 lam *= 10.0

@@ -110,7 +110,12 @@ def add_parser(subparsers) -> None:
                      help="then refine the camera poses from corresponding points of the "
                           "animal: an .npz with 'p2d' (cameras, points, 2) px, NaN where "
                           "unseen, cameras in --camera order (aniposelib's points.npz); also "
-                          "after --import")
+                          "after --import. Priors hold each camera near its place (the rig "
+                          "keeps its size); a change of a baseline by more than 1 %% or a "
+                          "turn of more than 5° is refused")
+    how.add_argument("--free-rig", action="store_true",
+                     help="with --refine-points: no priors and no tolerance, for a rig that "
+                          "really moved (the change is listed)")
     how.add_argument("--restarts", type=int, default=5, metavar="N",
                      help="bundle adjustments from different starts; the best is kept and "
                           "the spread is reported (default 5)")
@@ -173,7 +178,11 @@ def _print_refinement(refinement) -> None:
     if refinement is not None:
         print(f"refined from {refinement.points} points: reprojection median "
               f"{refinement.before_px:.3f} px before, {refinement.after_px:.3f} px after "
-              f"(triangulated)")
+              f"(triangulated); per camera: " + ", ".join(
+                  f"{n} {e:.2f} px" for n, e in refinement.per_camera_px.items()))
+        print("the rig's change (lengths in the camera file's unit):")
+        for line in refinement.change.lines():
+            print(line)
 
 
 def run(args) -> int:
@@ -206,6 +215,7 @@ def run(args) -> int:
             world_view=args.world_view, distortion=args.distortion,
             intrinsics=args.intrinsics, fix_intrinsics=args.fix_intrinsics,
             intrinsics_only=args.intrinsics_only, refine_points=args.refine_points,
+            free_rig=args.free_rig,
             restarts=args.restarts, max_frames=args.max_frames, seed=args.seed,
             cache=not args.no_cache, force=args.force, progress=progress)
     finally:
@@ -232,6 +242,7 @@ def _convert(args) -> int:
                               field="--import")
     done = convert_cameras(args.import_file, _outputs(args), fmt=args.format,
                            dlt_size=_size(args.dlt_size), refine_points=args.refine_points,
+                           free_rig=args.free_rig,
                            force=args.force)
     _print_refinement(done.refinement)
     print(f"wrote {done.out} ({done.cameras} cameras from {done.source})")

@@ -10,7 +10,7 @@ points of the animal and return a record of what they did.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from videotrack.errors import VideoTrackError
@@ -41,11 +41,14 @@ class Outputs:
 @dataclass(frozen=True)
 class Refinement:
     """Poses refined from ``points`` corresponding points: the median reprojection error of
-    the triangulated points before and after, px."""
+    the triangulated points before and after, px (after: per camera too), and how the rig
+    changed (:class:`videotrack.calibration.refine.RigChange`)."""
 
     points: int
     before_px: float
     after_px: float
+    change: object = None
+    per_camera_px: dict = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -102,6 +105,7 @@ def calibrate_cameras(
     fix_intrinsics: bool = False,
     intrinsics_only: bool = False,
     refine_points: Path | None = None,
+    free_rig: bool = False,
     restarts: int = 5,
     max_frames: int = 200,
     seed: int = 0,
@@ -114,7 +118,9 @@ def calibrate_cameras(
 
     ``reference`` (default the first camera) is the world frame, or the board in view
     ``world_view``; ``max_frames`` 0 samples all frames; ``cache``: detected corners are kept
-    in ``<out>.corners.npz``. ``progress(done, total)`` counts the bundle adjustment's starts.
+    in ``<out>.corners.npz``. ``refine_points``: refine the poses from the animal's points
+    after (``free_rig``: without the priors that hold the rig, and no tolerance).
+    ``progress(done, total)`` counts the bundle adjustment's starts.
     """
     from videotrack.project.outputs import guard_outputs
 
@@ -146,11 +152,12 @@ def calibrate_cameras(
     guard_outputs(kinds, inputs, force=force)
     return _calibrate(board, dict(cameras), outputs, reference, corners_cache if cache else None,
                       world_view, distortion, intrinsics, fix_intrinsics, intrinsics_only,
-                      refine_points, restarts, max_frames, seed, progress)
+                      (refine_points, free_rig) if refine_points else None, restarts,
+                      max_frames, seed, progress)
 
 
 def _calibrate(board_path, cams, outputs, reference, cache, world_view, distortion,
-               intrinsics, fix_intrinsics, intrinsics_only, refine_points, restarts,
+               intrinsics, fix_intrinsics, intrinsics_only, refine, restarts,
                max_frames, seed, progress) -> Calibrated:
     from kinematics.cameras.files import load_cameras
     from videotrack.calibration.boards import load_board
@@ -189,8 +196,8 @@ def _calibrate(board_path, cams, outputs, reference, cache, world_view, distorti
     tree = tuple((names[a], names[b], n) for a, b, n in cal.tree) if cal.tree else ()
     lines = tuple(report.lines())
     refinement = None
-    if refine_points:
-        cal.cameras, refinement = _refine(refine_points, cal.cameras, fixed)
+    if refine:
+        cal.cameras, refinement = _refine(*refine, cal.cameras, fixed)
     _write(outputs, {c.name: c for c in cal.cameras}, report.overall["median"])
     if outputs.report_png:
         save_png(outputs.report_png, cal, corners)
@@ -199,8 +206,10 @@ def _calibrate(board_path, cams, outputs, reference, cache, world_view, distorti
                       seconds=cal.seconds)
 
 
-def _refine(path: Path, cameras: list, reference: int) -> tuple[list, Refinement]:
-    """Camera poses refined from the points of ``path``, and the errors before and after."""
+def _refine(path: Path, free_rig: bool, cameras: list, reference: int
+            ) -> tuple[list, Refinement]:
+    """Camera poses refined from the points of ``path``, the errors before and after and the
+    rig's change (refused past the tolerance unless ``free_rig``)."""
     import numpy as np
 
     from kinematics.cameras import PinholeCamera
@@ -218,12 +227,15 @@ def _refine(path: Path, cameras: list, reference: int) -> tuple[list, Refinement
         raise VideoTrackError("refinement needs pinhole cameras", field="--refine-points")
     try:
         before = np.nanmedian(triangulated_errors(cameras, p2d))
-        refined, _ = refine_extrinsics(cameras, p2d, reference=reference)
+        refined, _, change = refine_extrinsics(cameras, p2d, reference=reference,
+                                               free_rig=free_rig)
     except VideoTrackError as err:
         raise err.located(file=path) from None
-    after = np.nanmedian(triangulated_errors(refined, p2d))
+    after = triangulated_errors(refined, p2d)
     return refined, Refinement(points=p2d.shape[1], before_px=float(before),
-                               after_px=float(after))
+                               after_px=float(np.nanmedian(after)), change=change,
+                               per_camera_px={c.name: float(np.nanmedian(e)) for c, e in
+                                              zip(refined, after, strict=True)})
 
 
 def convert_cameras(
@@ -233,6 +245,7 @@ def convert_cameras(
     fmt: str | None = None,
     dlt_size: tuple[int, int] | None = None,
     refine_points: Path | None = None,
+    free_rig: bool = False,
     force: bool = False,
 ) -> Converted:
     """Read the cameras of another tool's file ``source`` (``fmt``: its format, default from
@@ -249,7 +262,7 @@ def convert_cameras(
     cameras = read_cameras(source, fmt, dlt_size=dlt_size, dlt_origin=outputs.dlt_origin)
     refinement = None
     if refine_points:
-        refined, refinement = _refine(refine_points, list(cameras.values()), 0)
+        refined, refinement = _refine(refine_points, free_rig, list(cameras.values()), 0)
         cameras = {c.name: c for c in refined}
     _write(outputs, cameras, None, units="mm" if fmt == "qca" else None)  # others: unknown
     return Converted(out=outputs.out, source=source, cameras=len(cameras),
