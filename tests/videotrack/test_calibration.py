@@ -584,3 +584,33 @@ def test_command_intrinsics_only_from_unsynchronised_images(tmp_path, capsys):
     for cam in cams:
         assert np.allclose(got[cam.name].K, cam.K, rtol=0.02, atol=3)
     assert "cam1" in capsys.readouterr().out
+
+
+def test_import_names_identical_cameras(tmp_path, capsys):
+    from kinematics.cameras.files import save_cameras
+
+    cams = rig(3)
+    copy = PinholeCamera("cam3", cams[2].K, cams[2].dist, R=cams[2].R, t=cams[2].t,
+                         size=cams[2].image_size)
+    save_cameras(tmp_path / "four.toml", [*cams, copy])
+    assert cli("calibrate", "--import", tmp_path / "four.toml", "-o", tmp_path / "out.toml") == 0
+    err = capsys.readouterr().err
+    assert "warning: cameras cam2 and cam3 are identical" in err
+
+
+def test_triangulate_names_the_wrong_camera_of_the_mouse_rig(tmp_path, capsys):
+    """The shipped calibration of the sleap-anipose rig has 'side' a copy of 'top' (shared
+    data): triangulation names both, and 'side' by its errors."""
+    from videotrack.cli import main
+
+    folder = SHARED_DATA / "sleap_anipose_mouse4cam"
+    if not folder.is_dir():
+        pytest.skip("shared data absent")
+    views = [f"{v}={folder / v / f'minimal_{v}_proofread.analysis.h5'}"
+             for v in ("back", "mid", "side", "top")]
+    assert main(["triangulate", str(folder / "calibration.toml"), *views, "-o",
+                 str(tmp_path / "p3d.csv")]) == 0
+    out, err = capsys.readouterr()
+    assert re.search(r"per camera: back [\d.]+ px, mid [\d.]+ px, side [\d.]+ px", out)
+    assert "cameras side and top are identical" in err
+    assert "warning: camera side reprojects with a median error of" in err

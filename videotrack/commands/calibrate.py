@@ -244,6 +244,10 @@ def _convert(args) -> int:
                            dlt_size=_size(args.dlt_size), refine_points=args.refine_points,
                            free_rig=args.free_rig,
                            force=args.force)
+    from videotrack.commands._common import note
+
+    for line in done.warnings:
+        note(f"warning: {line}")
     _print_refinement(done.refinement)
     print(f"wrote {done.out} ({done.cameras} cameras from {done.source})")
     return 0

@@ -155,9 +155,30 @@ def run_fit(args, detect: bool = False) -> int:
               f"{numba.get_num_threads()} threads); median error "
               f"{np.median(finite) if finite.size else float('nan'):.2f} px")
         print("status: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
+        _print_views(results)
         print(f"wrote {run.results_path} (+ .json sidecar)")
     else:
         print(f"{run.results_path} is up to date (--force fits again)")
     if run.plot_path is not None:
         print(f"wrote {run.plot_path}")
     return incomplete_status(run, args.allow_incomplete)
+
+
+def _print_views(results) -> None:
+    """Each view's median error over the frames to trust, and a warning for a view whose
+    errors stand out (its camera's calibration may be wrong)."""
+    import numpy as np
+
+    from kinematics.cameras.checks import camera_warnings
+    from videotrack.commands._common import note
+
+    per_view = results.error_per_view[results.ok_mask()]
+    if len(results.view_names) < 2 or not len(per_view):
+        return
+    medians = {}
+    for v, name in enumerate(results.view_names):
+        finite = per_view[:, v][np.isfinite(per_view[:, v])]
+        medians[name] = float(np.median(finite)) if finite.size else float("nan")
+    print("median error per view: " + ", ".join(f"{n} {e:.2f} px" for n, e in medians.items()))
+    for line in camera_warnings([], medians):
+        note(f"warning: {line.replace('camera ', 'view ', 1)}")

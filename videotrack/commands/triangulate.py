@@ -148,5 +148,10 @@ def run(args) -> int:
     print(f"triangulated {done.placed} of {done.points} points ({done.body_parts} body parts "
           f"x {done.frames} frames, {done.cameras} cameras, {done.method}); reprojection "
           f"error median {med} px")
+    if done.per_camera_px:
+        print("per camera: " + ", ".join(f"{n} {e:.2f} px" for n, e in
+                                         done.per_camera_px.items()))
+    for line in done.warnings:
+        note(f"warning: {line}")
     print(f"wrote {done.output}")
     return 0

@@ -75,6 +75,7 @@ class Converted:
     source: Path
     cameras: int
     refinement: Refinement | None
+    warnings: tuple = ()  # cameras that look wrong (kinematics.cameras.checks)
 
 
 def _write(outputs: Outputs, cameras: dict, error: float | None,
@@ -260,10 +261,13 @@ def convert_cameras(
     guard_outputs(outputs.kinds(), inputs, force=force)
     fmt = fmt or guess_format(source)
     cameras = read_cameras(source, fmt, dlt_size=dlt_size, dlt_origin=outputs.dlt_origin)
+    from kinematics.cameras.checks import camera_warnings
+
+    found = tuple(camera_warnings(cameras))
     refinement = None
     if refine_points:
         refined, refinement = _refine(refine_points, free_rig, list(cameras.values()), 0)
         cameras = {c.name: c for c in refined}
     _write(outputs, cameras, None, units="mm" if fmt == "qca" else None)  # others: unknown
     return Converted(out=outputs.out, source=source, cameras=len(cameras),
-                     refinement=refinement)
+                     refinement=refinement, warnings=found)

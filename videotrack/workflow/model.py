@@ -155,6 +155,12 @@ def load_model(config, **overrides) -> ProjectModel:
                                                    f"views[{i}].model_markers")
     if not cameras:
         raise VideoTrackError("no views: add [[views]] tables", file=config.path, field="views")
+    from kinematics.cameras.checks import identical_cameras
+
+    used = {view["camera"] or view["name"] for view in views}
+    for a, b in identical_cameras({n: c for n, c in all_cameras.items() if n in used}):
+        warnings.warn(f"{cameras_path}: cameras {a} and {b} are identical (the same lens and "
+                      "pose): one of them is wrong", VideoTrackWarning, stacklevel=2)
     if shown and len(shown) == len(cameras):  # every view lists its markers: any left out?
         nowhere = [m for m in body.marker_names if not any(m in s for s in shown.values())]
         if nowhere:

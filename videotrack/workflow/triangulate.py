@@ -7,8 +7,10 @@ every body part and writes the CSV; it returns a :class:`Triangulated` saying wh
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
+
+from kinematics.cameras.checks import camera_warnings
 
 
 @dataclass(frozen=True)
@@ -16,7 +18,9 @@ class Triangulated:
     """What :func:`triangulate_keypoints` wrote.
 
     ``placed`` of ``points`` (body parts x frames) were triangulated; ``median_px`` is the
-    median reprojection error of those with one (None: none has).
+    median reprojection error of those with one (None: none has), ``per_camera_px`` each
+    camera's over the keypoints it gave; ``warnings``: cameras that look wrong
+    (:func:`kinematics.cameras.checks.camera_warnings`).
     """
 
     output: Path
@@ -27,6 +31,8 @@ class Triangulated:
     cameras: int
     method: str
     median_px: float | None
+    per_camera_px: dict = field(default_factory=dict)
+    warnings: tuple = ()
 
 
 def load_any_cameras(path: Path) -> dict:
@@ -178,6 +184,27 @@ def triangulate_keypoints(
     write_pose3d(output, names, result.xyz, result.error, result.ncams, result.score, frames)
     placed = np.isfinite(result.xyz).all(axis=-1)
     err = result.error[placed & np.isfinite(result.error)]
+    per_camera = _per_camera_px(list(files), cams, xy, result)
     return Triangulated(output=output, placed=int(placed.sum()), points=int(placed.size),
                         body_parts=len(names), frames=len(frames), cameras=len(cams),
-                        method=method, median_px=float(np.median(err)) if err.size else None)
+                        method=method, median_px=float(np.median(err)) if err.size else None,
+                        per_camera_px=per_camera,
+                        warnings=tuple(camera_warnings(dict(zip(files, cams, strict=True)),
+                                                       per_camera)))
+
+
+def _per_camera_px(names, cams, xy, result) -> dict[str, float]:
+    """Each camera's median reprojection error (px) over the keypoints a point was solved
+    from (NaN: none)."""
+    import numpy as np
+
+    out = {}
+    for c, (name, cam) in enumerate(zip(names, cams, strict=True)):
+        use = result.used[c] & np.isfinite(result.xyz).all(axis=-1)
+        if not use.any():
+            out[name] = float("nan")
+            continue
+        d = np.linalg.norm(cam.project(result.xyz[use]) - xy[c][use], axis=-1)
+        d = d[np.isfinite(d)]
+        out[name] = float(np.median(d)) if d.size else float("nan")
+    return out
