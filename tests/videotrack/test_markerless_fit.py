@@ -76,6 +76,8 @@ def test_fit_to_triangulated_points(session, tmp_path, capsys):
     tri = write_session(tmp_path, N_FRAMES, noise_px=1.0, bad_share=0.1,
                         project_text=TRIANGULATED)
     assert fit(tri.project) == 0
+    out = capsys.readouterr().out
+    assert " px" not in out.split("median error")[1].splitlines()[0]  # E is a length in 3D
     res = read_results(tmp_path / "cam0DLC.results.csv")
     err = angle_errors(res, tri)
     assert np.median(err) < 3.0

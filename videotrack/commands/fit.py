@@ -153,7 +153,8 @@ def run_fit(args, detect: bool = False) -> int:
         finite = results.error[np.isfinite(results.error)]
         print(f"fitted {n} frames in {seconds:.1f} s ({n / max(seconds, 1e-9):.1f} frames/s, "
               f"{numba.get_num_threads()} threads); median error "
-              f"{np.median(finite) if finite.size else float('nan'):.2f} px")
+              f"{np.median(finite) if finite.size else float('nan'):.2f} "
+              f"{error_unit(results, run.model)}")
         print("status: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
         _print_views(results)
         print(f"wrote {run.results_path} (+ .json sidecar)")
@@ -182,3 +183,20 @@ def _print_views(results) -> None:
     print("median error per view: " + ", ".join(f"{n} {e:.2f} px" for n, e in medians.items()))
     for line in camera_warnings([], medians):
         note(f"warning: {line.replace('camera ', 'view ', 1)}")
+
+
+def error_unit(results, model) -> str:
+    """The unit of E in ``results``: px for a fit to 2D points; for 3D points (no views) the
+    camera file's length unit ("length units" where the file does not say)."""
+    if results.view_names:
+        return "px"
+    units = None
+    if model is not None:
+        from kinematics.cameras.files import load_camera_file
+        from kinematics.errors import KinematicsError
+
+        try:
+            units = load_camera_file(model.cameras_path).units
+        except (KinematicsError, OSError):  # an imported format: no units key
+            units = None
+    return units if units and units != "px" else "length units (the camera file's)"

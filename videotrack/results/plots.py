@@ -35,12 +35,13 @@ def plot_angles(results: Results, path: str | os.PathLike, locked=None, truth=No
     ax.plot(t, results.error, lw=1, color="k")
     if bad.any():
         ax.plot(t[bad], np.nan_to_num(results.error[bad]), "x", color="tab:red")
-    ax.set_ylabel("error E (px)", fontsize=8)
+    unit = "px" if results.view_names else "length units"  # 3D points: no views
+    ax.set_ylabel(f"error E ({unit})", fontsize=8)
     ax.set_xlabel("time (s)")
     ax.grid(alpha=0.3)
     n_bad = int(bad.sum())
     fig.suptitle(f"{len(results)} frames, {n_bad} bad ({100 * n_bad / max(len(results), 1):.1f} %)"
-                 f", median E {median_text(results.error)}")
+                 f", median E {median_text(results.error, unit)}")
     return _save_png(fig, path, dpi=90)
 
 
