@@ -81,6 +81,16 @@ def test_dlc_csv_with_three_index_columns(tmp_path):
     t = read_keypoints(path)
     assert t.frames.tolist() == [0, 10, 20]
     np.testing.assert_allclose(t.xy, xy)
+    assert t.images  # labelled images, not a video: temporal filters are refused
+    from videotrack.markerless.filters import KeypointFilterSettings, apply_filters
+
+    for settings, what in ((KeypointFilterSettings(median=3), "median filter"),
+                           (KeypointFilterSettings(viterbi=True), "Viterbi filter")):
+        with pytest.raises(VideoTrackError, match=f"the {what} needs a video's consecutive "
+                                                  "frames, and these rows are labelled images"):
+            apply_filters(t, settings)
+    assert apply_filters(t, KeypointFilterSettings(score_threshold=0.5)).n_frames == 3
+    assert not read_keypoints(write_dlc_csv(tmp_path / "video.csv", xy, score)).images
 
 
 def test_dlc_h5_matches_csv(tmp_path):
@@ -301,6 +311,7 @@ def test_real_dlc_labels_csv_and_h5_agree():
     h5 = read_keypoints(folder / "CollectedData_Pranav.h5")
     np.testing.assert_allclose(h5.xy, csv.xy)
     np.testing.assert_array_equal(h5.frames, csv.frames)
+    assert csv.images and h5.images
 
 
 def test_real_sleap_slp_and_analysis_h5_agree():

@@ -17,6 +17,8 @@ import numpy as np
 from videotrack.errors import VideoTrackError
 from videotrack.io.keypoints import KeypointTracks, make_tracks
 
+_IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
+
 #: The last run of digits in a labelled image's name (``img0042.png`` -> 42).
 _DIGITS = re.compile(r"(\d+)(?!.*\d)")
 _UNIQUE = "single"  # multi-animal DeepLabCut's pseudo-individual of the unique bodyparts
@@ -90,7 +92,19 @@ def from_columns(columns: list[tuple], index: list, values: np.ndarray, path,
     others = [block(lambda bp, o=o: o) for o in animals if o != chosen]
     candidates = np.stack(others, axis=1) if others else None
     return make_tracks(parts, main[..., :2], main[..., 2], _frame_numbers(index, path), path,
-                       candidates=candidates, individual=chosen or None)
+                       candidates=candidates, individual=chosen or None,
+                       images=_labels_images(index))
+
+
+def _labels_images(index: list) -> bool:
+    """Whether the row labels name images (``labeled-data/video/img0042.png``): hand labels
+    of picked frames, not a video's consecutive frames."""
+    def is_image(label) -> bool:
+        if isinstance(label, tuple):
+            label = "/".join(str(p) for p in label)
+        return Path(str(label)).suffix.lower() in _IMAGE_SUFFIXES
+
+    return bool(index) and all(is_image(label) for label in index)
 
 
 def _choose(animals: list[str], individual, path) -> str:

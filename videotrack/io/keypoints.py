@@ -92,6 +92,9 @@ class KeypointTracks:
     candidates : optional (n_frames, n_candidates, n_keypoints, 3) x, y, score of other
         detections of the same keypoints (other animals or people), for the Viterbi filter
     individual : the individual (animal, track, person) these keypoints belong to, if chosen
+    images : the rows are labelled images (a DeepLabCut ``CollectedData`` file), not a
+        video's frames: their numbers come from the images' names, and images picked from
+        a video are not neighbours in time
     """
 
     names: tuple[str, ...]
@@ -101,6 +104,7 @@ class KeypointTracks:
     source: str
     candidates: np.ndarray | None = None
     individual: str | None = None
+    images: bool = False
 
     def __post_init__(self):
         n, k = len(self.frames), len(self.names)

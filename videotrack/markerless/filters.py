@@ -63,7 +63,14 @@ class KeypointFilterSettings:
 
 
 def apply_filters(tracks: KeypointTracks, settings: KeypointFilterSettings) -> KeypointTracks:
-    """Run the filters ``settings`` turns on (see the module doc for the order)."""
+    """Run the filters ``settings`` turns on (see the module doc for the order). The
+    temporal ones (median, Viterbi) are refused on labelled images, which are not a video."""
+    if tracks.images and (settings.median or settings.viterbi):
+        which = "the median filter" if settings.median else "the Viterbi filter"
+        raise VideoTrackError(
+            f"{which} needs a video's consecutive frames, and these rows are labelled images "
+            "(hand labels of frames picked from a video): filter by score only",
+            file=tracks.source, field="median" if settings.median else "viterbi")
     if settings.score_threshold > 0:
         tracks = threshold(tracks, settings.score_threshold)
     if settings.viterbi:
