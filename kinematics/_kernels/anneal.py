@@ -14,7 +14,13 @@ from kinematics._kernels.error2d import claim_detections, paper_error
 from kinematics._kernels.error3d import claim_cloud, cloud_error_once, unclaimed_cloud
 from kinematics._kernels.fastmath import GOLDEN, log_unit, mix64, next_uniform, sincos
 from kinematics._kernels.objective import evaluate, partition_error
-from kinematics._kernels.posture import drawn_views, has_pinhole, project_cs, project_posture
+from kinematics._kernels.posture import (
+    drawn_views,
+    has_pinhole,
+    posture_frames,
+    posture_markers,
+    project_posture,
+)
 from kinematics._kernels.records import FrameObs
 from kinematics._kernels.refine import refine_posture
 
@@ -88,6 +94,9 @@ def anneal_chain(start, free_idx, counts, state, root_pos, root_rot, body, cams,
     cur, cand, best, cs, sn = scratch.cur, scratch.cand, scratch.best, scratch.cs, scratch.sn
     rot, pos, mk, proj = scratch.rot, scratch.pos, scratch.mk, scratch.proj
     per_view, nearest = scratch.per_view, scratch.nearest
+    (parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index, joint_flags,
+     marker_joint, marker_local, slide_index) = body  # the loop's arrays (records: refcounts)
+    P, K, dist, R, t = cams.P, cams.K, cams.dist, cams.R, cams.t
     n_free = free_idx.shape[0]
     n_hist = 0  # free_idx holds the DOF_HISTOGRAM entries first
     while n_hist < n_free and dof_kind[free_idx[n_hist]] == DOF_HISTOGRAM:
@@ -110,8 +119,11 @@ def anneal_chain(start, free_idx, counts, state, root_pos, root_rot, body, cams,
         d2.shape[0] >= mk.shape[0] + obs3.shape[0]
     marker_d2 = d2[:mk.shape[0]]
     point_d2 = d2[mk.shape[0]:]
-    project_cs(cand, cs, sn, root_pos, root_rot, body, cams, views, rot, pos, mk, proj,
-               any_pinhole, span, marks)
+    posture_frames(cand, cs, sn, root_pos, root_rot, parent, chain, pre_rot, pre_trans,
+                   post_trans, elem_axis, elem_index, joint_flags, slide_index, rot,
+                   pos, j0, j1)
+    posture_markers(marker_joint, marker_local, rot, pos, mk, proj, views, P, K, dist,
+                    R, t, any_pinhole, m0, m1, marks)
     if not whole:
         e_cur = partition_error(objective, proj, mk, points, conf, view_off, obs3, cap, m0,
                                 m1, claimed, unexplained, penalty_cap, one, nearest)
@@ -161,8 +173,11 @@ def anneal_chain(start, free_idx, counts, state, root_pos, root_rot, body, cams,
             x = x if ok else cur[i]
             cand[i] = x
             sn[i], cs[i] = sincos(x)
-        project_cs(cand, cs, sn, root_pos, root_rot, body, cams, views, rot, pos, mk,
-                   proj, any_pinhole, span, marks)
+        posture_frames(cand, cs, sn, root_pos, root_rot, parent, chain, pre_rot, pre_trans,
+                       post_trans, elem_axis, elem_index, joint_flags, slide_index, rot,
+                       pos, j0, j1)
+        posture_markers(marker_joint, marker_local, rot, pos, mk, proj, views, P, K, dist,
+                        R, t, any_pinhole, m0, m1, marks)
         if once:
             e = cloud_error_once(mk, obs3, m0, m1, unexplained, cap, penalty_cap, nearest,
                                  marker_d2, point_d2)
@@ -227,7 +242,9 @@ def beam_start(work, s0, s1, parts, state, rp, rr, body, cams, dofs, schedule, e
                                                obs.view_off, obs.obs3)
     cs, sn, rot, pos, mk = scratch.cs, scratch.sn, scratch.rot, scratch.pos, scratch.mk
     proj, nearest = scratch.proj, scratch.nearest
-    marker_joint = body.marker_joint
+    (parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index, joint_flags,
+     marker_joint, marker_local, slide_index) = body  # the loop's arrays (records: refcounts)
+    P, K, dist, R, t = cams.P, cams.K, cams.dist, cams.R, cams.t
     ns = work.shape[0]
     e_first = np.inf
     views = drawn_views(cams.kind, objective)
@@ -256,8 +273,6 @@ def beam_start(work, s0, s1, parts, state, rp, rr, body, cams, dofs, schedule, e
         je = jf  # one past the last joint that carries a marker the stage places
         for m in range(ms, m_end):
             je = max(je, marker_joint[m] + 1)
-        span_old = (j0, j1, m0, ms)
-        span_new = (jf, je, ms, m_end)
         draws = (BEAM * n_samples) // nb
         nc = 0
         for b in range(nb):
@@ -265,8 +280,11 @@ def beam_start(work, s0, s1, parts, state, rp, rr, body, cams, dofs, schedule, e
                 sn[k], cs[k] = sincos(beams[b, k])
             # The beam's posture (the joints before the stage's first stay so for its
             # draws) and the E of the markers earlier stages placed
-            project_cs(beams[b], cs, sn, rp, rr, body, cams, views, rot, pos, mk, proj,
-                       any_pinhole, span_old, marks)
+            posture_frames(beams[b], cs, sn, rp, rr, parent, chain, pre_rot, pre_trans,
+                           post_trans, elem_axis, elem_index, joint_flags, slide_index, rot,
+                           pos, j0, j1)
+            posture_markers(marker_joint, marker_local, rot, pos, mk, proj, views, P, K, dist,
+                            R, t, any_pinhole, m0, ms, marks)
             e_beam = 0.0
             if ms > m0:
                 e_beam = partition_error(objective, proj, mk, points, conf, view_off, cloud,
@@ -288,8 +306,11 @@ def beam_start(work, s0, s1, parts, state, rp, rr, body, cams, dofs, schedule, e
                 for q in range(d0, d1):
                     i = stage_dofs[q]
                     sn[i], cs[i] = sincos(cands[nc, i])
-                project_cs(cands[nc], cs, sn, rp, rr, body, cams, views, rot, pos, mk, proj,
-                           any_pinhole, span_new, marks)
+                posture_frames(cands[nc], cs, sn, rp, rr, parent, chain, pre_rot, pre_trans,
+                               post_trans, elem_axis, elem_index, joint_flags, slide_index, rot,
+                               pos, jf, je)
+                posture_markers(marker_joint, marker_local, rot, pos, mk, proj, views, P, K, dist,
+                                R, t, any_pinhole, ms, m_end, marks)
                 cand_e[nc] = e_beam + partition_error(objective, proj, mk, points, conf,
                                                       view_off, cloud, cap, ms, m_end, free,
                                                       0.0, penalty_cap, one, nearest)

@@ -40,13 +40,25 @@ def project_cs(values, cs, sn, root_pos, root_rot, body, cams, views, rot, pos, 
     colour most markers are hidden in most views. ``span = (j0, j1, m0, m1)``:
     only joints ``j0:j1`` and markers ``m0:m1`` are computed (a partition's subtree; its
     parents' ``rot``, ``pos`` must be current); ``(0, nj, 0, nm)`` computes everything.
-    Inlined: the records cost nothing per call."""
+
+    For calls outside a loop: a field taken from a record costs reference counting, so the
+    loops unpack the records once and call :func:`posture_frames` and
+    :func:`posture_markers` with plain arrays."""
     j0, j1, m0, m1 = span
-    parent, chain, pre_rot, pre_trans = body.parent, body.chain, body.pre_rot, body.pre_trans
-    post_trans, elem_axis, elem_index = body.post_trans, body.elem_axis, body.elem_index
-    joint_flags, slide_index = body.joint_flags, body.slide_index
-    marker_joint, marker_local = body.marker_joint, body.marker_local
-    P = cams.P
+    posture_frames(values, cs, sn, root_pos, root_rot, body.parent, body.chain, body.pre_rot,
+                   body.pre_trans, body.post_trans, body.elem_axis, body.elem_index,
+                   body.joint_flags, body.slide_index, rot, pos, j0, j1)
+    posture_markers(body.marker_joint, body.marker_local, rot, pos, mk, proj, views, cams.P,
+                    cams.K, cams.dist, cams.R, cams.t, any_pinhole, m0, m1, marks)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def posture_frames(values, cs, sn, root_pos, root_rot, parent, chain, pre_rot, pre_trans,
+                   post_trans, elem_axis, elem_index, joint_flags, slide_index, rot, pos, j0,
+                   j1):
+    """The joint frames ``rot`` (nj, 3, 3) A'_j and centres ``pos`` (nj, 3) of joints
+    ``j0:j1`` (Eq. 1, 2) of the posture with cosines ``cs`` and sines ``sn``; the
+    parents of ``j0`` must be current. The first half of :func:`project_cs`."""
     for j in range(j0, j1):
         p = parent[j]
         if p < 0:
@@ -113,6 +125,14 @@ def project_cs(values, cs, sn, root_pos, root_rot, body, cams, views, rot, pos, 
         rot[j, 1, 0], rot[j, 1, 1], rot[j, 1, 2] = b10, b11, b12
         rot[j, 2, 0], rot[j, 2, 1], rot[j, 2, 2] = b20, b21, b22
         pos[j, 0], pos[j, 1], pos[j, 2] = px, py, pz
+
+
+@njit(cache=True, nogil=True, inline="always")
+def posture_markers(marker_joint, marker_local, rot, pos, mk, proj, views, P, K, dist, R, t,
+                    any_pinhole, m0, m1, marks):
+    """The 3D markers ``mk[m0:m1]`` on their joints' frames and their projections into
+    ``views`` (``proj``), not where ``marks`` hides them in a pinhole view. The second half
+    of :func:`project_cs`."""
     for m in range(m0, m1):
         j = marker_joint[m]
         a0, a1, a2 = marker_local[m, 0], marker_local[m, 1], marker_local[m, 2]
@@ -129,7 +149,7 @@ def project_cs(values, cs, sn, root_pos, root_rot, body, cams, views, rot, pos, 
             proj[v, m, 0] = P[v, 0, 0] * x + P[v, 0, 1] * y + P[v, 0, 2] * z + P[v, 0, 3]
             proj[v, m, 1] = P[v, 1, 0] * x + P[v, 1, 1] * y + P[v, 1, 2] * z + P[v, 1, 3]
     if any_pinhole:
-        project_pinhole(views, P, cams.K, cams.dist, cams.R, cams.t, mk, proj, m0, m1, marks)
+        project_pinhole(views, P, K, dist, R, t, mk, proj, m0, m1, marks)
 
 
 @njit(cache=True, nogil=True)

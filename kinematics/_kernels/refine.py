@@ -29,7 +29,13 @@ from kinematics._kernels.codes import (
 from kinematics._kernels.error2d import one_to_one, point_of
 from kinematics._kernels.error3d import cloud_nearest
 from kinematics._kernels.fastmath import sincos, solve_spd
-from kinematics._kernels.posture import has_pinhole, hidden_in, project_cs, project_posture
+from kinematics._kernels.posture import (
+    has_pinhole,
+    hidden_in,
+    posture_frames,
+    posture_markers,
+    project_posture,
+)
 from kinematics._kernels.records import frame_obs
 
 #: Forward-difference step of the Jacobian, radians.
@@ -317,6 +323,10 @@ def jacobian(angles, free_idx, span, root_pos, root_rot, body, cams, views, obs,
     ``saved``: scratch like ``rot``, ``pos``, ``mk``, ``proj``). ``obs``: a FrameObs."""
     objective, points, conf, obs3 = obs.objective, obs.points, obs.conf, obs.obs3
     rot0, pos0, mk0, proj0 = saved
+    (parent, chain, pre_rot, pre_trans, post_trans, elem_axis, elem_index, joint_flags,
+     marker_joint, marker_local, slide_index) = body  # the loop's arrays (records: refcounts)
+    P, K, dist, R, t = cams.P, cams.K, cams.dist, cams.R, cams.t
+    any_pinhole = pinhole
     nv = proj.shape[0]
     nm = mk.shape[0]
     nb = nv + 1  # row blocks of a marker range at most (:func:`_row_block`)
@@ -327,8 +337,11 @@ def jacobian(angles, free_idx, span, root_pos, root_rot, body, cams, views, obs,
         x, s0, c0 = angles[i], sn[i], cs[i]
         angles[i] = x + FD_STEP
         sn[i], cs[i] = sincos(angles[i])
-        project_cs(angles, cs, sn, root_pos, root_rot, body, cams, views, rot, pos, mk, proj,
-                   pinhole, (j0, j1, m0, m1), mk[:0])
+        posture_frames(angles, cs, sn, root_pos, root_rot, parent, chain, pre_rot, pre_trans,
+                       post_trans, elem_axis, elem_index, joint_flags, slide_index, rot,
+                       pos, j0, j1)
+        posture_markers(marker_joint, marker_local, rot, pos, mk, proj, views, P, K, dist,
+                        R, t, any_pinhole, m0, m1, mk[:0])
         angles[i], sn[i], cs[i] = x, s0, c0
         fill_rows(objective, proj, mk, points, conf, obs3, pair, res1, m0, m1)
         for b in range(nb):  # the Jacobian's rows of the pairs, packed
